@@ -1,0 +1,242 @@
+//! `realms bench sim`: how fast the simulator runs and what each sensor costs.
+//!
+//! Speed: the default arena, its rovers driving steady arcs (no autonomy), every sensor at its
+//! default rate, cameras off (nobody subscribes); simulated seconds per wall second, median of
+//! several trials. Sensors: frames taken from random free poses across the arena, median
+//! microseconds each, with plain cell-by-cell ray marching timed in the same run as the
+//! baseline the max-mipmap caster is compared against.
+
+use crate::cli::BenchSimArgs;
+use crate::mission::{load_scenario, parse_duration_s};
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use realms_core::geometry::Vec3;
+use realms_core::msgs::{Twist, TwistStamped};
+use realms_core::{Duration, Pose2, RoverId, Time};
+use realms_sim::World;
+use realms_sim::raycast::HeightPyramid;
+use realms_sim::rover::RoverBody;
+use realms_sim::sensors::{camera, depth, lidar};
+use std::time::Instant;
+
+/// `realms bench`.
+pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
+    match cmd {
+        crate::cli::BenchCommand::Sim(args) => sim(args),
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+fn sim(args: BenchSimArgs) -> Result<()> {
+    let (scenario, source) = load_scenario(args.scenario.as_deref())?;
+    let sim_s = parse_duration_s(&args.duration)?;
+    println!("# realms bench sim");
+    println!();
+    println!(
+        "scenario: {source}, seed {}, {} rovers; machine: {}",
+        scenario.seed,
+        scenario.rovers.count,
+        machine()
+    );
+    println!();
+
+    let t0 = Instant::now();
+    let world = World::new(&scenario);
+    let gen_s = t0.elapsed().as_secs_f64();
+    println!(
+        "world generation (terrain, truth, pyramid): {:.0} ms",
+        gen_s * 1e3
+    );
+
+    let mut speeds = Vec::new();
+    let mut msgs = 0usize;
+    for trial in 0..args.trials.max(1) {
+        let mut w = World::new(&scenario);
+        let mut out = Vec::new();
+        let start = Instant::now();
+        let step = Duration::from_millis(250);
+        let mut t = Time::ZERO;
+        let end = Time::from_secs_f64(sim_s);
+        while t < end {
+            t = (t + step).min(end);
+            let ids: Vec<RoverId> = w.rovers().map(|b| b.id).collect();
+            for id in ids {
+                let phase = t.as_secs_f64() / 10.0 + f64::from(id.0);
+                w.command(
+                    id,
+                    TwistStamped {
+                        stamp: t,
+                        twist: Twist {
+                            linear: Vec3::new(0.3, 0.0, 0.0),
+                            angular: Vec3::new(0.0, 0.0, 0.3 * phase.sin()),
+                        },
+                    },
+                );
+            }
+            w.advance_to(t, &mut out);
+            msgs += out.len();
+            out.clear();
+        }
+        let wall = start.elapsed().as_secs_f64();
+        speeds.push(sim_s / wall);
+        eprintln!("trial {trial}: {:.0}x real time", sim_s / wall);
+    }
+    println!(
+        "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial)",
+        median(speeds),
+        args.trials.max(1),
+        sim_s,
+        msgs / args.trials.max(1)
+    );
+    println!();
+
+    let spec = &scenario.rovers;
+    let baseline = HeightPyramid::with_max_level(&world.terrain().heights, 0);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let free: Vec<Pose2> = {
+        let g = *world.truth().explorable.geometry();
+        let mut poses = Vec::new();
+        while poses.len() < args.frames.max(1) {
+            let x = rng.random_range(0.0..g.width_m());
+            let y = rng.random_range(0.0..g.height_m());
+            let p = Pose2::new(
+                x,
+                y,
+                rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
+            );
+            if world.truth().explorable.at_world(p.position()) == Some(&true) {
+                poses.push(p);
+            }
+        }
+        poses
+    };
+    let (mut lidar_us, mut lidar_base_us, mut depth_us, mut depth_base_us, mut cam_us) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut noise = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+    for pose in &free {
+        let body = RoverBody::new(RoverId(1), *pose, spec, world.terrain(), &mut noise);
+        let base = World::world_from_base(&body);
+        let lidar_pose = base.compose(&world.base_from_lidar());
+        let optical = base.compose(&world.base_from_optical());
+        let time = |f: &mut dyn FnMut()| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64() * 1e6
+        };
+        lidar_us.push(time(&mut || {
+            std::hint::black_box(lidar::scan(
+                world.pyramid(),
+                &lidar_pose,
+                &spec.lidar,
+                &mut noise,
+                Time::ZERO,
+                "l",
+            ));
+        }));
+        lidar_base_us.push(time(&mut || {
+            std::hint::black_box(lidar::scan(
+                &baseline,
+                &lidar_pose,
+                &spec.lidar,
+                &mut noise,
+                Time::ZERO,
+                "l",
+            ));
+        }));
+        depth_us.push(time(&mut || {
+            std::hint::black_box(depth::frame(
+                world.pyramid(),
+                &optical,
+                &spec.depth,
+                &mut noise,
+                Time::ZERO,
+                "d",
+            ));
+        }));
+        depth_base_us.push(time(&mut || {
+            std::hint::black_box(depth::frame(
+                &baseline,
+                &optical,
+                &spec.depth,
+                &mut noise,
+                Time::ZERO,
+                "d",
+            ));
+        }));
+        cam_us.push(time(&mut || {
+            std::hint::black_box(camera::render(
+                world.pyramid(),
+                world.terrain(),
+                &optical,
+                &spec.camera,
+                &scenario.sun,
+                Time::ZERO,
+                "c",
+            ));
+        }));
+    }
+    let (l, lb, d, db, c) = (
+        median(lidar_us),
+        median(lidar_base_us),
+        median(depth_us),
+        median(depth_base_us),
+        median(cam_us),
+    );
+    println!("| sensor | median per frame | cell-by-cell baseline | speedup |");
+    println!("| --- | --- | --- | --- |");
+    println!(
+        "| lidar scan ({} beams, {} m) | {l:.1} us | {lb:.1} us | {:.1}x |",
+        spec.lidar.beams,
+        spec.lidar.range_max_m,
+        lb / l
+    );
+    println!(
+        "| depth frame ({}x{}, {} m) | {d:.1} us | {db:.1} us | {:.1}x |",
+        spec.depth.width,
+        spec.depth.height,
+        spec.depth.range_max_m,
+        db / d
+    );
+    println!(
+        "| camera image ({}x{}, shadows) | {c:.1} us | - | - |",
+        spec.camera.width, spec.camera.height
+    );
+    let n = f64::from(spec.count);
+    let per_sim_s_us = n * (spec.lidar.rate_hz * l + spec.depth.rate_hz * d);
+    println!();
+    println!(
+        "sensor budget: {:.2} ms of lidar + depth per simulated second for {} rovers ({:.0}x real time if sensors were all)",
+        per_sim_s_us / 1e3,
+        spec.count,
+        1e6 / per_sim_s_us
+    );
+    Ok(())
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    format!("{cpu}, {cores} cores, one thread used")
+}

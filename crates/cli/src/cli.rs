@@ -1,0 +1,80 @@
+//! Raw command-line flags, as clap parses them. Subcommands resolve them into settings.
+
+use clap::{Args as ClapArgs, Parser, Subcommand};
+use std::path::PathBuf;
+
+/// realms: a team of planetary rovers run as one mission.
+#[derive(Debug, Parser)]
+#[command(name = "realms", version, about)]
+pub struct Args {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run a simulated mission headless and write its results folder.
+    Mission(MissionArgs),
+    /// Print or check scenario files.
+    Scenario(ScenarioArgs),
+    /// Measure performance.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+/// `realms mission`.
+#[derive(Debug, ClapArgs)]
+pub struct MissionArgs {
+    /// Scenario TOML (default: the built-in ESA-ESRIC analogue, see `realms scenario --print-default`).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Override the scenario's seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Override the mission length, e.g. `4h`, `90m`, `30s`.
+    #[arg(long)]
+    pub duration: Option<String>,
+    /// Results folder (default: `runs/<date>-<time>-seed<N>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `realms scenario`.
+#[derive(Debug, ClapArgs)]
+pub struct ScenarioArgs {
+    /// Print the default scenario as TOML.
+    #[arg(long, conflicts_with = "check")]
+    pub print_default: bool,
+    /// Check a scenario file and print what it resolves to.
+    #[arg(long)]
+    pub check: Option<PathBuf>,
+}
+
+/// `realms bench`.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Simulated seconds per wall second, and the cost of each sensor.
+    Sim(BenchSimArgs),
+}
+
+/// `realms bench sim`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchSimArgs {
+    /// Simulated time per speed trial, e.g. `120s`.
+    #[arg(long, default_value = "120s")]
+    pub duration: String,
+    /// Speed trials (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    pub trials: usize,
+    /// Sensor frames timed per sensor (the median is reported).
+    #[arg(long, default_value_t = 200)]
+    pub frames: usize,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+}

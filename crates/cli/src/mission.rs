@@ -1,0 +1,181 @@
+//! `realms mission` and `realms scenario`: resolve flags into a scenario, run it with a
+//! progress bar, write the results folder and say where it is.
+
+use crate::cli::{MissionArgs, ScenarioArgs};
+use anyhow::{Context, Result, bail};
+use realms_core::Time;
+use realms_mission::Mission;
+use realms_mission::report::write_results;
+use realms_sim::Scenario;
+use std::path::{Path, PathBuf};
+
+/// Parses a duration such as `4h`, `90m`, `1h30m`, `45s` or a plain number of seconds.
+pub fn parse_duration_s(text: &str) -> Result<f64> {
+    if let Ok(secs) = text.trim().parse::<f64>() {
+        if secs.is_finite() && secs > 0.0 {
+            return Ok(secs);
+        }
+        bail!("duration {text:?} must be positive");
+    }
+    let d = humantime::parse_duration(text).with_context(|| {
+        format!("duration {text:?}: expected e.g. 4h, 90m, 1h30m, 45s or seconds")
+    })?;
+    if d.is_zero() {
+        bail!("duration {text:?} must be positive");
+    }
+    Ok(d.as_secs_f64())
+}
+
+/// The scenario named by `--scenario` (or the default) and where it came from.
+pub fn load_scenario(path: Option<&Path>) -> Result<(Scenario, String)> {
+    match path {
+        Some(p) => Ok((Scenario::load(p)?, p.display().to_string())),
+        None => Ok((Scenario::default(), "default".to_string())),
+    }
+}
+
+/// `realms mission`.
+pub fn run(args: MissionArgs) -> Result<()> {
+    let (mut scenario, source) = load_scenario(args.scenario.as_deref())?;
+    if let Some(seed) = args.seed {
+        scenario.seed = seed;
+    }
+    if let Some(d) = &args.duration {
+        scenario.duration_s = parse_duration_s(d)?;
+    }
+    scenario.validate(&source)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| default_out_dir(scenario.seed));
+    if out.exists()
+        && out
+            .read_dir()
+            .map(|mut d| d.next().is_some())
+            .unwrap_or(true)
+        && args.out.is_none()
+    {
+        bail!("results folder {} already exists", out.display());
+    }
+
+    let wall = std::time::Instant::now();
+    eprintln!(
+        "realms mission: scenario {source}, seed {}, {} rovers, {:.0} s simulated",
+        scenario.seed, scenario.rovers.count, scenario.duration_s
+    );
+    let mut mission = Mission::new(&scenario);
+    let end = Time::from_secs_f64(scenario.duration_s);
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let bar = indicatif::ProgressBar::new(scenario.duration_s.ceil() as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:40}] {pos}/{len} sim s  {msg}",
+            )
+            .expect("static template")
+            .progress_chars("=> "),
+        );
+        bar
+    };
+    let chunk = realms_core::Duration::from_secs(30);
+    while mission.now() < end {
+        let next = (mission.now() + chunk).min(end);
+        mission.run_until(next);
+        let sim_s = mission.now().as_secs_f64();
+        bar.set_position(sim_s as u64);
+        bar.set_message(format!(
+            "{:.0}x real time",
+            sim_s / wall.elapsed().as_secs_f64().max(1e-9)
+        ));
+    }
+    bar.finish_and_clear();
+    let wall_s = wall.elapsed().as_secs_f64();
+    let report = write_results(&mission, &out, &source, wall_s)
+        .with_context(|| format!("writing results to {}", out.display()))?;
+
+    println!(
+        "mission done: {:.0} s simulated in {:.1} s ({:.0}x real time)",
+        report.sim_duration_s, wall_s, report.speedup
+    );
+    for r in &report.rovers {
+        println!(
+            "  {}: {:.0} m driven, {} collisions, {} hazard entries, {}{}",
+            r.name,
+            r.distance_m,
+            r.collisions,
+            r.hazard_entries,
+            if r.powered { "powered" } else { "powered off" },
+            if r.stuck { ", stuck" } else { "" }
+        );
+    }
+    println!("results in {}/", out.display());
+    println!("  mission.json  truth.png  trajectories.png  trajectories.csv");
+    Ok(())
+}
+
+/// `realms scenario`.
+pub fn scenario(args: ScenarioArgs) -> Result<()> {
+    if args.print_default {
+        print!("{}", Scenario::default_toml());
+        return Ok(());
+    }
+    if let Some(path) = args.check {
+        let s = Scenario::load(&path)?;
+        println!("{}: ok", path.display());
+        print!("{}", realms_sim::scenario::to_toml(&s));
+        return Ok(());
+    }
+    bail!("nothing to do: use --print-default or --check FILE")
+}
+
+/// `runs/<YYYYmmdd-HHMMSS>-seed<N>` in UTC.
+fn default_out_dir(seed: u64) -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let (y, m, d) = civil_from_days((secs / 86_400) as i64);
+    let rem = secs % 86_400;
+    PathBuf::from("runs").join(format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}-seed{seed}",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    ))
+}
+
+/// Days since 1970-01-01 to a proleptic Gregorian date (Howard Hinnant's `civil_from_days`).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_parse_in_the_field_s_units() {
+        assert_eq!(parse_duration_s("4h").expect("ok"), 14_400.0);
+        assert_eq!(parse_duration_s("1h30m").expect("ok"), 5_400.0);
+        assert_eq!(parse_duration_s("45").expect("ok"), 45.0);
+        assert!(parse_duration_s("soon").is_err());
+        assert!(parse_duration_s("0s").is_err());
+        assert!(parse_duration_s("-5").is_err());
+    }
+
+    #[test]
+    fn dates_are_gregorian() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(20_779), (2026, 11, 22));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+    }
+}

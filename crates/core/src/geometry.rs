@@ -1,0 +1,256 @@
+//! Geometry: SE(2) poses for everything planar, and the small 3D types the ROS-shaped
+//! messages need.
+//!
+//! Transforms are named `target_from_source` (rerun's convention), so composition reads
+//! left to right: `world_from_sensor = world_from_rover * rover_from_sensor`.
+
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::ops::Mul;
+
+/// Wraps an angle to (-pi, pi].
+pub fn normalize_angle_rad(a: f64) -> f64 {
+    let mut r = a % (2.0 * PI);
+    if r <= -PI {
+        r += 2.0 * PI;
+    } else if r > PI {
+        r -= 2.0 * PI;
+    }
+    r
+}
+
+/// A point in a plane, in metres.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Point2 {
+    /// x in metres.
+    pub x_m: f64,
+    /// y in metres.
+    pub y_m: f64,
+}
+
+impl Point2 {
+    /// A point at (x, y) metres.
+    pub const fn new(x_m: f64, y_m: f64) -> Self {
+        Point2 { x_m, y_m }
+    }
+
+    /// Euclidean distance to another point.
+    pub fn distance_m(self, other: Point2) -> f64 {
+        (self.x_m - other.x_m).hypot(self.y_m - other.y_m)
+    }
+}
+
+/// A rigid transform in the plane (SE(2)): a rotation by `yaw_rad` then a translation.
+/// As a pose, it is the frame of a body expressed in some parent frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose2 {
+    /// Translation x in metres.
+    pub x_m: f64,
+    /// Translation y in metres.
+    pub y_m: f64,
+    /// Rotation in radians, kept in (-pi, pi] by the constructors and operations here.
+    pub yaw_rad: f64,
+}
+
+impl Pose2 {
+    /// The identity transform.
+    pub const IDENTITY: Pose2 = Pose2 {
+        x_m: 0.0,
+        y_m: 0.0,
+        yaw_rad: 0.0,
+    };
+
+    /// A pose at (x, y) with heading `yaw_rad` (normalised).
+    pub fn new(x_m: f64, y_m: f64, yaw_rad: f64) -> Self {
+        Pose2 {
+            x_m,
+            y_m,
+            yaw_rad: normalize_angle_rad(yaw_rad),
+        }
+    }
+
+    /// The translation part as a point.
+    pub fn position(&self) -> Point2 {
+        Point2::new(self.x_m, self.y_m)
+    }
+
+    /// `self * other`: apply `other` first, then `self`.
+    pub fn compose(&self, other: &Pose2) -> Pose2 {
+        let (s, c) = self.yaw_rad.sin_cos();
+        Pose2::new(
+            self.x_m + c * other.x_m - s * other.y_m,
+            self.y_m + s * other.x_m + c * other.y_m,
+            self.yaw_rad + other.yaw_rad,
+        )
+    }
+
+    /// The inverse transform: `a_from_b.inverse()` is `b_from_a`.
+    pub fn inverse(&self) -> Pose2 {
+        let (s, c) = self.yaw_rad.sin_cos();
+        Pose2::new(
+            -(c * self.x_m + s * self.y_m),
+            s * self.x_m - c * self.y_m,
+            -self.yaw_rad,
+        )
+    }
+
+    /// Maps a point from the source frame into the target frame.
+    pub fn transform_point(&self, p: Point2) -> Point2 {
+        let (s, c) = self.yaw_rad.sin_cos();
+        Point2::new(
+            self.x_m + c * p.x_m - s * p.y_m,
+            self.y_m + s * p.x_m + c * p.y_m,
+        )
+    }
+
+    /// The pose relative to `base`: `base.inverse() * self`.
+    pub fn relative_to(&self, base: &Pose2) -> Pose2 {
+        base.inverse().compose(self)
+    }
+
+    /// Interpolates on SE(2)'s product form: translation linearly, heading along the shorter
+    /// arc. `s = 0` gives `self`, `s = 1` gives `other`.
+    pub fn interpolate(&self, other: &Pose2, s: f64) -> Pose2 {
+        let dyaw = normalize_angle_rad(other.yaw_rad - self.yaw_rad);
+        Pose2::new(
+            self.x_m + s * (other.x_m - self.x_m),
+            self.y_m + s * (other.y_m - self.y_m),
+            self.yaw_rad + s * dyaw,
+        )
+    }
+}
+
+impl Mul for Pose2 {
+    type Output = Pose2;
+    fn mul(self, rhs: Pose2) -> Pose2 {
+        self.compose(&rhs)
+    }
+}
+
+/// A 3D vector (geometry_msgs/Vector3, and points).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Vec3 {
+    /// x component.
+    pub x: f64,
+    /// y component.
+    pub y: f64,
+    /// z component.
+    pub z: f64,
+}
+
+impl Vec3 {
+    /// A vector from components.
+    pub const fn new(x: f64, y: f64, z: f64) -> Self {
+        Vec3 { x, y, z }
+    }
+}
+
+/// A unit quaternion (geometry_msgs/Quaternion), Hamilton convention, `w` the scalar part.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Quaternion {
+    /// x component.
+    pub x: f64,
+    /// y component.
+    pub y: f64,
+    /// z component.
+    pub z: f64,
+    /// scalar component.
+    pub w: f64,
+}
+
+impl Default for Quaternion {
+    fn default() -> Self {
+        Quaternion::IDENTITY
+    }
+}
+
+impl Quaternion {
+    /// No rotation.
+    pub const IDENTITY: Quaternion = Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        w: 1.0,
+    };
+
+    /// From intrinsic Z-Y-X Euler angles (yaw, then pitch, then roll), as ROS `tf2` does.
+    pub fn from_roll_pitch_yaw(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Self {
+        let (sr, cr) = (roll_rad * 0.5).sin_cos();
+        let (sp, cp) = (pitch_rad * 0.5).sin_cos();
+        let (sy, cy) = (yaw_rad * 0.5).sin_cos();
+        Quaternion {
+            w: cr * cp * cy + sr * sp * sy,
+            x: sr * cp * cy - cr * sp * sy,
+            y: cr * sp * cy + sr * cp * sy,
+            z: cr * cp * sy - sr * sp * cy,
+        }
+    }
+
+    /// The yaw (rotation about z) of this orientation.
+    pub fn yaw_rad(&self) -> f64 {
+        (2.0 * (self.w * self.z + self.x * self.y))
+            .atan2(1.0 - 2.0 * (self.y * self.y + self.z * self.z))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn close(a: &Pose2, b: &Pose2) -> bool {
+        (a.x_m - b.x_m).abs() < 1e-9
+            && (a.y_m - b.y_m).abs() < 1e-9
+            && normalize_angle_rad(a.yaw_rad - b.yaw_rad).abs() < 1e-9
+    }
+
+    fn pose() -> impl Strategy<Value = Pose2> {
+        (-100.0..100.0f64, -100.0..100.0f64, -10.0..10.0f64)
+            .prop_map(|(x, y, t)| Pose2::new(x, y, t))
+    }
+
+    #[test]
+    fn hand_checked_composition() {
+        // A rover at (1, 2) facing +y sees a point 1 m ahead at world (1, 3).
+        let world_from_rover = Pose2::new(1.0, 2.0, PI / 2.0);
+        let p = world_from_rover.transform_point(Point2::new(1.0, 0.0));
+        assert!((p.x_m - 1.0).abs() < 1e-12 && (p.y_m - 3.0).abs() < 1e-12);
+        let world_from_sensor = world_from_rover * Pose2::new(0.5, 0.0, PI / 2.0);
+        assert!(close(&world_from_sensor, &Pose2::new(1.0, 2.5, PI)));
+    }
+
+    #[test]
+    fn interpolation_takes_the_short_arc() {
+        let a = Pose2::new(0.0, 0.0, 3.0);
+        let b = Pose2::new(2.0, 0.0, -3.0);
+        let mid = a.interpolate(&b, 0.5);
+        assert!((mid.x_m - 1.0).abs() < 1e-12);
+        assert!((mid.yaw_rad.abs() - PI).abs() < 1e-9, "{}", mid.yaw_rad);
+    }
+
+    #[test]
+    fn quaternion_yaw_round_trips() {
+        let q = Quaternion::from_roll_pitch_yaw(0.1, -0.2, 2.5);
+        assert!((q.yaw_rad() - 2.5).abs() < 1e-12);
+    }
+
+    proptest! {
+        #[test]
+        fn inverse_undoes_compose(a in pose(), b in pose()) {
+            prop_assert!(close(&(a.inverse() * (a * b)), &b));
+            prop_assert!(close(&(a * a.inverse()), &Pose2::IDENTITY));
+        }
+
+        #[test]
+        fn composition_is_associative(a in pose(), b in pose(), c in pose()) {
+            prop_assert!(close(&((a * b) * c), &(a * (b * c))));
+        }
+
+        #[test]
+        fn angles_stay_normalised(t in -1000.0..1000.0f64) {
+            let n = normalize_angle_rad(t);
+            prop_assert!(n > -PI - 1e-12 && n <= PI + 1e-12);
+            prop_assert!(((t - n) / (2.0 * PI) - ((t - n) / (2.0 * PI)).round()).abs() < 1e-9);
+        }
+    }
+}

@@ -1,0 +1,298 @@
+//! `Grid<T>`: a metric raster laid on the plane, the shape shared by heightfields, occupancy
+//! maps, costmaps and ground truth. Cell (0, 0) has its lower-left corner at `origin`; x grows
+//! with column, y with row (the ROS map_server convention, whose image rows run the other way,
+//! which the exporters here handle).
+
+use crate::geometry::Point2;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// Where a grid lies in the world and how fine it is.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridGeometry {
+    /// Number of columns (cells along x).
+    pub width: usize,
+    /// Number of rows (cells along y).
+    pub height: usize,
+    /// Edge length of a cell in metres.
+    pub resolution_m: f64,
+    /// World position of the lower-left corner of cell (0, 0).
+    pub origin: Point2,
+}
+
+/// Integer cell coordinates, column `x` and row `y`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Cell {
+    /// Column.
+    pub x: usize,
+    /// Row.
+    pub y: usize,
+}
+
+impl GridGeometry {
+    /// Cell containing a world point, or `None` outside the grid.
+    pub fn world_to_cell(&self, p: Point2) -> Option<Cell> {
+        let fx = ((p.x_m - self.origin.x_m) / self.resolution_m).floor();
+        let fy = ((p.y_m - self.origin.y_m) / self.resolution_m).floor();
+        if fx < 0.0 || fy < 0.0 || fx >= self.width as f64 || fy >= self.height as f64 {
+            return None;
+        }
+        Some(Cell {
+            x: fx as usize,
+            y: fy as usize,
+        })
+    }
+
+    /// World position of a cell's centre.
+    pub fn cell_center(&self, c: Cell) -> Point2 {
+        Point2::new(
+            self.origin.x_m + (c.x as f64 + 0.5) * self.resolution_m,
+            self.origin.y_m + (c.y as f64 + 0.5) * self.resolution_m,
+        )
+    }
+
+    /// Width of the covered area in metres.
+    pub fn width_m(&self) -> f64 {
+        self.width as f64 * self.resolution_m
+    }
+
+    /// Height of the covered area in metres.
+    pub fn height_m(&self) -> f64 {
+        self.height as f64 * self.resolution_m
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// Whether the grid has no cells.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Row-major index of an in-bounds cell.
+    pub fn index(&self, c: Cell) -> usize {
+        c.y * self.width + c.x
+    }
+}
+
+/// A raster of `T` over a [`GridGeometry`], stored row-major from the bottom row up.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid<T> {
+    geometry: GridGeometry,
+    cells: Vec<T>,
+}
+
+/// Why a grid could not be written out.
+#[derive(Debug, thiserror::Error)]
+pub enum GridExportError {
+    /// The file could not be written.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// The PNG encoder failed.
+    #[error("cannot encode PNG {path}: {source}")]
+    Png {
+        /// The file.
+        path: String,
+        /// What the encoder said.
+        source: image::ImageError,
+    },
+}
+
+impl<T: Clone> Grid<T> {
+    /// A grid with every cell set to `fill`.
+    pub fn new(geometry: GridGeometry, fill: T) -> Self {
+        Grid {
+            cells: vec![fill; geometry.len()],
+            geometry,
+        }
+    }
+}
+
+impl<T> Grid<T> {
+    /// A grid from row-major cells (bottom row first); `None` if the count does not match.
+    pub fn from_cells(geometry: GridGeometry, cells: Vec<T>) -> Option<Self> {
+        (cells.len() == geometry.len()).then_some(Grid { geometry, cells })
+    }
+
+    /// Where the grid lies and how fine it is.
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
+    /// Columns.
+    pub fn width(&self) -> usize {
+        self.geometry.width
+    }
+
+    /// Rows.
+    pub fn height(&self) -> usize {
+        self.geometry.height
+    }
+
+    /// Cell edge in metres.
+    pub fn resolution_m(&self) -> f64 {
+        self.geometry.resolution_m
+    }
+
+    /// The cell at column `x`, row `y`, if inside.
+    pub fn get(&self, x: usize, y: usize) -> Option<&T> {
+        if x < self.geometry.width && y < self.geometry.height {
+            self.cells.get(y * self.geometry.width + x)
+        } else {
+            None
+        }
+    }
+
+    /// Mutable access to the cell at column `x`, row `y`, if inside.
+    pub fn get_mut(&mut self, x: usize, y: usize) -> Option<&mut T> {
+        if x < self.geometry.width && y < self.geometry.height {
+            self.cells.get_mut(y * self.geometry.width + x)
+        } else {
+            None
+        }
+    }
+
+    /// The cell under a world point, if inside.
+    pub fn at_world(&self, p: Point2) -> Option<&T> {
+        let c = self.geometry.world_to_cell(p)?;
+        self.get(c.x, c.y)
+    }
+
+    /// All cells, row-major from the bottom row.
+    pub fn cells(&self) -> &[T] {
+        &self.cells
+    }
+
+    /// All cells, mutable.
+    pub fn cells_mut(&mut self) -> &mut [T] {
+        &mut self.cells
+    }
+
+    /// Every cell with its coordinates, row-major from the bottom row.
+    pub fn iter(&self) -> impl Iterator<Item = (Cell, &T)> {
+        let w = self.geometry.width;
+        self.cells
+            .iter()
+            .enumerate()
+            .map(move |(i, v)| (Cell { x: i % w, y: i / w }, v))
+    }
+
+    /// A new grid of the same geometry with `f` applied to every cell.
+    pub fn map<U>(&self, f: impl FnMut(&T) -> U) -> Grid<U> {
+        Grid {
+            geometry: self.geometry,
+            cells: self.cells.iter().map(f).collect(),
+        }
+    }
+
+    /// Rows top-down (image order), each as a slice.
+    fn rows_top_down(&self) -> impl Iterator<Item = &[T]> {
+        self.cells.chunks(self.geometry.width.max(1)).rev()
+    }
+
+    /// Writes a binary PGM (P5) image, north up, as ROS map_server reads it.
+    pub fn write_pgm(&self, path: &Path, gray: impl Fn(&T) -> u8) -> Result<(), GridExportError> {
+        let io_err = |source| GridExportError::Io {
+            path: path.display().to_string(),
+            source,
+        };
+        let mut bytes = format!("P5\n{} {}\n255\n", self.width(), self.height()).into_bytes();
+        bytes.reserve(self.cells.len());
+        for row in self.rows_top_down() {
+            bytes.extend(row.iter().map(&gray));
+        }
+        let mut file = std::fs::File::create(path).map_err(io_err)?;
+        file.write_all(&bytes).map_err(io_err)
+    }
+
+    /// Writes an RGB PNG image, north up.
+    pub fn write_png(
+        &self,
+        path: &Path,
+        color: impl Fn(&T) -> [u8; 3],
+    ) -> Result<(), GridExportError> {
+        let mut rgb = Vec::with_capacity(self.cells.len() * 3);
+        for row in self.rows_top_down() {
+            for v in row {
+                rgb.extend_from_slice(&color(v));
+            }
+        }
+        let img = image::RgbImage::from_raw(self.width() as u32, self.height() as u32, rgb)
+            .expect("buffer length is width * height * 3 by construction");
+        img.save_with_format(path, image::ImageFormat::Png)
+            .map_err(|source| GridExportError::Png {
+                path: path.display().to_string(),
+                source,
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn geom() -> GridGeometry {
+        GridGeometry {
+            width: 4,
+            height: 3,
+            resolution_m: 0.5,
+            origin: Point2::new(-1.0, 2.0),
+        }
+    }
+
+    #[test]
+    fn world_and_cells_agree() {
+        let g = geom();
+        assert_eq!(
+            g.world_to_cell(Point2::new(-1.0, 2.0)),
+            Some(Cell { x: 0, y: 0 })
+        );
+        assert_eq!(
+            g.world_to_cell(Point2::new(0.99, 3.49)),
+            Some(Cell { x: 3, y: 2 })
+        );
+        assert_eq!(g.world_to_cell(Point2::new(1.0, 3.0)), None);
+        assert_eq!(g.world_to_cell(Point2::new(-1.01, 3.0)), None);
+        let c = g.cell_center(Cell { x: 1, y: 2 });
+        assert_eq!((c.x_m, c.y_m), (-0.25, 3.25));
+        assert_eq!(g.world_to_cell(c), Some(Cell { x: 1, y: 2 }));
+    }
+
+    #[test]
+    fn access_is_bounds_checked() {
+        let mut grid = Grid::new(geom(), 0u8);
+        *grid.get_mut(3, 2).expect("inside") = 7;
+        assert_eq!(grid.get(3, 2), Some(&7));
+        assert_eq!(grid.get(4, 0), None);
+        assert_eq!(grid.get(0, 3), None);
+        assert!(grid.get_mut(9, 9).is_none());
+        let (cell, _) = grid.iter().find(|(_, v)| **v == 7).expect("set above");
+        assert_eq!(cell, Cell { x: 3, y: 2 });
+    }
+
+    #[test]
+    fn pgm_is_written_north_up() {
+        let mut grid = Grid::new(geom(), 0u8);
+        *grid.get_mut(0, 2).expect("inside") = 200; // top-left in the image
+        let dir = std::env::temp_dir().join(format!("realms-grid-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("g.pgm");
+        grid.write_pgm(&path, |v| *v).expect("write");
+        let bytes = std::fs::read(&path).expect("read back");
+        let header = b"P5\n4 3\n255\n";
+        assert_eq!(&bytes[..header.len()], header);
+        assert_eq!(bytes[header.len()], 200);
+        assert_eq!(bytes.len(), header.len() + 12);
+        grid.write_png(&dir.join("g.png"), |v| [*v, 0, 0])
+            .expect("png");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,189 @@
+//! Message types for the hardware-facing topics, shaped field for field like their ROS 2
+//! counterparts (sensor_msgs, nav_msgs, geometry_msgs) so a bridge to real drivers is a
+//! mechanical mapping. Units are ROS's (metres, radians, seconds); names add the unit where
+//! ROS leaves it implicit. Stamps are mission [`Time`].
+
+use crate::geometry::{Quaternion, Vec3};
+use crate::time::Time;
+use serde::{Deserialize, Serialize};
+
+/// std_msgs/Header: when the data was taken and in which frame it is expressed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Acquisition time on the mission clock.
+    pub stamp: Time,
+    /// Frame of the data, e.g. `rover1/laser`.
+    pub frame_id: String,
+}
+
+/// sensor_msgs/LaserScan. Beams without a return are `+inf` (REP 117).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LaserScan {
+    /// Stamp of the first beam.
+    pub header: Header,
+    /// Angle of the first beam, counter-clockwise from the sensor's x axis.
+    pub angle_min_rad: f32,
+    /// Angle of the last beam.
+    pub angle_max_rad: f32,
+    /// Angle between beams.
+    pub angle_increment_rad: f32,
+    /// Time between beams.
+    pub time_increment_s: f32,
+    /// Time between scans.
+    pub scan_time_s: f32,
+    /// Shortest range the sensor reports.
+    pub range_min_m: f32,
+    /// Longest range the sensor reports.
+    pub range_max_m: f32,
+    /// One range per beam.
+    pub ranges_m: Vec<f32>,
+    /// One intensity per beam, or empty.
+    pub intensities: Vec<f32>,
+}
+
+/// geometry_msgs/Pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose3 {
+    /// Position in metres.
+    pub position: Vec3,
+    /// Orientation.
+    pub orientation: Quaternion,
+}
+
+/// geometry_msgs/Twist: linear velocity in m/s, angular in rad/s.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Twist {
+    /// Linear velocity, m/s.
+    pub linear: Vec3,
+    /// Angular velocity, rad/s.
+    pub angular: Vec3,
+}
+
+/// A 6x6 covariance over (x, y, z, roll, pitch, yaw), row-major as in ROS.
+pub type Covariance6 = [[f64; 6]; 6];
+/// A 3x3 covariance, row-major.
+pub type Covariance3 = [[f64; 3]; 3];
+
+/// geometry_msgs/PoseWithCovariance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovariance {
+    /// The pose.
+    pub pose: Pose3,
+    /// Its uncertainty.
+    pub covariance: Covariance6,
+}
+
+/// geometry_msgs/TwistWithCovariance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TwistWithCovariance {
+    /// The twist.
+    pub twist: Twist,
+    /// Its uncertainty.
+    pub covariance: Covariance6,
+}
+
+/// nav_msgs/Odometry: the pose in `header.frame_id` (`odom`), the twist in `child_frame_id`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Odometry {
+    /// Stamp and the odometry frame.
+    pub header: Header,
+    /// The body frame, e.g. `rover1/base_link`.
+    pub child_frame_id: String,
+    /// Integrated pose in the odometry frame.
+    pub pose: PoseWithCovariance,
+    /// Velocity in the body frame.
+    pub twist: TwistWithCovariance,
+}
+
+/// sensor_msgs/Imu. A covariance whose first element is -1 marks the field as not provided.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Imu {
+    /// Stamp and the IMU frame.
+    pub header: Header,
+    /// Orientation estimate, if provided.
+    pub orientation: Quaternion,
+    /// Its covariance (-1 in [0][0]: not provided).
+    pub orientation_covariance: Covariance3,
+    /// Angular velocity in rad/s (yaw rate in `z`).
+    pub angular_velocity: Vec3,
+    /// Its covariance.
+    pub angular_velocity_covariance: Covariance3,
+    /// Linear acceleration in m/s^2.
+    pub linear_acceleration: Vec3,
+    /// Its covariance (-1 in [0][0]: not provided).
+    pub linear_acceleration_covariance: Covariance3,
+}
+
+/// geometry_msgs/TwistStamped, the form `cmd_vel` takes here so a receiver can drop a stale
+/// command instead of executing it late.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TwistStamped {
+    /// When the command was issued (frame: the rover's base).
+    pub stamp: crate::time::Time,
+    /// The commanded velocity.
+    pub twist: Twist,
+}
+
+/// An organised point cloud from a depth camera (sensor_msgs/PointCloud2 with `x, y, z`
+/// float32 fields): `width x height` points row by row, in the camera's optical frame
+/// (z forward, x right, y down); pixels without a return are NaN.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PointCloud {
+    /// Stamp and the optical frame.
+    pub header: Header,
+    /// Points per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width * height` points, `[x, y, z]` in metres.
+    pub points_in_sensor: Vec<[f32; 3]>,
+}
+
+/// sensor_msgs/Image; here always `mono8` (one byte per pixel, rows top-down).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    /// Stamp and the camera's optical frame.
+    pub header: Header,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// Pixel encoding, e.g. `mono8`.
+    pub encoding: String,
+    /// Bytes per row.
+    pub step: u32,
+    /// Pixel bytes.
+    pub data: Vec<u8>,
+}
+
+/// Every message that can travel between nodes. New kinds are appended at the end so older
+/// encodings keep decoding.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    /// `scan`: the 2D lidar.
+    LaserScan(LaserScan),
+    /// `odom`: wheel odometry.
+    Odometry(Box<Odometry>),
+    /// `imu`: the gyro.
+    Imu(Box<Imu>),
+    /// `cmd_vel`: a velocity command.
+    CmdVel(TwistStamped),
+    /// `depth/points`: the depth camera.
+    PointCloud(PointCloud),
+    /// `camera/image`: the grayscale camera.
+    Image(Image),
+}
+
+impl Message {
+    /// Acquisition or issue time of the message.
+    pub fn stamp(&self) -> Time {
+        match self {
+            Message::LaserScan(m) => m.header.stamp,
+            Message::Odometry(m) => m.header.stamp,
+            Message::Imu(m) => m.header.stamp,
+            Message::CmdVel(m) => m.stamp,
+            Message::PointCloud(m) => m.header.stamp,
+            Message::Image(m) => m.header.stamp,
+        }
+    }
+}

@@ -1,0 +1,207 @@
+//! realms-mission: runs a simulated mission end to end.
+//!
+//! [`Mission`] owns the [`World`](realms_sim::World), one node per rover and the message bus
+//! between them, and advances all of it on the world's clock. [`report`] turns a finished
+//! mission into its results folder (`mission.json`, `truth.png`, `trajectories.png`,
+//! `trajectories.csv`). No clock is read here: the caller measures wall time.
+
+pub mod bus;
+pub mod report;
+
+use bus::Bus;
+use realms_core::msgs::Message;
+use realms_core::{Duration, Point2, RoverId, Time, Topic};
+use realms_node::rover::RoverNode;
+use realms_node::wander::WanderConfig;
+use realms_node::{Node, Outgoing};
+use realms_sim::{Scenario, World};
+
+/// How often rover poses are sampled for trajectories.
+pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
+
+/// One sampled true pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseSample {
+    /// When.
+    pub t: Time,
+    /// Where, arena frame.
+    pub x_m: f64,
+    /// Where, arena frame.
+    pub y_m: f64,
+    /// Heading.
+    pub yaw_rad: f64,
+}
+
+/// A simulated mission in progress.
+pub struct Mission {
+    world: World,
+    nodes: Vec<Box<dyn Node>>,
+    bus: Bus,
+    trajectories: Vec<Vec<PoseSample>>,
+    next_sample: Time,
+    published: Vec<(Topic, Message)>,
+}
+
+impl Mission {
+    /// A mission of `scenario`, with the rover nodes of the current behaviour.
+    pub fn new(scenario: &Scenario) -> Mission {
+        Mission::with_world(World::new(scenario))
+    }
+
+    /// A mission on a prepared world (hand-built terrain in tests).
+    pub fn with_world(world: World) -> Mission {
+        let spec = &world.scenario().rovers;
+        let base_from_optical = world.base_from_optical();
+        let nodes: Vec<Box<dyn Node>> = world
+            .rovers()
+            .map(|body| {
+                let cfg = WanderConfig {
+                    cruise_speed_m_s: 0.3_f64.min(spec.max_speed_m_s),
+                    turn_rate_rad_s: 0.8_f64.min(spec.max_yaw_rate_rad_s),
+                    clearance_m: 0.6,
+                    half_length_m: spec.length_m / 2.0,
+                    half_width_m: spec.width_m / 2.0,
+                    lidar_x_m: spec.lidar.mount_x_m,
+                    depth_rot: base_from_optical.rot,
+                    depth_origin_m: base_from_optical.origin,
+                    max_step_m: spec.max_step_m,
+                    max_drop_m: 0.12,
+                    seed: world.scenario().seed ^ (u64::from(body.id.0) << 32),
+                };
+                Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
+            })
+            .collect();
+        let mut bus = Bus::default();
+        for (i, node) in nodes.iter().enumerate() {
+            for topic in node.subscriptions() {
+                bus.subscribe(topic, i);
+            }
+        }
+        let trajectories = vec![Vec::new(); nodes.len()];
+        let mut mission = Mission {
+            world,
+            nodes,
+            bus,
+            trajectories,
+            next_sample: Time::ZERO,
+            published: Vec::new(),
+        };
+        mission.update_camera_wants();
+        mission
+    }
+
+    /// The world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Sampled true trajectories, one per rover.
+    pub fn trajectories(&self) -> &[Vec<PoseSample>] {
+        &self.trajectories
+    }
+
+    /// The bus (for its statistics).
+    pub fn bus(&self) -> &Bus {
+        &self.bus
+    }
+
+    /// Mission time reached.
+    pub fn now(&self) -> Time {
+        self.world.now()
+    }
+
+    /// Runs every world event and node wakeup up to and including `end`.
+    pub fn run_until(&mut self, end: Time) {
+        loop {
+            let t_world = self.world.next_due();
+            let t_nodes = self.nodes.iter().filter_map(|n| n.next_wakeup()).min();
+            let t = match (t_world, t_nodes) {
+                (Some(a), Some(b)) => a.min(b),
+                (a, b) => match a.or(b) {
+                    Some(t) => t,
+                    None => break,
+                },
+            };
+            if t > end {
+                break;
+            }
+            self.sample_trajectories(t);
+            self.world.advance_to(t, &mut self.published);
+            let mut pending: Vec<(Topic, Message)> = std::mem::take(&mut self.published);
+            for i in 0..self.nodes.len() {
+                if self.nodes[i].next_wakeup().is_some_and(|w| w <= t) {
+                    self.nodes[i].on_tick(t);
+                    pending.extend(
+                        self.nodes[i]
+                            .drain_outbox()
+                            .into_iter()
+                            .map(|o| (o.topic, o.message)),
+                    );
+                }
+            }
+            self.deliver(t, pending);
+        }
+        let mut rest = Vec::new();
+        self.world.advance_to(end, &mut rest);
+        self.deliver(end, rest);
+    }
+
+    /// Delivers messages (and whatever they cause) at time `t`, in order.
+    fn deliver(&mut self, t: Time, mut pending: Vec<(Topic, Message)>) {
+        // Nodes answer messages with messages; bounded so a chatty loop cannot hang a run.
+        for _round in 0..16 {
+            if pending.is_empty() {
+                return;
+            }
+            let mut next = Vec::new();
+            for (topic, message) in pending {
+                self.bus.count(&topic);
+                if let (Some(rover), Message::CmdVel(cmd)) = (topic.rover(), &message)
+                    && topic.leaf() == "cmd_vel"
+                {
+                    self.world.command(rover, *cmd);
+                }
+                for i in self.bus.subscribers(&topic).to_vec() {
+                    let node = &mut self.nodes[i];
+                    node.on_message(t, &topic, &message);
+                    next.extend(
+                        node.drain_outbox()
+                            .into_iter()
+                            .map(|Outgoing { topic, message }| (topic, message)),
+                    );
+                }
+            }
+            pending = next;
+        }
+    }
+
+    fn update_camera_wants(&mut self) {
+        let ids: Vec<RoverId> = self.world.rovers().map(|b| b.id).collect();
+        for id in ids {
+            let wanted = !self.bus.subscribers(&id.topic("camera/image")).is_empty();
+            self.world.set_camera_wanted(id, wanted);
+        }
+    }
+
+    fn sample_trajectories(&mut self, t: Time) {
+        while self.next_sample <= t {
+            for (traj, body) in self.trajectories.iter_mut().zip(self.world.rovers()) {
+                traj.push(PoseSample {
+                    t: self.next_sample,
+                    x_m: body.pose.x_m,
+                    y_m: body.pose.y_m,
+                    yaw_rad: body.pose.yaw_rad,
+                });
+            }
+            self.next_sample += TRAJECTORY_PERIOD;
+        }
+    }
+
+    /// The trajectory of each rover as points, for drawing.
+    pub fn trajectory_points(&self) -> Vec<Vec<Point2>> {
+        self.trajectories
+            .iter()
+            .map(|t| t.iter().map(|s| Point2::new(s.x_m, s.y_m)).collect())
+            .collect()
+    }
+}

@@ -1,0 +1,242 @@
+//! The results folder of a mission and `mission.json`, its stable contract (documented in
+//! `docs/mission-json.md`; later issues add fields, never change or remove them).
+
+use crate::Mission;
+use realms_sim::SimEvent;
+use realms_sim::render;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Schema identifier written into every `mission.json`.
+pub const SCHEMA: &str = "realms.mission/1";
+
+/// The behaviour driving the rovers, named so nobody mistakes it for exploration.
+pub const BEHAVIOUR: &str = "wander (placeholder until autonomous exploration)";
+
+/// `mission.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct MissionReport {
+    /// Schema identifier.
+    pub schema: &'static str,
+    /// Version of realms that ran the mission.
+    pub realms_version: &'static str,
+    /// Where the scenario came from: a file path, or `default`.
+    pub scenario: String,
+    /// The seed.
+    pub seed: u64,
+    /// Simulated mission time, seconds.
+    pub sim_duration_s: f64,
+    /// Wall-clock time the run took, seconds (varies run to run).
+    pub wall_s: f64,
+    /// Simulated seconds per wall second (varies run to run).
+    pub speedup: f64,
+    /// What drove the rovers.
+    pub behaviour: &'static str,
+    /// The arena.
+    pub arena: ArenaSummary,
+    /// Per rover.
+    pub rovers: Vec<RoverSummary>,
+    /// Collision episodes, all rovers.
+    pub collisions: u32,
+    /// Hazard-cell entries, all rovers.
+    pub hazard_entries: u32,
+    /// Stuck events, all rovers.
+    pub stuck_events: u32,
+    /// Everything notable, in time order.
+    pub events: Vec<SimEvent>,
+    /// Messages published per topic.
+    pub messages: BTreeMap<String, u64>,
+    /// The other files in the folder.
+    pub files: BTreeMap<&'static str, &'static str>,
+}
+
+/// What the arena held.
+#[derive(Clone, Debug, Serialize)]
+pub struct ArenaSummary {
+    /// Extent along x, metres.
+    pub width_m: f64,
+    /// Extent along y, metres.
+    pub length_m: f64,
+    /// Heightfield cell, metres.
+    pub resolution_m: f64,
+    /// Ground-truth explorable area, square metres.
+    pub explorable_area_m2: f64,
+    /// Craters placed.
+    pub craters: usize,
+    /// Boulders placed.
+    pub boulders: usize,
+    /// Boulders a rover cannot drive over.
+    pub blocking_boulders: usize,
+    /// Resource targets placed.
+    pub targets: usize,
+}
+
+/// One rover's mission.
+#[derive(Clone, Debug, Serialize)]
+pub struct RoverSummary {
+    /// Namespace.
+    pub name: String,
+    /// Distance over ground, metres.
+    pub distance_m: f64,
+    /// Collision episodes.
+    pub collisions: u32,
+    /// Times stuck.
+    pub stuck_events: u32,
+    /// Hazard-cell entries.
+    pub hazard_entries: u32,
+    /// Still powered at the end.
+    pub powered: bool,
+    /// Stuck at the end.
+    pub stuck: bool,
+    /// Final true pose `[x_m, y_m, yaw_rad]`.
+    pub final_pose: [f64; 3],
+}
+
+/// Why the results could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Folder or file I/O.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// What.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// An image.
+    #[error(transparent)]
+    Image(#[from] realms_core::grid::GridExportError),
+}
+
+/// Rover colours in pictures, cycled.
+pub const ROVER_COLORS: [[u8; 3]; 6] = [
+    [230, 60, 50],
+    [40, 160, 230],
+    [60, 200, 80],
+    [230, 140, 30],
+    [180, 80, 220],
+    [20, 200, 190],
+];
+
+impl MissionReport {
+    /// Summarises a mission.
+    pub fn new(mission: &Mission, scenario_source: &str, wall_s: f64) -> MissionReport {
+        let world = mission.world();
+        let s = world.scenario();
+        let t = world.terrain();
+        let rovers: Vec<RoverSummary> = world
+            .rovers()
+            .map(|b| RoverSummary {
+                name: b.id.to_string(),
+                distance_m: b.stats.distance_m,
+                collisions: b.stats.collisions,
+                stuck_events: b.stats.stuck_events,
+                hazard_entries: b.stats.hazard_entries,
+                powered: b.powered,
+                stuck: b.stuck,
+                final_pose: [b.pose.x_m, b.pose.y_m, b.pose.yaw_rad],
+            })
+            .collect();
+        let sim_duration_s = mission.now().as_secs_f64();
+        MissionReport {
+            schema: SCHEMA,
+            realms_version: env!("CARGO_PKG_VERSION"),
+            scenario: scenario_source.to_string(),
+            seed: s.seed,
+            sim_duration_s,
+            wall_s,
+            speedup: if wall_s > 0.0 {
+                sim_duration_s / wall_s
+            } else {
+                0.0
+            },
+            behaviour: BEHAVIOUR,
+            arena: ArenaSummary {
+                width_m: s.arena.width_m,
+                length_m: s.arena.length_m,
+                resolution_m: s.arena.resolution_m,
+                explorable_area_m2: world.truth().explorable_area_m2,
+                craters: t.craters.len(),
+                boulders: t.boulders.len(),
+                blocking_boulders: t
+                    .boulders
+                    .iter()
+                    .filter(|b| b.height_m > s.rovers.max_step_m)
+                    .count(),
+                targets: t.targets.len(),
+            },
+            collisions: rovers.iter().map(|r| r.collisions).sum(),
+            hazard_entries: rovers.iter().map(|r| r.hazard_entries).sum(),
+            stuck_events: rovers.iter().map(|r| r.stuck_events).sum(),
+            rovers,
+            events: world.events().to_vec(),
+            messages: mission
+                .bus()
+                .counts()
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect(),
+            files: BTreeMap::from([
+                ("truth", "truth.png"),
+                ("trajectories", "trajectories.png"),
+                ("trajectories_csv", "trajectories.csv"),
+            ]),
+        }
+    }
+}
+
+/// Writes the results folder: `mission.json`, `truth.png`, `trajectories.png`,
+/// `trajectories.csv`. Creates the folder if needed.
+pub fn write_results(
+    mission: &Mission,
+    dir: &Path,
+    scenario_source: &str,
+    wall_s: f64,
+) -> Result<MissionReport, ReportError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ReportError::Io { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let world = mission.world();
+    let truth_img = render::truth_image(world.terrain(), world.truth());
+    truth_img.write_png(&dir.join("truth.png"), |c| *c)?;
+
+    let mut traj_img = truth_img.map(|c| {
+        // Fade the terrain so the paths stand out.
+        [c[0] / 2 + 100, c[1] / 2 + 100, c[2] / 2 + 100]
+    });
+    for (i, points) in mission.trajectory_points().iter().enumerate() {
+        render::draw_path(
+            &mut traj_img,
+            points,
+            ROVER_COLORS[i % ROVER_COLORS.len()],
+            3,
+        );
+    }
+    traj_img.write_png(&dir.join("trajectories.png"), |c| *c)?;
+
+    let mut csv = String::from("t_s,rover,x_m,y_m,yaw_rad\n");
+    for (body, samples) in world.rovers().zip(mission.trajectories()) {
+        for s in samples {
+            csv.push_str(&format!(
+                "{:.3},{},{:.4},{:.4},{:.5}\n",
+                s.t.as_secs_f64(),
+                body.id,
+                s.x_m,
+                s.y_m,
+                s.yaw_rad
+            ));
+        }
+    }
+    let csv_path = dir.join("trajectories.csv");
+    std::fs::write(&csv_path, csv).map_err(io(&csv_path))?;
+
+    let report = MissionReport::new(mission, scenario_source, wall_s);
+    let json = serde_json::to_string_pretty(&report)
+        .expect("the report is plain data and always serialises");
+    let json_path = dir.join("mission.json");
+    std::fs::write(&json_path, json + "\n").map_err(io(&json_path))?;
+    Ok(report)
+}

@@ -1,0 +1,44 @@
+//! realms-node: the logic of every node as a sans-IO state machine.
+//!
+//! A node is handed messages and ticks with the current mission time and returns what it
+//! wants to send; it never reads a clock, sleeps, spawns a thread or opens a socket. The
+//! simulator and (later) the Zenoh runner are two thin drivers of the same code.
+//!
+//! - [`Node`]: the interface every node implements.
+//! - [`rover::RoverNode`]: a rover's on-board logic.
+
+pub mod rover;
+pub mod wander;
+
+use realms_core::msgs::Message;
+use realms_core::{Time, Topic};
+
+/// A message a node wants published.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outgoing {
+    /// Where to.
+    pub topic: Topic,
+    /// What.
+    pub message: Message,
+}
+
+/// A sans-IO node.
+pub trait Node {
+    /// The node's name (its namespace for a rover: `rover1`).
+    fn name(&self) -> &str;
+
+    /// Topics the node wants delivered to [`on_message`](Node::on_message).
+    fn subscriptions(&self) -> Vec<Topic>;
+
+    /// A message arrived at `now`.
+    fn on_message(&mut self, now: Time, topic: &Topic, message: &Message);
+
+    /// The time asked for by [`next_wakeup`](Node::next_wakeup) has come.
+    fn on_tick(&mut self, now: Time);
+
+    /// Takes everything the node wants sent, in the order it was produced.
+    fn drain_outbox(&mut self) -> Vec<Outgoing>;
+
+    /// When the node next wants [`on_tick`](Node::on_tick), if ever.
+    fn next_wakeup(&self) -> Option<Time>;
+}

@@ -1,0 +1,98 @@
+//! A small grayscale camera rendered from the terrain under a low sun: Lambertian shading,
+//! hard shadows (a shadow ray per pixel), black sky, as in a lunar analogue hall lit by one
+//! lamp. Rendered only when someone subscribes, so it costs nothing otherwise.
+
+use super::Frame3;
+use super::depth::{Intrinsics, cast_image};
+use crate::raycast::HeightPyramid;
+use crate::scenario::{Camera, Sun};
+use crate::terrain::{SurfaceKind, Terrain};
+use realms_core::Time;
+use realms_core::msgs::{Header, Image};
+
+/// Renders one `mono8` image from `world_from_optical`.
+pub fn render(
+    world: &HeightPyramid,
+    terrain: &Terrain,
+    world_from_optical: &Frame3,
+    spec: &Camera,
+    sun: &Sun,
+    stamp: Time,
+    frame_id: &str,
+) -> Image {
+    let (w, h) = (spec.width, spec.height);
+    let vfov_deg = 2.0
+        * ((h as f64 / w as f64) * (spec.hfov_deg.to_radians() / 2.0).tan())
+            .atan()
+            .to_degrees();
+    let k = Intrinsics::from_fov(w, h, spec.hfov_deg, vfov_deg);
+    let (se, ce) = sun.elevation_deg.to_radians().sin_cos();
+    let (sa, ca) = sun.azimuth_deg.to_radians().sin_cos();
+    let to_sun = [ce * ca, ce * sa, se];
+    let exposure = 1.5 / se.max(0.1);
+    let g = *terrain.geometry();
+    let heights = terrain.heights.cells();
+    let mut data = vec![0u8; (w * h) as usize];
+    cast_image(
+        world,
+        world_from_optical,
+        &k,
+        w,
+        h,
+        30.0,
+        |u, v, unit, hit| {
+            let Some(t) = hit else { return };
+            let dir = world_from_optical.rotate(unit);
+            let o = world_from_optical.origin;
+            let p = [o[0] + dir[0] * t, o[1] + dir[1] * t, o[2] + dir[2] * t];
+            let Some(cell) = g.world_to_cell(realms_core::Point2::new(p[0], p[1])) else {
+                return;
+            };
+            let at = |x: usize, y: usize| {
+                heights[y.min(g.height - 1) * g.width + x.min(g.width - 1)] as f64
+            };
+            let (x, y) = (cell.x, cell.y);
+            let gx = (at(x + 1, y) - at(x.saturating_sub(1), y)) / (2.0 * g.resolution_m);
+            let gy = (at(x, y + 1) - at(x, y.saturating_sub(1))) / (2.0 * g.resolution_m);
+            let n_len = (gx * gx + gy * gy + 1.0).sqrt();
+            let normal = [-gx / n_len, -gy / n_len, 1.0 / n_len];
+            let lambert =
+                (normal[0] * to_sun[0] + normal[1] * to_sun[1] + normal[2] * to_sun[2]).max(0.0);
+            let lit = lambert > 0.0
+                && world
+                    .cast([p[0], p[1], p[2] + 0.02], to_sun, 0.0, 40.0)
+                    .is_none();
+            let albedo = match terrain.kind.cells()[g.index(cell)] {
+                SurfaceKind::Floor => 0.30 + 0.06 * texture(x, y),
+                SurfaceKind::Rock => 0.42 + 0.08 * texture(x / 2, y / 2),
+                SurfaceKind::Wall => 0.6,
+                SurfaceKind::Lander => 0.85,
+                SurfaceKind::Target => 0.95,
+            };
+            let light = 0.03 + if lit { lambert } else { 0.0 };
+            let value = (albedo * light * exposure * 255.0).clamp(0.0, 255.0);
+            data[(v * w + u) as usize] = value as u8;
+        },
+    );
+    Image {
+        header: Header {
+            stamp,
+            frame_id: frame_id.to_string(),
+        },
+        height: h,
+        width: w,
+        encoding: "mono8".into(),
+        step: w,
+        data,
+    }
+}
+
+/// Deterministic per-cell texture in [-1, 1] (a hash, so the regolith looks grainy).
+fn texture(x: usize, y: usize) -> f64 {
+    let mut v = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    v ^= v >> 29;
+    v = v.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    v ^= v >> 32;
+    (v % 2001) as f64 / 1000.0 - 1.0
+}

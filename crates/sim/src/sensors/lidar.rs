@@ -1,0 +1,57 @@
+//! RPLIDAR A2M8-like 2D lidar: a 360 degree fan of beams in the sensor's x-y plane, which tilts
+//! with the rover (so on slopes it can hit the ground, and it never sees a crater bowl).
+
+use super::{Frame3, gaussian};
+use crate::raycast::HeightPyramid;
+use crate::rng::SimRng;
+use crate::scenario::Lidar;
+use realms_core::Time;
+use realms_core::msgs::{Header, LaserScan};
+
+/// Takes one scan from `world_from_lidar`.
+pub fn scan(
+    world: &HeightPyramid,
+    world_from_lidar: &Frame3,
+    spec: &Lidar,
+    rng: &mut SimRng,
+    stamp: Time,
+    frame_id: &str,
+) -> LaserScan {
+    let n = spec.beams as usize;
+    let increment = std::f64::consts::TAU / n as f64;
+    let angle_min = -std::f64::consts::PI;
+    let mut ranges = Vec::with_capacity(n);
+    for i in 0..n {
+        let a = angle_min + i as f64 * increment;
+        let dir = world_from_lidar.rotate([a.cos(), a.sin(), 0.0]);
+        let hit = world.cast(world_from_lidar.origin, dir, 0.0, spec.range_max_m);
+        let range = match hit {
+            Some(t) => {
+                let noisy = t + gaussian(rng, spec.noise_m + spec.noise_per_m * t);
+                if noisy < spec.range_min_m || noisy > spec.range_max_m {
+                    f32::INFINITY
+                } else {
+                    noisy as f32
+                }
+            }
+            None => f32::INFINITY,
+        };
+        ranges.push(range);
+    }
+    let scan_time = 1.0 / spec.rate_hz;
+    LaserScan {
+        header: Header {
+            stamp,
+            frame_id: frame_id.to_string(),
+        },
+        angle_min_rad: angle_min as f32,
+        angle_max_rad: (angle_min + (n - 1) as f64 * increment) as f32,
+        angle_increment_rad: increment as f32,
+        time_increment_s: (scan_time / n as f64) as f32,
+        scan_time_s: scan_time as f32,
+        range_min_m: spec.range_min_m as f32,
+        range_max_m: spec.range_max_m as f32,
+        ranges_m: ranges,
+        intensities: Vec::new(),
+    }
+}

@@ -1,0 +1,79 @@
+//! Proprioceptive sensors: wheel odometry (the encoder-integrated pose, which drifts with slip
+//! and the skid-steer yaw error) and a yaw gyro (true rate plus a fixed bias and white noise).
+
+use super::gaussian;
+use crate::rng::SimRng;
+use crate::rover::RoverBody;
+use crate::scenario::Rovers;
+use realms_core::Time;
+use realms_core::geometry::{Quaternion, Vec3};
+use realms_core::msgs::{
+    Header, Imu, Odometry, Pose3, PoseWithCovariance, Twist, TwistWithCovariance,
+};
+
+/// The odometry message for a rover's current encoder state.
+pub fn odometry(body: &RoverBody, spec: &Rovers, stamp: Time) -> Odometry {
+    let ns = body.id.namespace();
+    let p = &body.odom_pose;
+    let mut pose_cov = [[0.0; 6]; 6];
+    let mut twist_cov = [[0.0; 6]; 6];
+    let rel = spec.odometry.speed_noise_frac.max(1e-3);
+    // Nominal per-message uncertainty; z, roll and pitch are not estimated (large variance).
+    for (i, v) in [
+        (0, 0.01),
+        (1, 0.01),
+        (2, 1e6),
+        (3, 1e6),
+        (4, 1e6),
+        (5, 0.02),
+    ] {
+        pose_cov[i][i] = v;
+    }
+    twist_cov[0][0] = (rel * spec.max_speed_m_s).powi(2);
+    twist_cov[5][5] =
+        (spec.odometry.yaw_scale_error_std.max(rel) * spec.max_yaw_rate_rad_s).powi(2);
+    Odometry {
+        header: Header {
+            stamp,
+            frame_id: format!("{ns}/odom"),
+        },
+        child_frame_id: format!("{ns}/base_link"),
+        pose: PoseWithCovariance {
+            pose: Pose3 {
+                position: Vec3::new(p.x_m, p.y_m, 0.0),
+                orientation: Quaternion::from_roll_pitch_yaw(0.0, 0.0, p.yaw_rad),
+            },
+            covariance: pose_cov,
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: Vec3::new(body.odom_speed_m_s, 0.0, 0.0),
+                angular: Vec3::new(0.0, 0.0, body.odom_yaw_rate_rad_s),
+            },
+            covariance: twist_cov,
+        },
+    }
+}
+
+/// The gyro message: the true yaw rate plus bias and noise.
+pub fn imu(body: &RoverBody, spec: &Rovers, rng: &mut SimRng, stamp: Time) -> Imu {
+    let sigma = spec.imu.gyro_noise_rad_s;
+    let not_provided = [[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
+    let var = sigma * sigma;
+    Imu {
+        header: Header {
+            stamp,
+            frame_id: format!("{}/imu", body.id.namespace()),
+        },
+        orientation: Quaternion::IDENTITY,
+        orientation_covariance: not_provided,
+        angular_velocity: Vec3::new(
+            0.0,
+            0.0,
+            body.yaw_rate_rad_s + body.gyro_bias_rad_s + gaussian(rng, sigma),
+        ),
+        angular_velocity_covariance: [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, var]],
+        linear_acceleration: Vec3::default(),
+        linear_acceleration_covariance: not_provided,
+    }
+}

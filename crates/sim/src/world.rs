@@ -1,0 +1,411 @@
+//! The simulated world: terrain, ground truth and rovers on one integer-nanosecond clock.
+//!
+//! A discrete-event loop: physics steps at a fixed rate, every sensor of every rover fires at
+//! its own rate (phases staggered so rovers do not all fire at once), and scheduled faults
+//! start and end. Sensor data leaves as `(topic, message)` pairs for the message bus; velocity
+//! commands come in through [`World::command`]. Nothing here reads a clock.
+
+use crate::raycast::HeightPyramid;
+use crate::rng::{Purpose, SimRng, Streams};
+use crate::rover::{RoverBody, StepOutcome};
+use crate::scenario::{FaultKind, Scenario, SensorKind};
+use crate::scheduler::Scheduler;
+use crate::sensors::depth::BODY_FROM_OPTICAL;
+use crate::sensors::{Frame3, camera, depth, lidar, proprio};
+use crate::terrain::Terrain;
+use crate::truth::GroundTruth;
+use realms_core::msgs::{Message, TwistStamped};
+use realms_core::{Duration, RoverId, Time, Topic};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Something notable that happened in the world.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SimEvent {
+    /// When, mission seconds.
+    pub t_s: f64,
+    /// What.
+    pub kind: SimEventKind,
+    /// To which rover.
+    pub rover: String,
+}
+
+/// Kinds of world event (the `kind` of a `mission.json` event).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SimEventKind {
+    /// A rover ran into an obstacle.
+    Collision,
+    /// A rover's centre entered a hazard cell.
+    HazardEntry,
+    /// A rover is trapped.
+    Stuck,
+    /// A rover shut down.
+    PowerOff,
+    /// A rover's wheels lost grip.
+    SlipBurstStart,
+    /// Grip came back.
+    SlipBurstEnd,
+    /// A sensor stopped publishing.
+    SensorDropoutStart,
+    /// It publishes again.
+    SensorDropoutEnd,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Due {
+    Physics,
+    Sensor(usize, SensorKind),
+    FaultStart(usize),
+    FaultEnd(usize),
+}
+
+#[derive(Debug)]
+struct RoverSlot {
+    body: RoverBody,
+    lidar_rng: SimRng,
+    depth_rng: SimRng,
+    motion_rng: SimRng,
+    camera_wanted: bool,
+    dropped: BTreeMap<SensorKind, u32>,
+}
+
+/// The whole simulated world.
+#[derive(Debug)]
+pub struct World {
+    scenario: Scenario,
+    terrain: Terrain,
+    truth: GroundTruth,
+    pyramid: HeightPyramid,
+    rovers: Vec<RoverSlot>,
+    queue: Scheduler<Due>,
+    now: Time,
+    events: Vec<SimEvent>,
+    physics_dt: Duration,
+}
+
+impl World {
+    /// Generates the scenario's arena and puts its rovers at their starts.
+    pub fn new(scenario: &Scenario) -> World {
+        World::with_terrain(scenario, Terrain::generate(scenario))
+    }
+
+    /// A world on a given terrain (hand-built test worlds); rovers start at
+    /// `terrain.rover_starts`, one per start up to the scenario's rover count.
+    pub fn with_terrain(scenario: &Scenario, terrain: Terrain) -> World {
+        let truth = GroundTruth::derive(&terrain, scenario);
+        let pyramid = HeightPyramid::new(&terrain.heights);
+        let streams = Streams::new(scenario.seed);
+        let spec = &scenario.rovers;
+        let rovers: Vec<RoverSlot> = terrain
+            .rover_starts
+            .iter()
+            .take(spec.count as usize)
+            .enumerate()
+            .map(|(i, start)| {
+                let n = (i + 1) as u8;
+                let mut motion_rng = streams.rng(Purpose::Odometry(n));
+                RoverSlot {
+                    body: RoverBody::new(RoverId(n), *start, spec, &terrain, &mut motion_rng),
+                    lidar_rng: streams.rng(Purpose::Lidar(n)),
+                    depth_rng: streams.rng(Purpose::Depth(n)),
+                    motion_rng,
+                    camera_wanted: false,
+                    dropped: BTreeMap::new(),
+                }
+            })
+            .collect();
+        let mut queue = Scheduler::new();
+        let physics_dt = Duration::from_secs_f64(spec.physics_step_s);
+        // The step at time t integrates (t - dt, t], so the state at t is the state of time t.
+        queue.push(Time::ZERO + physics_dt, Due::Physics);
+        for i in 0..rovers.len() {
+            // Stagger phases so the fleet's sensors do not all fire on the same nanosecond.
+            let phase = |ms: i64| Time::ZERO + Duration::from_millis(ms * i as i64);
+            queue.push(phase(7), Due::Sensor(i, SensorKind::Lidar));
+            queue.push(
+                phase(11) + Duration::from_millis(50),
+                Due::Sensor(i, SensorKind::Depth),
+            );
+            queue.push(
+                phase(13) + Duration::from_millis(20),
+                Due::Sensor(i, SensorKind::Camera),
+            );
+            queue.push(phase(3), Due::Sensor(i, SensorKind::Odometry));
+            queue.push(phase(1), Due::Sensor(i, SensorKind::Imu));
+        }
+        for (k, f) in scenario.faults.iter().enumerate() {
+            queue.push(Time::from_secs_f64(f.at_s), Due::FaultStart(k));
+            if f.kind != FaultKind::PowerOff {
+                queue.push(Time::from_secs_f64(f.at_s + f.duration_s), Due::FaultEnd(k));
+            }
+        }
+        World {
+            physics_dt,
+            scenario: scenario.clone(),
+            terrain,
+            truth,
+            pyramid,
+            rovers,
+            queue,
+            now: Time::ZERO,
+            events: Vec::new(),
+        }
+    }
+
+    /// The scenario this world runs.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The terrain.
+    pub fn terrain(&self) -> &Terrain {
+        &self.terrain
+    }
+
+    /// Ground truth.
+    pub fn truth(&self) -> &GroundTruth {
+        &self.truth
+    }
+
+    /// The height pyramid the sensors cast against.
+    pub fn pyramid(&self) -> &HeightPyramid {
+        &self.pyramid
+    }
+
+    /// The time of the last processed event.
+    pub fn now(&self) -> Time {
+        self.now
+    }
+
+    /// The rovers' physical state, rover 1 first.
+    pub fn rovers(&self) -> impl Iterator<Item = &RoverBody> {
+        self.rovers.iter().map(|s| &s.body)
+    }
+
+    /// Everything notable so far.
+    pub fn events(&self) -> &[SimEvent] {
+        &self.events
+    }
+
+    /// When the next world event is due.
+    pub fn next_due(&self) -> Option<Time> {
+        self.queue.peek_time()
+    }
+
+    /// Hands a velocity command to a rover's driver; unknown rovers are ignored.
+    pub fn command(&mut self, rover: RoverId, cmd: TwistStamped) {
+        if let Some(slot) = self.slot_mut(rover) {
+            slot.body.command = Some(cmd);
+        }
+    }
+
+    /// Whether anyone wants a rover's camera images (they are rendered only then).
+    pub fn set_camera_wanted(&mut self, rover: RoverId, wanted: bool) {
+        if let Some(slot) = self.slot_mut(rover) {
+            slot.camera_wanted = wanted;
+        }
+    }
+
+    fn slot_mut(&mut self, rover: RoverId) -> Option<&mut RoverSlot> {
+        self.rovers.iter_mut().find(|s| s.body.id == rover)
+    }
+
+    /// Processes every event due at or before `until`, appending published sensor messages.
+    pub fn advance_to(&mut self, until: Time, out: &mut Vec<(Topic, Message)>) {
+        while let Some((t, due)) = self.queue.pop_due(until) {
+            self.now = t;
+            match due {
+                Due::Physics => {
+                    self.physics(t);
+                    self.queue.push(t + self.physics_dt, Due::Physics);
+                }
+                Due::Sensor(i, kind) => {
+                    let spec = &self.scenario.rovers;
+                    let period = Duration::from_rate_hz(match kind {
+                        SensorKind::Lidar => spec.lidar.rate_hz,
+                        SensorKind::Depth => spec.depth.rate_hz,
+                        SensorKind::Camera => spec.camera.rate_hz,
+                        SensorKind::Odometry => spec.odometry.rate_hz,
+                        SensorKind::Imu => spec.imu.rate_hz,
+                    });
+                    if let Some(msg) = self.sense(i, kind, t) {
+                        out.push(msg);
+                    }
+                    self.queue.push(t + period, Due::Sensor(i, kind));
+                }
+                Due::FaultStart(k) => self.fault(k, t, true),
+                Due::FaultEnd(k) => self.fault(k, t, false),
+            }
+        }
+        self.now = self.now.max(until);
+    }
+
+    fn physics(&mut self, t: Time) {
+        let dt = self.physics_dt.as_secs_f64();
+        let spec = &self.scenario.rovers;
+        for slot in &mut self.rovers {
+            let outcomes = slot.body.step(
+                spec,
+                &self.terrain,
+                &self.truth,
+                t,
+                dt,
+                &mut slot.motion_rng,
+            );
+            for o in outcomes {
+                let kind = match o {
+                    StepOutcome::Moved => continue,
+                    StepOutcome::Collided => SimEventKind::Collision,
+                    StepOutcome::EnteredHazard => SimEventKind::HazardEntry,
+                    StepOutcome::GotStuck => SimEventKind::Stuck,
+                };
+                self.events.push(SimEvent {
+                    t_s: t.as_secs_f64(),
+                    kind,
+                    rover: slot.body.id.to_string(),
+                });
+            }
+        }
+    }
+
+    /// `world_from_base`: the rover's base frame on the ground, tilted with the terrain.
+    pub fn world_from_base(body: &RoverBody) -> Frame3 {
+        Frame3::from_rpy(
+            [body.pose.x_m, body.pose.y_m, body.z_m],
+            body.roll_rad,
+            body.pitch_rad,
+            body.pose.yaw_rad,
+        )
+    }
+
+    /// `base_from_lidar` for this scenario's rovers.
+    pub fn base_from_lidar(&self) -> Frame3 {
+        let l = &self.scenario.rovers.lidar;
+        Frame3::from_rpy([l.mount_x_m, 0.0, l.mount_height_m], 0.0, 0.0, 0.0)
+    }
+
+    /// `base_from_optical` of the depth camera (the grayscale camera shares its mount).
+    pub fn base_from_optical(&self) -> Frame3 {
+        let d = &self.scenario.rovers.depth;
+        let body = Frame3::from_rpy(
+            [d.mount_x_m, 0.0, d.mount_height_m],
+            0.0,
+            d.tilt_down_deg.to_radians(),
+            0.0,
+        );
+        body.compose(&Frame3 {
+            origin: [0.0; 3],
+            rot: BODY_FROM_OPTICAL,
+        })
+    }
+
+    fn sense(&mut self, i: usize, kind: SensorKind, t: Time) -> Option<(Topic, Message)> {
+        let base_from_lidar = self.base_from_lidar();
+        let base_from_optical = self.base_from_optical();
+        let spec = &self.scenario.rovers;
+        let slot = &mut self.rovers[i];
+        if !slot.body.powered || slot.dropped.get(&kind).is_some_and(|n| *n > 0) {
+            return None;
+        }
+        let id = slot.body.id;
+        let ns = id.namespace();
+        let world_from_base = World::world_from_base(&slot.body);
+        Some(match kind {
+            SensorKind::Lidar => {
+                let pose = world_from_base.compose(&base_from_lidar);
+                let frame = format!("{ns}/laser");
+                let scan = lidar::scan(
+                    &self.pyramid,
+                    &pose,
+                    &spec.lidar,
+                    &mut slot.lidar_rng,
+                    t,
+                    &frame,
+                );
+                (id.topic("scan"), Message::LaserScan(scan))
+            }
+            SensorKind::Depth => {
+                let pose = world_from_base.compose(&base_from_optical);
+                let frame = format!("{ns}/depth_optical");
+                let cloud = depth::frame(
+                    &self.pyramid,
+                    &pose,
+                    &spec.depth,
+                    &mut slot.depth_rng,
+                    t,
+                    &frame,
+                );
+                (id.topic("depth/points"), Message::PointCloud(cloud))
+            }
+            SensorKind::Camera => {
+                if !slot.camera_wanted {
+                    return None;
+                }
+                let pose = world_from_base.compose(&base_from_optical);
+                let frame = format!("{ns}/camera_optical");
+                let image = camera::render(
+                    &self.pyramid,
+                    &self.terrain,
+                    &pose,
+                    &spec.camera,
+                    &self.scenario.sun,
+                    t,
+                    &frame,
+                );
+                (id.topic("camera/image"), Message::Image(image))
+            }
+            SensorKind::Odometry => (
+                id.topic("odom"),
+                Message::Odometry(Box::new(proprio::odometry(&slot.body, spec, t))),
+            ),
+            SensorKind::Imu => (
+                id.topic("imu"),
+                Message::Imu(Box::new(proprio::imu(
+                    &slot.body,
+                    spec,
+                    &mut slot.motion_rng,
+                    t,
+                ))),
+            ),
+        })
+    }
+
+    fn fault(&mut self, k: usize, t: Time, starting: bool) {
+        let fault = self.scenario.faults[k].clone();
+        let Some(id) = RoverId::parse(&fault.rover) else {
+            return; // validated at load; a hand-built scenario may still name nobody
+        };
+        let end = Time::from_secs_f64(fault.at_s + fault.duration_s);
+        let Some(slot) = self.slot_mut(id) else {
+            return;
+        };
+        let kind = match (fault.kind, starting) {
+            (FaultKind::PowerOff, _) => {
+                slot.body.powered = false;
+                SimEventKind::PowerOff
+            }
+            (FaultKind::SlipBurst, true) => {
+                slot.body.slip_burst_until = Some(end);
+                SimEventKind::SlipBurstStart
+            }
+            (FaultKind::SlipBurst, false) => SimEventKind::SlipBurstEnd,
+            (FaultKind::SensorDropout, start) => {
+                let sensor = fault.sensor.unwrap_or(SensorKind::Lidar);
+                let n = slot.dropped.entry(sensor).or_insert(0);
+                if start {
+                    *n += 1;
+                    SimEventKind::SensorDropoutStart
+                } else {
+                    *n = n.saturating_sub(1);
+                    SimEventKind::SensorDropoutEnd
+                }
+            }
+        };
+        self.events.push(SimEvent {
+            t_s: t.as_secs_f64(),
+            kind,
+            rover: id.to_string(),
+        });
+    }
+}

@@ -1,0 +1,259 @@
+//! The rover body: commanded velocities, limits, the dead-man, collisions, craters, and the
+//! odometry and gyro error models against their configured statistics.
+
+mod common;
+
+use common::{drive, flat_world, idle_until, scenario};
+use realms_core::msgs::Message;
+use realms_core::{Point2, Pose2, RoverId, Time};
+use realms_sim::SimEventKind;
+use realms_sim::terrain::{Crater, Rect};
+
+const R1: RoverId = RoverId(1);
+
+fn firm(mut s: realms_sim::Scenario) -> realms_sim::Scenario {
+    s.rovers.odometry.slip_base = 0.0;
+    s.rovers.odometry.slip_per_slope = 0.0;
+    s.rovers.odometry.slip_loose = 0.0;
+    s
+}
+
+#[test]
+fn commanded_speed_is_reached_after_the_acceleration_ramp() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 0.3, 0.0, 10.0);
+    let body = world.rovers().next().expect("rover");
+    // v t - v^2 / (2 a): 3.0 - 0.09 = 2.91 m.
+    let travelled = body.pose.x_m - 3.0;
+    assert!((travelled - 2.91).abs() < 0.01, "{travelled}");
+    assert!(body.pose.y_m.sub(10.0).abs() < 1e-9);
+    assert!((body.wheel_speed_m_s - 0.3).abs() < 1e-9);
+}
+
+trait Sub {
+    fn sub(self, o: f64) -> f64;
+}
+impl Sub for f64 {
+    fn sub(self, o: f64) -> f64 {
+        self - o
+    }
+}
+
+#[test]
+fn speed_and_yaw_rate_are_limited() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 5.0, 0.0, 5.0);
+    let body = world.rovers().next().expect("rover");
+    assert!((body.wheel_speed_m_s - s.rovers.max_speed_m_s).abs() < 1e-9);
+    let travelled = body.pose.x_m - 3.0;
+    // 0.4 * 5 - 0.4^2 / (2 * 0.5) = 1.84 m.
+    assert!((travelled - 1.84).abs() < 0.01, "{travelled}");
+
+    let mut world = flat_world(&s, &[Pose2::new(10.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 0.0, 9.0, 1.5);
+    let body = world.rovers().next().expect("rover");
+    assert!((body.wheel_yaw_rate_rad_s - s.rovers.max_yaw_rate_rad_s).abs() < 1e-9);
+    // Ramp 0.5 s to 1 rad/s (0.25 rad), then 1.0 s at 1 rad/s: 1.25 rad.
+    assert!(
+        (body.pose.yaw_rad - 1.25).abs() < 0.03,
+        "{}",
+        body.pose.yaw_rad
+    );
+}
+
+#[test]
+fn a_stale_command_stops_the_rover() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 0.3, 0.0, 0.1);
+    idle_until(&mut world, Time::from_secs_f64(5.0));
+    let body = world.rovers().next().expect("rover");
+    assert_eq!(body.wheel_speed_m_s, 0.0);
+    // Half a second of commands at most (0.6 s incl. the first), then braking.
+    assert!(body.pose.x_m - 3.0 < 0.2, "{}", body.pose.x_m);
+}
+
+#[test]
+fn a_wall_stops_the_rover_and_is_recorded_once() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |t| {
+        t.add_wall(
+            Rect {
+                min: Point2::new(5.0, 0.0),
+                max: Point2::new(5.5, 20.0),
+            },
+            1.0,
+        );
+    });
+    drive(&mut world, R1, 0.4, 0.0, 15.0);
+    let body = world.rovers().next().expect("rover");
+    let front = body.pose.x_m + s.rovers.length_m / 2.0;
+    assert!(front <= 5.0 && front > 4.95, "front bumper at {front}");
+    assert_eq!(body.stats.collisions, 1);
+    let collisions: Vec<_> = world
+        .events()
+        .iter()
+        .filter(|e| e.kind == SimEventKind::Collision)
+        .collect();
+    assert_eq!(collisions.len(), 1);
+    assert_eq!(collisions[0].rover, "rover1");
+}
+
+#[test]
+fn driving_into_a_steep_crater_gets_the_rover_stuck() {
+    let s = firm(scenario(1));
+    let crater = Crater {
+        center: Point2::new(8.0, 10.0),
+        radius_m: 1.5,
+        depth_m: 0.6,
+        rim_m: 0.1,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| t.add_crater(crater));
+    drive(&mut world, R1, 0.3, 0.0, 20.0);
+    let body = world.rovers().next().expect("rover");
+    assert!(body.stuck);
+    assert_eq!(body.stats.hazard_entries, 1);
+    assert_eq!(body.stats.stuck_events, 1);
+    let x_stuck = body.pose.x_m;
+    assert!(x_stuck > 6.5 && x_stuck < 7.0, "stuck at {x_stuck}");
+    drive(&mut world, R1, -0.3, 0.0, 5.0);
+    let body = world.rovers().next().expect("rover");
+    assert_eq!(body.pose.x_m, x_stuck, "a stuck rover does not move");
+    let kinds: Vec<_> = world.events().iter().map(|e| e.kind).collect();
+    assert_eq!(kinds, vec![SimEventKind::HazardEntry, SimEventKind::Stuck]);
+}
+
+#[test]
+fn the_rover_pitches_on_a_slope() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| {
+        // A 10 % ramp up towards +x from x = 6 m.
+        let g = *t.geometry();
+        for (cell, h) in t.floor.clone().iter() {
+            let x = g.cell_center(cell).x_m;
+            let i = g.index(cell);
+            let rise = ((x - 6.0).max(0.0) * 0.1).min(0.8) as f32;
+            if t.kind.cells()[i] == realms_sim::terrain::SurfaceKind::Floor {
+                t.floor.cells_mut()[i] = h + rise;
+                t.heights.cells_mut()[i] = h + rise;
+            }
+        }
+    });
+    drive(&mut world, R1, 0.3, 0.0, 12.0);
+    let body = world.rovers().next().expect("rover");
+    assert!(body.pose.x_m > 7.0);
+    // Nose up on an upward slope: negative pitch (REP 103), atan(0.1) = 5.7 degrees.
+    assert!(
+        (body.pitch_rad + 0.1f64.atan()).abs() < 0.01,
+        "{}",
+        body.pitch_rad
+    );
+    assert!(body.roll_rad.abs() < 1e-6);
+}
+
+/// Odometry over-reports distance by 1 / (1 - slip) with the configured per-step noise.
+#[test]
+fn odometry_error_follows_the_configured_model() {
+    let mut ratios = Vec::new();
+    for seed in 0..30 {
+        let mut s = scenario(1);
+        s.seed = seed;
+        s.rovers.odometry.slip_per_slope = 0.0;
+        let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |t| {
+            t.looseness.cells_mut().fill(0.5);
+        });
+        drive(&mut world, R1, 0.3, 0.0, 30.0);
+        let body = world.rovers().next().expect("rover");
+        let truth = body.pose.x_m - 3.0;
+        let odom = body.odom_pose.x_m - 3.0;
+        ratios.push(odom / truth);
+    }
+    let o = &scenario(1).rovers.odometry;
+    let expected = 1.0 / (1.0 - (o.slip_base + 0.5 * o.slip_loose));
+    let n = ratios.len() as f64;
+    let mean = ratios.iter().sum::<f64>() / n;
+    let std = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    // Per-step relative noise sigma over ~1500 moving steps.
+    let steps = 30.0 / scenario(1).rovers.physics_step_s;
+    let expected_std = o.speed_noise_frac / steps.sqrt();
+    assert!(
+        (mean - expected).abs() < 4.0 * expected_std / n.sqrt() + 1e-3,
+        "mean {mean} vs {expected}"
+    );
+    assert!(
+        std > 0.6 * expected_std && std < 1.5 * expected_std,
+        "std {std} vs {expected_std}"
+    );
+}
+
+#[test]
+fn gyro_reads_the_yaw_rate_plus_its_bias_and_noise() {
+    let s = scenario(1);
+    let mut world = flat_world(&s, &[Pose2::new(10.0, 10.0, 0.0)], |_| {});
+    let out = idle_until(&mut world, Time::from_secs_f64(60.0));
+    let bias = world.rovers().next().expect("rover").gyro_bias_rad_s;
+    let rates: Vec<f64> = out
+        .iter()
+        .filter_map(|(_, m)| match m {
+            Message::Imu(imu) => Some(imu.angular_velocity.z),
+            _ => None,
+        })
+        .collect();
+    let n = rates.len() as f64;
+    assert!(n > 2900.0, "{n} gyro messages in 60 s at 50 Hz");
+    let mean = rates.iter().sum::<f64>() / n;
+    let std = (rates.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let sigma = s.rovers.imu.gyro_noise_rad_s;
+    assert!(
+        (mean - bias).abs() < 4.0 * sigma / n.sqrt(),
+        "mean {mean} vs bias {bias}"
+    );
+    assert!((std - sigma).abs() < 0.1 * sigma, "std {std}");
+}
+
+#[test]
+fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
+    let mut s = firm(scenario(1));
+    s.faults.push(realms_sim::scenario::Fault {
+        kind: realms_sim::scenario::FaultKind::SlipBurst,
+        rover: "rover1".into(),
+        at_s: 5.0,
+        duration_s: 5.0,
+        sensor: None,
+    });
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 0.3, 0.0, 15.0);
+    let body = world.rovers().next().expect("rover");
+    let truth = body.pose.x_m - 3.0;
+    let odom = body.odom_pose.x_m - 3.0;
+    // 5 s at 0.3 m/s with 90 % slip: the odometry is about 1.35 m ahead of the truth.
+    assert!(
+        (odom - truth - 1.35).abs() < 0.1,
+        "odom {odom} truth {truth}"
+    );
+    let kinds: Vec<_> = world.events().iter().map(|e| e.kind).collect();
+    assert_eq!(
+        kinds,
+        vec![SimEventKind::SlipBurstStart, SimEventKind::SlipBurstEnd]
+    );
+}
+
+#[test]
+fn a_powered_off_rover_stops_and_falls_silent() {
+    let mut s = firm(scenario(1));
+    s.faults.push(realms_sim::scenario::Fault {
+        kind: realms_sim::scenario::FaultKind::PowerOff,
+        rover: "rover1".into(),
+        at_s: 2.0,
+        duration_s: 0.0,
+        sensor: None,
+    });
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    drive(&mut world, R1, 0.3, 0.0, 2.5);
+    let x = world.rovers().next().expect("rover").pose.x_m;
+    let out = drive(&mut world, R1, 0.3, 0.0, 5.0);
+    assert!(out.is_empty(), "{} messages after power-off", out.len());
+    assert_eq!(world.rovers().next().expect("rover").pose.x_m, x);
+}

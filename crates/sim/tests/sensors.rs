@@ -1,0 +1,253 @@
+//! Sensors against analytic answers in hand-built worlds.
+
+mod common;
+
+use common::{flat_world, idle_until, scenario};
+use realms_core::msgs::{LaserScan, Message, PointCloud};
+use realms_core::{Point2, Pose2, Time};
+use realms_sim::World;
+use realms_sim::terrain::{Boulder, Crater, Rect};
+
+fn first_scan(out: &[(realms_core::Topic, Message)]) -> LaserScan {
+    out.iter()
+        .find_map(|(_, m)| match m {
+            Message::LaserScan(s) => Some(s.clone()),
+            _ => None,
+        })
+        .expect("a scan was published")
+}
+
+fn first_cloud(out: &[(realms_core::Topic, Message)]) -> PointCloud {
+    out.iter()
+        .find_map(|(_, m)| match m {
+            Message::PointCloud(c) => Some(c.clone()),
+            _ => None,
+        })
+        .expect("a depth frame was published")
+}
+
+fn beam_angle(scan: &LaserScan, i: usize) -> f64 {
+    scan.angle_min_rad as f64 + i as f64 * scan.angle_increment_rad as f64
+}
+
+/// World coordinates of every valid depth point.
+fn cloud_in_world(world: &World, cloud: &PointCloud) -> Vec<[f64; 3]> {
+    let body = world.rovers().next().expect("one rover");
+    let world_from_optical = World::world_from_base(body).compose(&world.base_from_optical());
+    cloud
+        .points_in_sensor
+        .iter()
+        .filter(|p| !p[2].is_nan())
+        .map(|p| world_from_optical.transform([p[0] as f64, p[1] as f64, p[2] as f64]))
+        .collect()
+}
+
+#[test]
+fn lidar_ranges_to_a_wall_match_geometry() {
+    let mut s = scenario(1);
+    s.rovers.lidar.noise_m = 0.0;
+    s.rovers.lidar.noise_per_m = 0.0;
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
+        t.add_wall(
+            Rect {
+                min: Point2::new(12.0, 0.0),
+                max: Point2::new(12.5, 20.0),
+            },
+            1.0,
+        );
+    });
+    let scan = first_scan(&idle_until(&mut world, Time::from_secs_f64(0.2)));
+    assert_eq!(scan.ranges_m.len(), 360);
+    let mut checked = 0;
+    for (i, r) in scan.ranges_m.iter().enumerate() {
+        let a = beam_angle(&scan, i);
+        if a.abs() < 40f64.to_radians() {
+            let expected = 7.0 / a.cos();
+            assert!(
+                (*r as f64 - expected).abs() < 1e-3,
+                "beam {a:.3} rad: {r} vs {expected}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 70);
+    // Behind the rover the west wall is 4.8 m away (its face at x = 0.2).
+    let back = scan.ranges_m[0] as f64;
+    assert!((back - 4.8).abs() < 1e-3, "{back}");
+}
+
+#[test]
+fn lidar_noise_has_the_configured_spread() {
+    let s = scenario(1);
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
+        t.add_wall(
+            Rect {
+                min: Point2::new(12.0, 0.0),
+                max: Point2::new(12.5, 20.0),
+            },
+            1.0,
+        );
+    });
+    let out = idle_until(&mut world, Time::from_secs_f64(20.0));
+    let errors: Vec<f64> = out
+        .iter()
+        .filter_map(|(_, m)| match m {
+            Message::LaserScan(s) => Some(s.ranges_m[180] as f64 - 7.0),
+            _ => None,
+        })
+        .collect();
+    assert!(errors.len() >= 190);
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    let std = (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / errors.len() as f64).sqrt();
+    let sigma = s.rovers.lidar.noise_m + s.rovers.lidar.noise_per_m * 7.0;
+    assert!(
+        mean.abs() < 4.0 * sigma / (errors.len() as f64).sqrt(),
+        "bias {mean}"
+    );
+    assert!(
+        std > 0.8 * sigma && std < 1.2 * sigma,
+        "std {std} vs {sigma}"
+    );
+}
+
+#[test]
+fn lidar_sees_a_tall_boulder_where_its_surface_crosses_the_beam() {
+    let mut s = scenario(1);
+    s.rovers.lidar.noise_m = 0.0;
+    s.rovers.lidar.noise_per_m = 0.0;
+    let boulder = Boulder {
+        center: Point2::new(8.0, 13.0),
+        radius_m: 0.5,
+        height_m: 0.5,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 13.0, 0.0)], |t| {
+        t.add_boulder(boulder)
+    });
+    let scan = first_scan(&idle_until(&mut world, Time::from_secs_f64(0.2)));
+    // A hemisphere of radius 0.5 is 0.3 m high at 0.4 m from its centre: 3 - 0.4 = 2.6 m.
+    let r = scan.ranges_m[180] as f64;
+    assert!((r - 2.6).abs() < 0.06, "{r}");
+}
+
+#[test]
+fn depth_matches_a_flat_floor_with_range_squared_noise() {
+    let s = scenario(1);
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    let cloud = first_cloud(&idle_until(&mut world, Time::from_secs_f64(0.6)));
+    assert_eq!((cloud.width, cloud.height), (106, 60));
+    let d = &s.rovers.depth;
+    let mut valid = 0;
+    for p in cloud.points_in_sensor.iter().filter(|p| !p[2].is_nan()) {
+        let z = p[2] as f64;
+        assert!(
+            z >= d.range_min_m - 0.5 && z <= d.range_max_m + 1.0,
+            "depth {z}"
+        );
+        valid += 1;
+    }
+    // Each valid point lies on the floor (z = 0) up to the depth noise along its ray.
+    for w in cloud_in_world(&world, &cloud) {
+        let range = (w[0] - 3.2).hypot(w[1] - 10.0);
+        let sigma = d.noise_per_m2 * range * range;
+        assert!(
+            w[2].abs() < 0.01 + 5.0 * sigma * 0.5,
+            "point {w:?} off the floor"
+        );
+    }
+    // The lower part of the image sees floor within range; the top sees nothing.
+    assert!(valid > 106 * 20, "{valid} valid points");
+    let top_row = &cloud.points_in_sensor[..106];
+    assert!(top_row.iter().all(|p| p[2].is_nan()));
+}
+
+#[test]
+fn crater_is_invisible_to_the_lidar_and_visible_to_the_depth_camera() {
+    let mut s = scenario(1);
+    s.rovers.lidar.noise_m = 0.0;
+    s.rovers.lidar.noise_per_m = 0.0;
+    let crater = Crater {
+        center: Point2::new(7.0, 10.0),
+        radius_m: 1.0,
+        depth_m: 0.3,
+        rim_m: 0.06,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.5, 10.0, 0.0)], |t| t.add_crater(crater));
+    let out = idle_until(&mut world, Time::from_secs_f64(0.6));
+    let scan = first_scan(&out);
+    // Straight ahead the beam flies over the crater to the east wall at x = 19.8.
+    for i in 170..=190 {
+        let r = scan.ranges_m[i] as f64;
+        assert!(r > 10.0, "beam {i} stopped at {r} m");
+    }
+    let points = cloud_in_world(&world, &first_cloud(&out));
+    let inside_deep = points
+        .iter()
+        .filter(|p| Point2::new(p[0], p[1]).distance_m(crater.center) < 0.8 && p[2] < -0.1)
+        .count();
+    assert!(
+        inside_deep > 20,
+        "only {inside_deep} points inside the bowl"
+    );
+    let on_rim = points
+        .iter()
+        .filter(|p| {
+            (Point2::new(p[0], p[1]).distance_m(crater.center) - 1.0).abs() < 0.1 && p[2] > 0.03
+        })
+        .count();
+    assert!(on_rim > 3, "only {on_rim} points on the raised rim");
+}
+
+#[test]
+fn a_rock_below_the_lidar_plane_is_seen_only_by_the_depth_camera() {
+    let mut s = scenario(1);
+    s.rovers.lidar.noise_m = 0.0;
+    s.rovers.lidar.noise_per_m = 0.0;
+    let rock = Boulder {
+        center: Point2::new(6.0, 10.0),
+        radius_m: 0.2,
+        height_m: 0.15,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.5, 10.0, 0.0)], |t| t.add_boulder(rock));
+    let out = idle_until(&mut world, Time::from_secs_f64(0.6));
+    assert!(first_scan(&out).ranges_m[180] > 10.0);
+    let points = cloud_in_world(&world, &first_cloud(&out));
+    let on_rock = points
+        .iter()
+        .filter(|p| Point2::new(p[0], p[1]).distance_m(rock.center) < 0.2 && p[2] > 0.08)
+        .count();
+    assert!(on_rock > 5, "only {on_rock} points on the rock");
+}
+
+#[test]
+fn camera_renders_only_when_wanted_and_shows_light_and_shadow() {
+    let s = scenario(1);
+    let rock = Boulder {
+        center: Point2::new(7.0, 10.0),
+        radius_m: 0.6,
+        height_m: 0.6,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| t.add_boulder(rock));
+    let images = |out: &[(realms_core::Topic, Message)]| {
+        out.iter()
+            .filter(|(_, m)| matches!(m, Message::Image(_)))
+            .count()
+    };
+    assert_eq!(images(&idle_until(&mut world, Time::from_secs_f64(3.0))), 0);
+    world.set_camera_wanted(realms_core::RoverId(1), true);
+    let out = idle_until(&mut world, Time::from_secs_f64(5.0));
+    assert_eq!(images(&out), 2);
+    let Some(Message::Image(img)) = out
+        .iter()
+        .map(|(_, m)| m)
+        .find(|m| matches!(m, Message::Image(_)))
+    else {
+        unreachable!("counted above")
+    };
+    assert_eq!(img.data.len(), (img.width * img.height) as usize);
+    let top = &img.data[..img.width as usize];
+    assert!(top.iter().all(|p| *p == 0), "the sky is black");
+    let max = *img.data.iter().max().expect("pixels");
+    let dark = img.data.iter().filter(|p| **p < 15).count();
+    assert!(max > 100, "some lit ground, max {max}");
+    assert!(dark > 100, "sky and shadow pixels: {dark}");
+}
