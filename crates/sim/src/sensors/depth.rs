@@ -60,14 +60,21 @@ pub fn cast_image(
     t_max_m: f64,
     mut visit: impl FnMut(u32, u32, [f64; 3], Option<f64>),
 ) {
+    // Unit rays in the optical frame, computed once per image.
+    let units: Vec<[f64; 3]> = (0..height)
+        .flat_map(|v| (0..width).map(move |u| (u, v)))
+        .map(|(u, v)| {
+            let r = k.ray(u, v);
+            let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            [r[0] / norm, r[1] / norm, r[2] / norm]
+        })
+        .collect();
     for u in 0..width {
         let mut prev: Option<(f64, f64)> = None; // (hit distance, horizontal part of ray)
         for v in (0..height).rev() {
-            let r = k.ray(u, v);
-            let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-            let unit = [r[0] / norm, r[1] / norm, r[2] / norm];
+            let unit = units[(v * width + u) as usize];
             let dir = world_from_optical.rotate(unit);
-            let horiz = dir[0].hypot(dir[1]).max(1e-9);
+            let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt().max(1e-9);
             // Rays higher in a column hit at least as far away horizontally; start a bit short.
             let hint = prev.map_or(0.0, |(t, h)| 0.97 * t * h / horiz);
             let hit = world.cast_from_hint(world_from_optical.origin, dir, 0.0, hint, t_max_m);
