@@ -179,7 +179,7 @@ impl HeightPyramid {
     /// A ray that starts below the surface hits at `t_min_m`.
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], t_min_m: f64, t_max_m: f64) -> Option<f64> {
         let t = self.skip_clear_space(origin, dir, t_min_m, t_max_m)?;
-        self.cast_from_level(origin, dir, t, t_max_m, 3)
+        self.cast_from_level(origin, dir, t, t_max_m, 1)
     }
 
     /// Advances along the ray through space the clearance field proves empty; returns where
@@ -386,19 +386,101 @@ impl HeightPyramid {
         hint_m: f64,
         t_max_m: f64,
     ) -> Option<f64> {
-        if hint_m > t_min_m {
-            let p = [
-                origin[0] + dir[0] * hint_m,
-                origin[1] + dir[1] * hint_m,
-                origin[2] + dir[2] * hint_m,
-            ];
-            if self.column_height(p[0], p[1]).is_some_and(|h| p[2] > h) {
-                // The hit is a few cells on: start at the finest level.
-                return self.cast_from_level(origin, dir, hint_m, t_max_m, 0);
+        if hint_m <= t_min_m {
+            return self.cast(origin, dir, t_min_m, t_max_m);
+        }
+        match self.march_near(origin, dir, hint_m, t_max_m) {
+            Near::Settled(hit) => hit,
+            Near::ContinueFrom(t) => self.cast(origin, dir, t, t_max_m),
+            Near::HitBehindStart => self.cast(origin, dir, t_min_m, t_max_m),
+        }
+    }
+
+    /// Walks level-0 cells from `t_start_m` for a short stretch, for rays whose hit is
+    /// expected to be close: no clipping, no pyramid, almost no setup.
+    fn march_near(&self, origin: [f64; 3], dir: [f64; 3], t_start_m: f64, t_max_m: f64) -> Near {
+        const STRETCH_CELLS: usize = 24;
+        let g = &self.geometry;
+        let inv_res = 1.0 / g.resolution_m;
+        let ox = (origin[0] - g.origin.x_m) * inv_res;
+        let oy = (origin[1] - g.origin.y_m) * inv_res;
+        let (dx, dy, dz) = (dir[0] * inv_res, dir[1] * inv_res, dir[2]);
+        let (px, py) = (ox + dx * t_start_m, oy + dy * t_start_m);
+        let (w, h) = (g.width as i64, g.height as i64);
+        if !(px >= 0.0 && py >= 0.0 && px < w as f64 && py < h as f64) {
+            return Near::ContinueFrom(t_start_m);
+        }
+        let (mut cx, mut cy) = (px as i64, py as i64);
+        let cells = &self.levels[0].max;
+        let z0 = origin[2] + dz * t_start_m;
+        if z0 <= cells[(cy * w + cx) as usize] as f64 {
+            return Near::HitBehindStart;
+        }
+        let step_x: i64 = if dx > 0.0 {
+            1
+        } else if dx < 0.0 {
+            -1
+        } else {
+            0
+        };
+        let step_y: i64 = if dy > 0.0 {
+            1
+        } else if dy < 0.0 {
+            -1
+        } else {
+            0
+        };
+        let (tdx, tdy) = ((1.0 / dx).abs(), (1.0 / dy).abs());
+        let next = |c: i64, o: f64, d: f64, step: i64| match step {
+            1 => ((c + 1) as f64 - o) / d,
+            -1 => (c as f64 - o) / d,
+            _ => f64::INFINITY,
+        };
+        let (mut tmx, mut tmy) = (next(cx, ox, dx, step_x), next(cy, oy, dy, step_y));
+        let mut t = t_start_m;
+        for _ in 0..STRETCH_CELLS {
+            let top = cells[(cy * w + cx) as usize] as f64;
+            let t_exit = if tmx < tmy { tmx } else { tmy };
+            let t_exit = if t_exit < t_max_m { t_exit } else { t_max_m };
+            let z_in = oz_at(origin, dz, t);
+            if z_in <= top {
+                return Near::Settled(Some(t));
+            }
+            let z_out = oz_at(origin, dz, t_exit);
+            if z_out <= top {
+                return Near::Settled(Some(t + (top - z_in) / dz));
+            }
+            if t_exit >= t_max_m {
+                return Near::Settled(None);
+            }
+            t = t_exit;
+            if tmx < tmy {
+                cx += step_x;
+                tmx += tdx;
+            } else {
+                cy += step_y;
+                tmy += tdy;
+            }
+            if cx < 0 || cy < 0 || cx >= w || cy >= h {
+                return Near::ContinueFrom(t);
             }
         }
-        self.cast(origin, dir, t_min_m, t_max_m)
+        Near::ContinueFrom(t)
     }
+}
+
+/// What a short level-0 walk found.
+enum Near {
+    /// The walk found the hit, or the end of the range.
+    Settled(Option<f64>),
+    /// Nothing yet: cast properly from here.
+    ContinueFrom(f64),
+    /// The start is below the surface: the hit lies before it.
+    HitBehindStart,
+}
+
+fn oz_at(origin: [f64; 3], dz: f64, t: f64) -> f64 {
+    origin[2] + dz * t
 }
 
 #[cfg(test)]

@@ -75,12 +75,13 @@ pub fn cast_image(
             let unit = units[(v * width + u) as usize];
             let dir = world_from_optical.rotate(unit);
             let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt().max(1e-9);
-            // Rays higher in a column hit at least as far away horizontally; start a bit short.
+            // A ray higher in a column stays above the one below it, so it cannot hit before
+            // that ray's hit (or, after a miss, its reach) horizontally; start a bit short.
+            // Exact for a level camera; with roll the rays fan sideways a little, and the
+            // cast checks that the start is still above the ground.
             let hint = prev.map_or(0.0, |(t, h)| 0.97 * t * h / horiz);
             let hit = world.cast_from_hint(world_from_optical.origin, dir, 0.0, hint, t_max_m);
-            if let Some(t) = hit {
-                prev = Some((t, horiz));
-            }
+            prev = Some((hit.unwrap_or(t_max_m), horiz));
             visit(u, v, unit, hit);
         }
     }
