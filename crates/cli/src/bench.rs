@@ -194,7 +194,9 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         median(depth_base_us),
         median(cam_us),
     );
-    println!("| sensor | median per frame | baseline: plain cell march, no pyramid or clearance field | speedup |");
+    println!(
+        "| sensor | median per frame | baseline: plain cell march, no pyramid or clearance field | speedup |"
+    );
     println!("| --- | --- | --- | --- |");
     println!(
         "| lidar scan ({} beams, {} m) | {l:.1} us | {lb:.1} us | {:.1}x |",

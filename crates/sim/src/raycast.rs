@@ -274,26 +274,7 @@ impl HeightPyramid {
         }
         let inv_dx = if dx != 0.0 { 1.0 / dx } else { f64::INFINITY };
         let inv_dy = if dy != 0.0 { 1.0 / dy } else { f64::INFINITY };
-        let step_x: i64 = if dx > 0.0 {
-            1
-        } else if dx < 0.0 {
-            -1
-        } else {
-            0
-        };
-        let step_y: i64 = if dy > 0.0 {
-            1
-        } else if dy < 0.0 {
-            -1
-        } else {
-            0
-        };
-        // Time of the boundary a cell [c * size, (c + 1) * size) is left through.
-        let exit = |c: i64, size: f64, o: f64, inv: f64, step: i64| match step {
-            1 => ((c + 1) as f64 * size - o) * inv,
-            -1 => (c as f64 * size - o) * inv,
-            _ => f64::INFINITY,
-        };
+        let (step_x, step_y) = (step_sign(dx), step_sign(dy));
         let top = self.levels.len() - 1;
         let mut k = top.min(start_level);
         let mut size = (1i64 << k) as f64;
@@ -305,8 +286,8 @@ impl HeightPyramid {
             (ix >> k, iy >> k)
         };
         let (mut cx, mut cy) = locate(t, k);
-        let mut tmx = exit(cx, size, ox, inv_dx, step_x);
-        let mut tmy = exit(cy, size, oy, inv_dy, step_y);
+        let mut tmx = exit_time(cx, size, ox, inv_dx, step_x);
+        let mut tmy = exit_time(cy, size, oy, inv_dy, step_y);
         loop {
             let level = &self.levels[k];
             let t_exit = tmx.min(tmy).min(t_end);
@@ -324,13 +305,13 @@ impl HeightPyramid {
                     if cx < 0 || cx >= level.width as i64 {
                         return None;
                     }
-                    tmx = exit(cx, size, ox, inv_dx, step_x);
+                    tmx = exit_time(cx, size, ox, inv_dx, step_x);
                 } else {
                     cy += step_y;
                     if cy < 0 || cy >= level.height as i64 {
                         return None;
                     }
-                    tmy = exit(cy, size, oy, inv_dy, step_y);
+                    tmy = exit_time(cy, size, oy, inv_dy, step_y);
                 }
                 // Crossed into a new parent block: try skipping at the coarser level.
                 if k < top && ((cx >> 1) != old_px || (cy >> 1) != old_py) {
@@ -338,8 +319,8 @@ impl HeightPyramid {
                     size *= 2.0;
                     cx >>= 1;
                     cy >>= 1;
-                    tmx = exit(cx, size, ox, inv_dx, step_x);
-                    tmy = exit(cy, size, oy, inv_dy, step_y);
+                    tmx = exit_time(cx, size, ox, inv_dx, step_x);
+                    tmy = exit_time(cy, size, oy, inv_dy, step_y);
                 }
             } else if k > 0 {
                 k -= 1;
@@ -352,16 +333,16 @@ impl HeightPyramid {
                 let lv = &self.levels[k];
                 cx = cx.min(lv.width as i64 - 1);
                 cy = cy.min(lv.height as i64 - 1);
-                tmx = exit(cx, size, ox, inv_dx, step_x);
-                tmy = exit(cy, size, oy, inv_dy, step_y);
+                tmx = exit_time(cx, size, ox, inv_dx, step_x);
+                tmy = exit_time(cy, size, oy, inv_dy, step_y);
                 // Rounding at a boundary can leave an exit behind t: that cell is already left.
                 if tmx < t {
                     cx += step_x;
-                    tmx = exit(cx, size, ox, inv_dx, step_x);
+                    tmx = exit_time(cx, size, ox, inv_dx, step_x);
                 }
                 if tmy < t {
                     cy += step_y;
-                    tmy = exit(cy, size, oy, inv_dy, step_y);
+                    tmy = exit_time(cy, size, oy, inv_dy, step_y);
                 }
                 if cx < 0 || cy < 0 || cx >= lv.width as i64 || cy >= lv.height as i64 {
                     return None;
@@ -416,27 +397,11 @@ impl HeightPyramid {
         if z0 <= cells[(cy * w + cx) as usize] as f64 {
             return Near::HitBehindStart;
         }
-        let step_x: i64 = if dx > 0.0 {
-            1
-        } else if dx < 0.0 {
-            -1
-        } else {
-            0
-        };
-        let step_y: i64 = if dy > 0.0 {
-            1
-        } else if dy < 0.0 {
-            -1
-        } else {
-            0
-        };
-        let (tdx, tdy) = ((1.0 / dx).abs(), (1.0 / dy).abs());
-        let next = |c: i64, o: f64, d: f64, step: i64| match step {
-            1 => ((c + 1) as f64 - o) / d,
-            -1 => (c as f64 - o) / d,
-            _ => f64::INFINITY,
-        };
-        let (mut tmx, mut tmy) = (next(cx, ox, dx, step_x), next(cy, oy, dy, step_y));
+        let (step_x, step_y) = (step_sign(dx), step_sign(dy));
+        let (inv_dx, inv_dy) = (1.0 / dx, 1.0 / dy);
+        let (tdx, tdy) = (inv_dx.abs(), inv_dy.abs());
+        let mut tmx = exit_time(cx, 1.0, ox, inv_dx, step_x);
+        let mut tmy = exit_time(cy, 1.0, oy, inv_dy, step_y);
         let mut t = t_start_m;
         for _ in 0..STRETCH_CELLS {
             let top = cells[(cy * w + cx) as usize] as f64;
@@ -466,6 +431,27 @@ impl HeightPyramid {
             }
         }
         Near::ContinueFrom(t)
+    }
+}
+
+/// Which way a ray walks along an axis: +1, -1, or 0 when it does not move along it.
+fn step_sign(d: f64) -> i64 {
+    if d > 0.0 {
+        1
+    } else if d < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Time at which a ray leaves cell `c` (spanning `[c * size, (c + 1) * size)` along an axis),
+/// given its origin `o` and inverse speed `inv` along that axis and its `step` sign.
+fn exit_time(c: i64, size: f64, o: f64, inv: f64, step: i64) -> f64 {
+    match step {
+        1 => ((c + 1) as f64 * size - o) * inv,
+        -1 => (c as f64 * size - o) * inv,
+        _ => f64::INFINITY,
     }
 }
 

@@ -26,6 +26,14 @@ fn first_cloud(out: &[(realms_core::Topic, Message)]) -> PointCloud {
         .expect("a depth frame was published")
 }
 
+/// One default rover whose lidar has no noise, so ranges compare exactly with geometry.
+fn noiseless_lidar() -> realms_sim::Scenario {
+    let mut s = scenario(1);
+    s.rovers.lidar.noise_m = 0.0;
+    s.rovers.lidar.noise_per_m = 0.0;
+    s
+}
+
 fn beam_angle(scan: &LaserScan, i: usize) -> f64 {
     scan.angle_min_rad as f64 + i as f64 * scan.angle_increment_rad as f64
 }
@@ -44,9 +52,7 @@ fn cloud_in_world(world: &World, cloud: &PointCloud) -> Vec<[f64; 3]> {
 
 #[test]
 fn lidar_ranges_to_a_wall_match_geometry() {
-    let mut s = scenario(1);
-    s.rovers.lidar.noise_m = 0.0;
-    s.rovers.lidar.noise_per_m = 0.0;
+    let s = noiseless_lidar();
     let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
         t.add_wall(
             Rect {
@@ -112,9 +118,7 @@ fn lidar_noise_has_the_configured_spread() {
 
 #[test]
 fn lidar_sees_a_tall_boulder_where_its_surface_crosses_the_beam() {
-    let mut s = scenario(1);
-    s.rovers.lidar.noise_m = 0.0;
-    s.rovers.lidar.noise_per_m = 0.0;
+    let s = noiseless_lidar();
     let boulder = Boulder {
         center: Point2::new(8.0, 13.0),
         radius_m: 0.5,
@@ -162,9 +166,7 @@ fn depth_matches_a_flat_floor_with_range_squared_noise() {
 
 #[test]
 fn crater_is_invisible_to_the_lidar_and_visible_to_the_depth_camera() {
-    let mut s = scenario(1);
-    s.rovers.lidar.noise_m = 0.0;
-    s.rovers.lidar.noise_per_m = 0.0;
+    let s = noiseless_lidar();
     let crater = Crater {
         center: Point2::new(7.0, 10.0),
         radius_m: 1.0,
@@ -199,9 +201,7 @@ fn crater_is_invisible_to_the_lidar_and_visible_to_the_depth_camera() {
 
 #[test]
 fn a_rock_below_the_lidar_plane_is_seen_only_by_the_depth_camera() {
-    let mut s = scenario(1);
-    s.rovers.lidar.noise_m = 0.0;
-    s.rovers.lidar.noise_per_m = 0.0;
+    let s = noiseless_lidar();
     let rock = Boulder {
         center: Point2::new(6.0, 10.0),
         radius_m: 0.2,
