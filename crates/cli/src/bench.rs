@@ -6,7 +6,7 @@
 //! microseconds each, with plain cell-by-cell ray marching timed in the same run as the
 //! baseline the max-mipmap caster is compared against.
 
-use crate::cli::BenchSimArgs;
+use crate::cli::{BenchSensor, BenchSimArgs};
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -62,7 +62,7 @@ fn sim(args: BenchSimArgs) -> Result<()> {
 
     let mut speeds = Vec::new();
     let mut msgs = 0usize;
-    for trial in 0..args.trials.max(1) {
+    for trial in 0..args.trials {
         let mut w = World::new(&scenario);
         let mut out = Vec::new();
         let start = Instant::now();
@@ -93,14 +93,16 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         speeds.push(sim_s / wall);
         eprintln!("trial {trial}: {:.0}x real time", sim_s / wall);
     }
-    println!(
-        "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial)",
-        median(speeds),
-        args.trials.max(1),
-        sim_s,
-        msgs / args.trials.max(1)
-    );
-    println!();
+    if args.trials > 0 {
+        println!(
+            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial)",
+            median(speeds),
+            args.trials,
+            sim_s,
+            msgs / args.trials
+        );
+        println!();
+    }
 
     let spec = &scenario.rovers;
     let baseline = HeightPyramid::with_max_level(&world.terrain().heights, 0);
@@ -122,108 +124,115 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         }
         poses
     };
-    let (mut lidar_us, mut lidar_base_us, mut depth_us, mut depth_base_us, mut cam_us) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let wants = |s: BenchSensor| args.sensor == BenchSensor::All || args.sensor == s;
+    // (name, optimised, baseline) medians in microseconds.
+    let mut rows: Vec<(String, f64, Option<f64>)> = Vec::new();
     let mut noise = rand_chacha::ChaCha8Rng::seed_from_u64(8);
-    for pose in &free {
-        let body = RoverBody::new(RoverId(1), *pose, spec, world.terrain(), &mut noise);
-        let base = World::world_from_base(&body);
-        let lidar_pose = base.compose(&world.base_from_lidar());
-        let optical = base.compose(&world.base_from_optical());
-        let time = |f: &mut dyn FnMut()| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e6
+    let frames: Vec<_> = free
+        .iter()
+        .map(|pose| {
+            let body = RoverBody::new(RoverId(1), *pose, spec, world.terrain(), &mut noise);
+            let base = World::world_from_base(&body);
+            (
+                base.compose(&world.base_from_lidar()),
+                base.compose(&world.base_from_optical()),
+            )
+        })
+        .collect();
+    let time_each = |f: &mut dyn FnMut(usize)| {
+        let us: Vec<f64> = (0..frames.len())
+            .map(|i| {
+                let s = Instant::now();
+                f(i);
+                s.elapsed().as_secs_f64() * 1e6
+            })
+            .collect();
+        median(us)
+    };
+    if wants(BenchSensor::Lidar) {
+        let mut run = |p: &HeightPyramid, i: usize| {
+            std::hint::black_box(lidar::scan(
+                p,
+                &frames[i].0,
+                &spec.lidar,
+                &mut noise,
+                Time::ZERO,
+                "l",
+            ));
         };
-        lidar_us.push(time(&mut || {
-            std::hint::black_box(lidar::scan(
-                world.pyramid(),
-                &lidar_pose,
-                &spec.lidar,
-                &mut noise,
-                Time::ZERO,
-                "l",
-            ));
-        }));
-        lidar_base_us.push(time(&mut || {
-            std::hint::black_box(lidar::scan(
-                &baseline,
-                &lidar_pose,
-                &spec.lidar,
-                &mut noise,
-                Time::ZERO,
-                "l",
-            ));
-        }));
-        depth_us.push(time(&mut || {
+        let fast = time_each(&mut |i| run(world.pyramid(), i));
+        let base = time_each(&mut |i| run(&baseline, i));
+        let name = format!(
+            "lidar scan ({} beams, {} m)",
+            spec.lidar.beams, spec.lidar.range_max_m
+        );
+        rows.push((name, fast, Some(base)));
+    }
+    if wants(BenchSensor::Depth) {
+        let mut run = |p: &HeightPyramid, i: usize| {
             std::hint::black_box(depth::frame(
-                world.pyramid(),
-                &optical,
+                p,
+                &frames[i].1,
                 &spec.depth,
                 &mut noise,
                 Time::ZERO,
                 "d",
             ));
-        }));
-        depth_base_us.push(time(&mut || {
-            std::hint::black_box(depth::frame(
-                &baseline,
-                &optical,
-                &spec.depth,
-                &mut noise,
-                Time::ZERO,
-                "d",
-            ));
-        }));
-        cam_us.push(time(&mut || {
+        };
+        let fast = time_each(&mut |i| run(world.pyramid(), i));
+        let base = time_each(&mut |i| run(&baseline, i));
+        let d = &spec.depth;
+        let name = format!(
+            "depth frame ({}x{}, {} m)",
+            d.width, d.height, d.range_max_m
+        );
+        rows.push((name, fast, Some(base)));
+    }
+    if wants(BenchSensor::Camera) {
+        let c = &spec.camera;
+        let fast = time_each(&mut |i| {
             std::hint::black_box(camera::render(
                 world.pyramid(),
                 world.terrain(),
-                &optical,
-                &spec.camera,
+                &frames[i].1,
+                c,
                 &scenario.sun,
                 Time::ZERO,
                 "c",
             ));
-        }));
+        });
+        rows.push((
+            format!("camera image ({}x{}, shadows)", c.width, c.height),
+            fast,
+            None,
+        ));
     }
-    let (l, lb, d, db, c) = (
-        median(lidar_us),
-        median(lidar_base_us),
-        median(depth_us),
-        median(depth_base_us),
-        median(cam_us),
-    );
+    if rows.is_empty() {
+        return Ok(());
+    }
     println!(
         "| sensor | median per frame | baseline: plain cell march, no pyramid or clearance field | speedup |"
     );
     println!("| --- | --- | --- | --- |");
-    println!(
-        "| lidar scan ({} beams, {} m) | {l:.1} us | {lb:.1} us | {:.1}x |",
-        spec.lidar.beams,
-        spec.lidar.range_max_m,
-        lb / l
-    );
-    println!(
-        "| depth frame ({}x{}, {} m) | {d:.1} us | {db:.1} us | {:.1}x |",
-        spec.depth.width,
-        spec.depth.height,
-        spec.depth.range_max_m,
-        db / d
-    );
-    println!(
-        "| camera image ({}x{}, shadows) | {c:.1} us | - | - |",
-        spec.camera.width, spec.camera.height
-    );
-    let n = f64::from(spec.count);
-    let per_sim_s_us = n * (spec.lidar.rate_hz * l + spec.depth.rate_hz * d);
-    println!();
-    println!(
-        "sensor budget: {:.2} ms of lidar + depth per simulated second for {} rovers ({:.0}x real time if sensors were all)",
-        per_sim_s_us / 1e3,
-        spec.count,
-        1e6 / per_sim_s_us
-    );
+    for (name, fast, base) in &rows {
+        match base {
+            Some(b) => println!("| {name} | {fast:.1} us | {b:.1} us | {:.1}x |", b / fast),
+            None => println!("| {name} | {fast:.1} us | - | - |"),
+        }
+    }
+    let lidar = rows.iter().find(|r| r.0.starts_with("lidar")).map(|r| r.1);
+    let depth = rows.iter().find(|r| r.0.starts_with("depth")).map(|r| r.1);
+    if let (Some(l), Some(d)) = (lidar, depth) {
+        let per_sim_s_us =
+            f64::from(spec.count) * (spec.lidar.rate_hz * l + spec.depth.rate_hz * d);
+        println!();
+        println!(
+            "sensor budget: {:.2} ms of lidar + depth per simulated second for {} rovers ({:.0}x real time if sensors were all)",
+            per_sim_s_us / 1e3,
+            spec.count,
+            1e6 / per_sim_s_us
+        );
+    }
     Ok(())
 }
 

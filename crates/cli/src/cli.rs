@@ -68,7 +68,7 @@ pub struct BenchSimArgs {
     /// Simulated time per speed trial, e.g. `120s`.
     #[arg(long, default_value = "120s")]
     pub duration: String,
-    /// Speed trials (the median is reported).
+    /// Speed trials (the median is reported; 0 skips them).
     #[arg(long, default_value_t = 3)]
     pub trials: usize,
     /// Sensor frames timed per sensor (the median is reported).
@@ -77,4 +77,22 @@ pub struct BenchSimArgs {
     /// Scenario TOML (default: the built-in one).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
+    /// Which sensors to time (the speed trials always run unless `--trials 0`).
+    #[arg(long, value_enum, default_value_t = BenchSensor::All)]
+    pub sensor: BenchSensor,
+}
+
+/// Sensor selection for `realms bench sim`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchSensor {
+    /// Every sensor.
+    All,
+    /// The 2D lidar.
+    Lidar,
+    /// The depth camera.
+    Depth,
+    /// The grayscale camera.
+    Camera,
+    /// None.
+    None,
 }

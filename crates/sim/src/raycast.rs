@@ -27,7 +27,9 @@ struct Level {
 struct Clearance {
     z0_m: f64,
     dz_m: f64,
-    layers: Vec<Vec<u8>>,
+    count: usize,
+    /// Layer `k` is `layers[k * cells .. (k + 1) * cells]`, row-major like the heights.
+    layers: Vec<u8>,
 }
 
 /// Most layers a clearance field gets (memory: one byte per cell per layer).
@@ -46,7 +48,7 @@ impl Clearance {
         let dz_m = ((hi - lo) / MAX_LAYERS as f64).max(MIN_LAYER_STEP_M);
         let count = (((hi - lo) / dz_m).ceil() as usize).clamp(1, MAX_LAYERS);
         let layers = (0..count)
-            .map(|k| {
+            .flat_map(|k| {
                 let z = (lo + k as f64 * dz_m) as f32;
                 chessboard_distance(g.width, g.height, |i| heights.cells()[i] >= z)
             })
@@ -54,6 +56,7 @@ impl Clearance {
         Clearance {
             z0_m: lo,
             dz_m,
+            count,
             layers,
         }
     }
@@ -202,6 +205,16 @@ impl HeightPyramid {
             return Some(t_min_m);
         }
         let (w, h) = (g.width, g.height);
+        let cells = w * h;
+        // Inverses up front: the loop's step depends on the previous one, so a division in it
+        // would sit on the critical path.
+        let t_per_cell = 1.0 / horiz;
+        let t_per_drop_m = if dir[2] < 0.0 {
+            -1.0 / dir[2]
+        } else {
+            f64::INFINITY
+        };
+        let inv_dz = 1.0 / c.dz_m;
         let mut t = t_min_m;
         loop {
             let x = (origin[0] + dir[0] * t - g.origin.x_m) * inv_res;
@@ -211,17 +224,18 @@ impl HeightPyramid {
                 return Some(t);
             }
             let z = origin[2] + dir[2] * t;
-            let layer = (z - c.z0_m) / c.dz_m;
+            let layer = (z - c.z0_m) * inv_dz;
             if layer < 1.0 {
                 return Some(t);
             }
-            let k = (layer as usize - 1).min(c.layers.len() - 1);
+            let k = (layer as usize - 1).min(c.count - 1);
             let z_k = c.z0_m + k as f64 * c.dz_m;
             // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
-            let d = c.layers[k][y as usize * w + x as usize] as f64 - 1.5;
-            let mut step = d / horiz;
-            if dir[2] < 0.0 {
-                step = step.min((z - z_k) / -dir[2]);
+            let d = c.layers[k * cells + y as usize * w + x as usize] as f64 - 1.5;
+            let mut step = d * t_per_cell;
+            let drop_limit = (z - z_k) * t_per_drop_m;
+            if drop_limit < step {
+                step = drop_limit;
             }
             if step * horiz < 2.0 {
                 return Some(t);
@@ -290,11 +304,15 @@ impl HeightPyramid {
         let mut tmy = exit_time(cy, size, oy, inv_dy, step_y);
         loop {
             let level = &self.levels[k];
-            let t_exit = tmx.min(tmy).min(t_end);
+            // Plain comparisons: f64::min's NaN handling costs latency on this chain, and no
+            // NaN can arise here.
+            let t_cross = if tmx <= tmy { tmx } else { tmy };
+            let t_exit = if t_cross < t_end { t_cross } else { t_end };
             let z_in = oz + dz * t;
             let z_out = oz + dz * t_exit;
             let h_max = level.max[cy as usize * level.width + cx as usize] as f64;
-            if z_in.min(z_out) > h_max {
+            let z_low = if z_in < z_out { z_in } else { z_out };
+            if z_low > h_max {
                 if t_exit >= t_end {
                     return None;
                 }

@@ -40,11 +40,11 @@ pub fn render(
         w,
         h,
         30.0,
-        |u, v, unit, hit| {
-            let Some(t) = hit else { return };
-            let dir = world_from_optical.rotate(unit);
+        |u, v, ray, hit| {
+            let Some(z) = hit else { return };
+            let dir = world_from_optical.rotate(ray);
             let o = world_from_optical.origin;
-            let p = [o[0] + dir[0] * t, o[1] + dir[1] * t, o[2] + dir[2] * t];
+            let p = [o[0] + dir[0] * z, o[1] + dir[1] * z, o[2] + dir[2] * z];
             let Some(cell) = g.world_to_cell(realms_core::Point2::new(p[0], p[1])) else {
                 return;
             };

@@ -49,40 +49,39 @@ impl Intrinsics {
 pub const BODY_FROM_OPTICAL: [[f64; 3]; 3] = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
 
 /// Casts every pixel of a `width x height` image from `world_from_optical`, column by column
-/// from the bottom row up so each ray starts near its neighbour's hit. Calls
-/// `visit(u, v, ray_in_optical, hit)` with the hit distance along the unit ray.
+/// from the bottom row up so each ray starts near its neighbour's hit. Rays are cast along the
+/// unnormalised optical ray `r = ((u - cx) / fx, (v - cy) / fy, 1)`, so the ray parameter of a
+/// hit is its optical depth z, and stepping up a column is three additions. Calls
+/// `visit(u, v, r, z)` with the optical depth of the hit, or `None` beyond `z_max_m`.
 pub fn cast_image(
     world: &HeightPyramid,
     world_from_optical: &Frame3,
     k: &Intrinsics,
     width: u32,
     height: u32,
-    t_max_m: f64,
+    z_max_m: f64,
     mut visit: impl FnMut(u32, u32, [f64; 3], Option<f64>),
 ) {
-    // Unit rays in the optical frame, computed once per image.
-    let units: Vec<[f64; 3]> = (0..height)
-        .flat_map(|v| (0..width).map(move |u| (u, v)))
-        .map(|(u, v)| {
-            let r = k.ray(u, v);
-            let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-            [r[0] / norm, r[1] / norm, r[2] / norm]
-        })
-        .collect();
+    let origin = world_from_optical.origin;
+    // World direction of one pixel row up the image (towards smaller v).
+    let row_up = world_from_optical.rotate([0.0, -1.0 / k.fy, 0.0]);
     for u in 0..width {
-        let mut prev: Option<(f64, f64)> = None; // (hit distance, horizontal part of ray)
+        let bottom = k.ray(u, height - 1);
+        let mut dir = world_from_optical.rotate(bottom);
+        let mut prev_z = 0.0;
         for v in (0..height).rev() {
-            let unit = units[(v * width + u) as usize];
-            let dir = world_from_optical.rotate(unit);
-            let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt().max(1e-9);
-            // A ray higher in a column stays above the one below it, so it cannot hit before
-            // that ray's hit (or, after a miss, its reach) horizontally; start a bit short.
-            // Exact for a level camera; with roll the rays fan sideways a little, and the
-            // cast checks that the start is still above the ground.
-            let hint = prev.map_or(0.0, |(t, h)| 0.97 * t * h / horiz);
-            let hit = world.cast_from_hint(world_from_optical.origin, dir, 0.0, hint, t_max_m);
-            prev = Some((hit.unwrap_or(t_max_m), horiz));
-            visit(u, v, unit, hit);
+            let r = [bottom[0], bottom[1] - (height - 1 - v) as f64 / k.fy, 1.0];
+            // A ray higher in a column stays above the one below it, so in a level camera
+            // it cannot hit nearer than that ray's hit (or, after a miss, its reach); start a
+            // little short. With roll the rays fan sideways a little, and the cast checks that
+            // the start is still above the ground.
+            let hint = 0.95 * prev_z;
+            let hit = world.cast_from_hint(origin, dir, 0.0, hint, z_max_m);
+            prev_z = hit.unwrap_or(z_max_m);
+            visit(u, v, r, hit);
+            for (d, up) in dir.iter_mut().zip(row_up) {
+                *d += up;
+            }
         }
     }
 }
@@ -99,26 +98,24 @@ pub fn frame(
     let k = Intrinsics::from_fov(spec.width, spec.height, spec.hfov_deg, spec.vfov_deg);
     let (w, h) = (spec.width, spec.height);
     let mut points = vec![[f32::NAN; 3]; (w * h) as usize];
-    // The farthest ray (a corner pixel) reaches range_max in depth at this distance.
-    let corner = k.ray(0, 0);
-    let t_max = spec.range_max_m * (corner[0].powi(2) + corner[1].powi(2) + 1.0).sqrt();
     cast_image(
         world,
         world_from_optical,
         &k,
         w,
         h,
-        t_max,
-        |u, v, unit, hit| {
-            let Some(t) = hit else { return };
-            let z = t * unit[2];
-            if z < spec.range_min_m || z > spec.range_max_m {
+        spec.range_max_m,
+        |u, v, r, hit| {
+            let Some(z) = hit else { return };
+            if z < spec.range_min_m {
                 return;
             }
             let z_noisy = z + gaussian(rng, spec.noise_per_m2 * z * z);
-            let s = z_noisy / unit[2];
-            points[(v * w + u) as usize] =
-                [(unit[0] * s) as f32, (unit[1] * s) as f32, z_noisy as f32];
+            points[(v * w + u) as usize] = [
+                (r[0] * z_noisy) as f32,
+                (r[1] * z_noisy) as f32,
+                z_noisy as f32,
+            ];
         },
     );
     PointCloud {
