@@ -153,6 +153,12 @@ impl World {
         }
     }
 
+    /// Swaps the accelerated ray caster for plain cell-by-cell marching (same results,
+    /// slower): the baseline `realms bench sim` measures against in the same run.
+    pub fn use_plain_ray_casting(&mut self) {
+        self.pyramid = HeightPyramid::with_max_level(&self.terrain.heights, 0);
+    }
+
     /// The scenario this world runs.
     pub fn scenario(&self) -> &Scenario {
         &self.scenario
