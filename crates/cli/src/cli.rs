@@ -22,6 +22,44 @@ pub enum Command {
     /// Measure performance.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Run 2D lidar SLAM on a recorded CARMEN log.
+    Slam(SlamArgs),
+    /// Relative pose error of a trajectory against benchmark relations (Kümmerle et al. 2009).
+    SlamEval(SlamEvalArgs),
+}
+
+/// `realms slam`.
+#[derive(Debug, ClapArgs)]
+pub struct SlamArgs {
+    /// CARMEN log (FLASER, ODOM, ROBOTLASER1 lines).
+    #[arg(long)]
+    pub carmen: PathBuf,
+    /// Output folder: trajectory.txt, map.pgm + map.yaml, map.png.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also evaluate against these relations and print the error.
+    #[arg(long)]
+    pub relations: Option<PathBuf>,
+    /// Finest map cell, metres.
+    #[arg(long, default_value_t = 0.05)]
+    pub resolution_m: f64,
+    /// Map resolutions the matcher goes through, coarse to fine.
+    #[arg(long, default_value_t = 3)]
+    pub levels: usize,
+    /// Gauss-Newton iterations per resolution.
+    #[arg(long, default_value_t = 6)]
+    pub iterations: usize,
+}
+
+/// `realms slam-eval`.
+#[derive(Debug, ClapArgs)]
+pub struct SlamEvalArgs {
+    /// `timestamp x y theta` per line.
+    #[arg(long)]
+    pub trajectory: PathBuf,
+    /// `.relations` file: `t1 t2 x y z roll pitch yaw` per line.
+    #[arg(long)]
+    pub relations: PathBuf,
 }
 
 /// `realms mission`.

@@ -10,6 +10,7 @@
 mod bench;
 mod cli;
 mod mission;
+mod slam;
 
 use clap::Parser;
 
@@ -26,6 +27,8 @@ fn main() -> std::process::ExitCode {
         cli::Command::Mission(m) => mission::run(m),
         cli::Command::Scenario(s) => mission::scenario(s),
         cli::Command::Bench(b) => bench::run(b),
+        cli::Command::Slam(a) => slam::run(a),
+        cli::Command::SlamEval(a) => slam::eval(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

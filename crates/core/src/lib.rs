@@ -13,6 +13,7 @@ pub mod codec;
 pub mod geometry;
 pub mod grid;
 pub mod ids;
+pub mod map_server;
 pub mod msgs;
 pub mod time;
 

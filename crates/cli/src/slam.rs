@@ -1,0 +1,100 @@
+//! `realms slam` and `realms slam-eval`: SLAM on recorded CARMEN logs and the benchmark's
+//! relative pose error.
+
+use crate::cli::{SlamArgs, SlamEvalArgs};
+use anyhow::{Context, Result};
+use realms_core::map_server::{self, Trinary};
+use realms_slam::carmen::CarmenLog;
+use realms_slam::eval::{RelativePoseError, read_relations, relative_pose_error};
+use realms_slam::frontend::{Frontend, FrontendConfig};
+use realms_slam::occupancy::CellState;
+use realms_slam::trajectory;
+
+/// `realms slam`.
+pub fn run(args: SlamArgs) -> Result<()> {
+    let log = CarmenLog::read_file(&args.carmen)
+        .with_context(|| format!("reading {}", args.carmen.display()))?;
+    anyhow::ensure!(
+        !log.scans.is_empty(),
+        "{} holds no laser scans",
+        args.carmen.display()
+    );
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let start = std::time::Instant::now();
+    anyhow::ensure!(
+        args.resolution_m > 0.001 && args.resolution_m <= 1.0,
+        "--resolution-m must be between 0.001 and 1 m"
+    );
+    anyhow::ensure!((1..=8).contains(&args.levels), "--levels must be 1 to 8");
+    let mut cfg = FrontendConfig {
+        resolution_m: args.resolution_m,
+        levels: args.levels,
+        ..FrontendConfig::default()
+    };
+    cfg.matcher.iterations = args.iterations.clamp(1, 100);
+    let mut frontend = Frontend::new(cfg);
+    for scan in &log.scans {
+        frontend.add_scan(scan);
+    }
+    let wall_s = start.elapsed().as_secs_f64();
+    let duration = log.duration_s();
+    println!(
+        "{} scans over {:.0} s of log in {:.2} s ({:.0}x faster than the log, {:.0} scans/s)",
+        log.scans.len(),
+        duration,
+        wall_s,
+        duration / wall_s,
+        log.scans.len() as f64 / wall_s
+    );
+
+    let traj_path = args.out.join("trajectory.txt");
+    std::fs::write(&traj_path, trajectory::to_text(frontend.trajectory()))
+        .with_context(|| format!("writing {}", traj_path.display()))?;
+    let states = frontend.map().states();
+    let trinary = states.map(|c| match c {
+        CellState::Unknown => Trinary::Unknown,
+        CellState::Free => Trinary::Free,
+        CellState::Occupied => Trinary::Occupied,
+    });
+    let yaml = map_server::write(&trinary, &args.out, "map")?;
+    states.write_png(&args.out.join("map.png"), |c| match c {
+        CellState::Unknown => [205, 205, 205],
+        CellState::Free => [254, 254, 254],
+        CellState::Occupied => [0, 0, 0],
+    })?;
+    println!(
+        "wrote {}, {}, map.pgm, map.png",
+        traj_path.display(),
+        yaml.display()
+    );
+    if let Some(rel) = &args.relations {
+        let relations = read_relations(rel)?;
+        print_error(&relative_pose_error(frontend.trajectory(), &relations)?);
+    }
+    Ok(())
+}
+
+/// `realms slam-eval`.
+pub fn eval(args: SlamEvalArgs) -> Result<()> {
+    let traj = trajectory::read_file(&args.trajectory)?;
+    let relations = read_relations(&args.relations)?;
+    print_error(&relative_pose_error(&traj, &relations)?);
+    Ok(())
+}
+
+fn print_error(e: &RelativePoseError) {
+    println!(
+        "relative pose error over {} relations{}: translation {:.4} +- {:.4} m, rotation {:.3} +- {:.3} deg",
+        e.relations,
+        if e.missing > 0 {
+            format!(" ({} without poses, skipped)", e.missing)
+        } else {
+            String::new()
+        },
+        e.trans_mean_m,
+        e.trans_std_m,
+        e.rot_mean_deg,
+        e.rot_std_deg
+    );
+}

@@ -1,0 +1,304 @@
+//! CARMEN laser logs, the format of the standard 2D SLAM benchmark (Kümmerle et al. 2009).
+//!
+//! Reads `FLASER` (front laser with the odometry pose at the scan), `ODOM` and
+//! `ROBOTLASER1` lines; skips comments and message types it does not use (`PARAM`, `TRUEPOS`,
+//! ...). Lines need not be in time order: scans and odometry are sorted by their ipc timestamp.
+//! A malformed line is an error naming its line number; nothing panics.
+
+use realms_core::Pose2;
+use std::io::BufRead;
+
+/// One laser scan with the odometry pose at which it was taken.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LaserReading {
+    /// ipc timestamp, seconds (the key the benchmark relations use).
+    pub timestamp_s: f64,
+    /// Angle of the first beam in the laser frame, radians.
+    pub angle_min_rad: f64,
+    /// Angle between beams, radians.
+    pub angle_increment_rad: f64,
+    /// Longest valid range; readings at or beyond it are "no return".
+    pub max_range_m: f64,
+    /// Ranges, metres, first beam first.
+    pub ranges_m: Vec<f32>,
+    /// Odometry pose of the robot at the scan.
+    pub odom: Pose2,
+    /// Pose of the laser on the robot (`robot_from_laser`); identity for FLASER.
+    pub robot_from_laser: Pose2,
+}
+
+/// An odometry reading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OdomReading {
+    /// ipc timestamp, seconds.
+    pub timestamp_s: f64,
+    /// Odometry pose.
+    pub pose: Pose2,
+}
+
+/// A whole log, sorted by timestamp.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CarmenLog {
+    /// Laser scans in time order.
+    pub scans: Vec<LaserReading>,
+    /// Odometry in time order.
+    pub odometry: Vec<OdomReading>,
+}
+
+/// Why a log could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum CarmenError {
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A line is malformed.
+    #[error("line {line}: {what}")]
+    Line {
+        /// 1-based line number.
+        line: usize,
+        /// What was wrong.
+        what: String,
+    },
+}
+
+/// Max range assumed for FLASER lines, which carry none: SICK lasers report ~81.9 m for "no
+/// return"; ACES reports 50 m. Anything at or above this is treated as no return.
+pub const FLASER_MAX_RANGE_M: f64 = 50.0;
+
+impl CarmenLog {
+    /// Reads a log file.
+    pub fn read_file(path: &std::path::Path) -> Result<CarmenLog, CarmenError> {
+        let io = |source| CarmenError::Io {
+            path: path.display().to_string(),
+            source,
+        };
+        let file = std::fs::File::open(path).map_err(io)?;
+        CarmenLog::read(std::io::BufReader::new(file)).map_err(|e| match e {
+            CarmenError::Io { source, .. } => io(source),
+            other => other,
+        })
+    }
+
+    /// Reads a log from any reader.
+    pub fn read(reader: impl BufRead) -> Result<CarmenLog, CarmenError> {
+        let mut log = CarmenLog::default();
+        for (i, line) in reader.lines().enumerate() {
+            let line_no = i + 1;
+            let line = line.map_err(|source| CarmenError::Io {
+                path: String::new(),
+                source,
+            })?;
+            let mut fields = line.split_ascii_whitespace();
+            let Some(kind) = fields.next() else { continue };
+            let rest: Vec<&str> = fields.collect();
+            let err = |what: String| CarmenError::Line {
+                line: line_no,
+                what,
+            };
+            match kind {
+                "FLASER" => log.scans.push(parse_flaser(&rest).map_err(err)?),
+                "ROBOTLASER1" => log.scans.push(parse_robotlaser(&rest).map_err(err)?),
+                "ODOM" => log.odometry.push(parse_odom(&rest).map_err(err)?),
+                k if k.starts_with('#') => {}
+                _ => {} // PARAM, TRUEPOS, RAWLASER...: not used here
+            }
+        }
+        log.scans
+            .sort_by(|a, b| a.timestamp_s.total_cmp(&b.timestamp_s));
+        log.odometry
+            .sort_by(|a, b| a.timestamp_s.total_cmp(&b.timestamp_s));
+        Ok(log)
+    }
+
+    /// Duration from the first to the last scan, seconds.
+    pub fn duration_s(&self) -> f64 {
+        match (self.scans.first(), self.scans.last()) {
+            (Some(a), Some(b)) => b.timestamp_s - a.timestamp_s,
+            _ => 0.0,
+        }
+    }
+}
+
+fn num(fields: &[&str], i: usize, name: &str) -> Result<f64, String> {
+    let s = fields
+        .get(i)
+        .ok_or_else(|| format!("missing {name} (field {})", i + 2))?;
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{name} {s:?} is not a number"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{name} is not finite"))
+    }
+}
+
+fn count(fields: &[&str], i: usize, name: &str) -> Result<usize, String> {
+    let s = fields.get(i).ok_or_else(|| format!("missing {name}"))?;
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("{name} {s:?} is not a count"))?;
+    if n > 100_000 {
+        return Err(format!("{name} {n} is implausibly large"));
+    }
+    Ok(n)
+}
+
+fn ranges(fields: &[&str], start: usize, n: usize) -> Result<Vec<f32>, String> {
+    (start..start + n)
+        .map(|i| {
+            let r = num(fields, i, "range")?;
+            if r < 0.0 {
+                Err(format!("range {r} is negative"))
+            } else {
+                Ok(r as f32)
+            }
+        })
+        .collect()
+}
+
+/// `FLASER n r1..rn x y theta odom_x odom_y odom_theta ipc_timestamp host logger_timestamp`
+fn parse_flaser(f: &[&str]) -> Result<LaserReading, String> {
+    let n = count(f, 0, "number of readings")?;
+    if n < 2 {
+        return Err(format!("{n} readings: a scan needs at least 2"));
+    }
+    let ranges_m = ranges(f, 1, n)?;
+    let o = 1 + n;
+    let odom = Pose2::new(
+        num(f, o + 3, "odom_x")?,
+        num(f, o + 4, "odom_y")?,
+        num(f, o + 5, "odom_theta")?,
+    );
+    let timestamp_s = num(f, o + 6, "ipc_timestamp")?;
+    // 180 degrees, right to left; 181 and 361 beams include both ends.
+    let fov = std::f64::consts::PI;
+    let increment = if n % 2 == 1 {
+        fov / (n - 1) as f64
+    } else {
+        fov / n as f64
+    };
+    Ok(LaserReading {
+        timestamp_s,
+        angle_min_rad: -fov / 2.0,
+        angle_increment_rad: increment,
+        max_range_m: FLASER_MAX_RANGE_M,
+        ranges_m,
+        odom,
+        robot_from_laser: Pose2::IDENTITY,
+    })
+}
+
+/// `ROBOTLASER1 type start_angle fov angular_res max_range accuracy remission_mode n r1..rn
+/// m rem1..remm laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+/// forward_safety side_safety turn_axis ipc_timestamp host logger_timestamp`
+fn parse_robotlaser(f: &[&str]) -> Result<LaserReading, String> {
+    let start = num(f, 1, "start_angle")?;
+    let res = num(f, 3, "angular_resolution")?;
+    let max_range = num(f, 4, "maximum_range")?;
+    let n = count(f, 7, "number of readings")?;
+    let ranges_m = ranges(f, 8, n)?;
+    let m = count(f, 8 + n, "number of remissions")?;
+    let o = 9 + n + m;
+    let laser = Pose2::new(
+        num(f, o, "laser_x")?,
+        num(f, o + 1, "laser_y")?,
+        num(f, o + 2, "laser_theta")?,
+    );
+    let robot = Pose2::new(
+        num(f, o + 3, "robot_x")?,
+        num(f, o + 4, "robot_y")?,
+        num(f, o + 5, "robot_theta")?,
+    );
+    let timestamp_s = num(f, o + 11, "ipc_timestamp")?;
+    Ok(LaserReading {
+        timestamp_s,
+        angle_min_rad: start,
+        angle_increment_rad: res,
+        max_range_m: max_range,
+        ranges_m,
+        odom: robot,
+        robot_from_laser: robot.inverse() * laser,
+    })
+}
+
+/// `ODOM x y theta tv rv accel ipc_timestamp host logger_timestamp`
+fn parse_odom(f: &[&str]) -> Result<OdomReading, String> {
+    Ok(OdomReading {
+        pose: Pose2::new(num(f, 0, "x")?, num(f, 1, "y")?, num(f, 2, "theta")?),
+        timestamp_s: num(f, 6, "ipc_timestamp")?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_flaser_odom_and_robotlaser_out_of_order() {
+        let text = "\\
+# comment
+PARAM robot_width 0.5
+FLASER 4 1.0 2.0 3.0 4.0 0 0 0 1.5 2.5 0.1 100.5 host 100.5
+ODOM 1.0 2.0 0.3 0.1 0.0 0 99.0 host 99.0
+FLASER 3 1.0 2.0 3.0 0 0 0 1.0 2.0 0.0 100.0 host 100.0
+ROBOTLASER1 0 -1.5 3.0 1.0 30.0 0.01 0 4 1 2 3 4 0 1.08775825619 2.04794255386 0.5 1 2 0.5 0 0 0 0 0 101.0 host 101.0
+";
+        let log = CarmenLog::read(text.as_bytes()).expect("valid");
+        let t: Vec<f64> = log.scans.iter().map(|s| s.timestamp_s).collect();
+        assert_eq!(t, vec![100.0, 100.5, 101.0]);
+        assert_eq!(log.scans[0].ranges_m, vec![1.0, 2.0, 3.0]);
+        // 3 beams over 180 degrees including both ends: 90 degrees apart.
+        assert!((log.scans[0].angle_increment_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!((log.scans[1].angle_increment_rad - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+        assert_eq!(log.scans[1].odom, Pose2::new(1.5, 2.5, 0.1));
+        let rl = &log.scans[2];
+        assert_eq!(
+            (rl.angle_min_rad, rl.angle_increment_rad, rl.max_range_m),
+            (-1.5, 1.0, 30.0)
+        );
+        assert_eq!(rl.odom, Pose2::new(1.0, 2.0, 0.5));
+        let mount = rl.robot_from_laser;
+        assert!(
+            (mount.x_m - 0.1).abs() < 1e-9 && mount.y_m.abs() < 1e-9 && mount.yaw_rad.abs() < 1e-12
+        );
+        assert_eq!(log.odometry.len(), 1);
+        assert_eq!(log.odometry[0].pose, Pose2::new(1.0, 2.0, 0.3));
+    }
+
+    #[test]
+    fn corrupt_lines_name_their_line_number() {
+        for (text, line, needle) in [
+            (
+                "ODOM 1 2 3 0 0 0 5 h 5\nFLASER 3 1.0 x 3.0 0 0 0 0 0 0 1 h 1\n",
+                2,
+                "range",
+            ),
+            ("FLASER 300 1.0 2.0\n", 1, "missing range"),
+            ("\n\nODOM 1 2\n", 3, "missing"),
+            ("FLASER 99999999999 1\n", 1, "implausibly large"),
+            ("FLASER 2 1 -2 0 0 0 0 0 0 1 h 1\n", 1, "negative"),
+            ("ODOM 1 2 nan 0 0 0 1 h 1\n", 1, "not finite"),
+        ] {
+            match CarmenLog::read(text.as_bytes()) {
+                Err(CarmenError::Line { line: l, what }) => {
+                    assert_eq!(l, line, "{text:?}: {what}");
+                    assert!(what.contains(needle), "{text:?}: {what}");
+                }
+                other => panic!("{text:?} gave {other:?}"),
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn arbitrary_text_never_panics(text in "(FLASER|ODOM|ROBOTLASER1)?[ 0-9a-z.\\\\-]{0,200}(\\n[A-Z]{0,6}[ 0-9.\\\\-]{0,80}){0,5}") {
+            let _ = CarmenLog::read(text.as_bytes());
+        }
+    }
+}

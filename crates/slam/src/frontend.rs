@@ -1,0 +1,128 @@
+//! Runs laser scans through the matcher and the map, one by one: predict the pose from the
+//! odometry increment, match the scan against the map, insert it if the robot has moved
+//! enough since the last insertion. (No loop closure yet: that is the pose graph's job.)
+
+use crate::carmen::LaserReading;
+use crate::matcher::{Match, MatcherConfig, MultiResMap, match_scan};
+use crate::trajectory::StampedPose;
+use realms_core::{Point2, Pose2};
+
+/// Frontend tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrontendConfig {
+    /// Finest map cell, metres.
+    pub resolution_m: f64,
+    /// Map resolutions (each twice as coarse as the last).
+    pub levels: usize,
+    /// Readings beyond this are not used, metres.
+    pub max_range_m: f64,
+    /// Readings closer than this are not used (the robot's own body), metres.
+    pub min_range_m: f64,
+    /// Insert a scan after moving this far since the last insertion, metres.
+    pub insert_translation_m: f64,
+    /// ... or turning this much, radians.
+    pub insert_rotation_rad: f64,
+    /// Matcher tuning.
+    pub matcher: MatcherConfig,
+}
+
+impl Default for FrontendConfig {
+    fn default() -> Self {
+        FrontendConfig {
+            resolution_m: 0.05,
+            levels: 3,
+            max_range_m: 25.0,
+            min_range_m: 0.1,
+            insert_translation_m: 0.05,
+            insert_rotation_rad: 2f64.to_radians(),
+            matcher: MatcherConfig::default(),
+        }
+    }
+}
+
+/// The scan-matching frontend.
+#[derive(Debug)]
+pub struct Frontend {
+    cfg: FrontendConfig,
+    map: MultiResMap,
+    pose: Pose2,
+    last_odom: Option<Pose2>,
+    last_insert: Option<Pose2>,
+    trajectory: Vec<StampedPose>,
+}
+
+impl Frontend {
+    /// A frontend with an empty map.
+    pub fn new(cfg: FrontendConfig) -> Self {
+        Frontend {
+            map: MultiResMap::new(cfg.resolution_m, cfg.levels),
+            cfg,
+            pose: Pose2::IDENTITY,
+            last_odom: None,
+            last_insert: None,
+            trajectory: Vec::new(),
+        }
+    }
+
+    /// The endpoints of usable beams, in the robot frame.
+    pub fn points_in_robot(&self, scan: &LaserReading) -> Vec<Point2> {
+        let max = self.cfg.max_range_m.min(scan.max_range_m - 1e-3);
+        scan.ranges_m
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| (**r as f64) >= self.cfg.min_range_m && (**r as f64) < max)
+            .map(|(i, r)| {
+                let a = scan.angle_min_rad + i as f64 * scan.angle_increment_rad;
+                let r = *r as f64;
+                scan.robot_from_laser
+                    .transform_point(Point2::new(r * a.cos(), r * a.sin()))
+            })
+            .collect()
+    }
+
+    /// Adds a scan; returns the estimated pose of the robot at the scan.
+    pub fn add_scan(&mut self, scan: &LaserReading) -> Option<Match> {
+        let predicted = match self.last_odom {
+            Some(prev) => self.pose * (prev.inverse() * scan.odom),
+            None => scan.odom,
+        };
+        self.last_odom = Some(scan.odom);
+        let points = self.points_in_robot(scan);
+        let matched = match self.last_insert {
+            Some(_) if points.len() >= 10 => {
+                Some(match_scan(&self.map, &points, predicted, &self.cfg.matcher))
+            }
+            _ => None,
+        };
+        self.pose = matched.map_or(predicted, |m| m.pose);
+        let moved = self.last_insert.is_none_or(|last| {
+            let d = self.pose.relative_to(&last);
+            d.x_m.hypot(d.y_m) >= self.cfg.insert_translation_m
+                || d.yaw_rad.abs() >= self.cfg.insert_rotation_rad
+        });
+        if moved && !points.is_empty() {
+            let world: Vec<(Point2, bool)> = points
+                .iter()
+                .map(|p| (self.pose.transform_point(*p), true))
+                .collect();
+            let sensor = self.pose.transform_point(scan.robot_from_laser.position());
+            self.map.insert(sensor, &world);
+            self.last_insert = Some(self.pose);
+        }
+        self.trajectory.push(StampedPose {
+            timestamp_s: scan.timestamp_s,
+            pose: self.pose,
+        });
+        matched
+    }
+
+    /// Every pose so far, one per scan.
+    pub fn trajectory(&self) -> &[StampedPose] {
+        &self.trajectory
+    }
+
+    /// The finest map.
+    pub fn map(&self) -> &crate::occupancy::OccupancyGrid {
+        self.map.finest()
+    }
+}

@@ -1,0 +1,16 @@
+//! realms-slam: 2D lidar SLAM as plain types and functions, knowing nothing of nodes or
+//! transports.
+//!
+//! - [`carmen`]: reading CARMEN laser logs (FLASER, ODOM, ROBOTLASER1).
+//! - [`trajectory`]: `timestamp x y theta` trajectory files.
+//! - [`eval`]: the relative pose error of Kümmerle et al. 2009 against `.relations` files.
+//! - [`occupancy`]: a log-odds occupancy grid that grows as the robot explores.
+//! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
+//! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
+
+pub mod carmen;
+pub mod eval;
+pub mod frontend;
+pub mod matcher;
+pub mod occupancy;
+pub mod trajectory;

@@ -1,0 +1,252 @@
+//! A log-odds occupancy grid that grows as scans reach past its edge, updated by tracing each
+//! beam from the sensor (cells passed through: free; the endpoint: occupied). It keeps the
+//! occupancy probability beside the log-odds so scan matching can read it without `exp`.
+
+use realms_core::{Grid, GridGeometry, Point2};
+
+/// Log-odds added to a cell a beam ends in (p = 0.7).
+const HIT: f32 = 0.847;
+/// Log-odds added to a cell a beam passes through (p = 0.4).
+const MISS: f32 = -0.405;
+/// Log-odds are clamped to this magnitude so a cell can change its mind.
+const CLAMP: f32 = 4.0;
+/// Cells added on each side when the grid grows.
+const GROW_MARGIN_CELLS: usize = 128;
+
+/// What a map cell is, for export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellState {
+    /// Never observed, or no evidence either way.
+    Unknown,
+    /// Observed free.
+    Free,
+    /// Observed occupied.
+    Occupied,
+}
+
+/// A growable log-odds occupancy grid.
+#[derive(Clone, Debug)]
+pub struct OccupancyGrid {
+    resolution_m: f64,
+    origin: Point2,
+    width: usize,
+    height: usize,
+    log_odds: Vec<f32>,
+    prob: Vec<f32>,
+}
+
+impl OccupancyGrid {
+    /// An empty grid of `resolution_m` cells around the world origin.
+    pub fn new(resolution_m: f64) -> Self {
+        let side = 2 * GROW_MARGIN_CELLS;
+        OccupancyGrid {
+            resolution_m,
+            origin: Point2::new(
+                -(GROW_MARGIN_CELLS as f64) * resolution_m,
+                -(GROW_MARGIN_CELLS as f64) * resolution_m,
+            ),
+            width: side,
+            height: side,
+            log_odds: vec![0.0; side * side],
+            prob: vec![0.5; side * side],
+        }
+    }
+
+    /// Cell edge, metres.
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution_m
+    }
+
+    /// The grid's geometry now (it changes when the grid grows).
+    pub fn geometry(&self) -> GridGeometry {
+        GridGeometry {
+            width: self.width,
+            height: self.height,
+            resolution_m: self.resolution_m,
+            origin: self.origin,
+        }
+    }
+
+    /// Grows the grid so the world box `[min, max]` lies inside it.
+    fn ensure(&mut self, min: Point2, max: Point2) {
+        let r = self.resolution_m;
+        let cx0 = ((min.x_m - self.origin.x_m) / r).floor();
+        let cy0 = ((min.y_m - self.origin.y_m) / r).floor();
+        let cx1 = ((max.x_m - self.origin.x_m) / r).floor();
+        let cy1 = ((max.y_m - self.origin.y_m) / r).floor();
+        if cx0 >= 0.0 && cy0 >= 0.0 && cx1 < self.width as f64 && cy1 < self.height as f64 {
+            return;
+        }
+        let add_left = if cx0 < 0.0 {
+            (-cx0) as usize + GROW_MARGIN_CELLS
+        } else {
+            0
+        };
+        let add_bottom = if cy0 < 0.0 {
+            (-cy0) as usize + GROW_MARGIN_CELLS
+        } else {
+            0
+        };
+        let add_right = if cx1 >= self.width as f64 {
+            cx1 as usize + 1 - self.width + GROW_MARGIN_CELLS
+        } else {
+            0
+        };
+        let add_top = if cy1 >= self.height as f64 {
+            cy1 as usize + 1 - self.height + GROW_MARGIN_CELLS
+        } else {
+            0
+        };
+        let (w2, h2) = (
+            self.width + add_left + add_right,
+            self.height + add_bottom + add_top,
+        );
+        let mut lo = vec![0.0f32; w2 * h2];
+        let mut pr = vec![0.5f32; w2 * h2];
+        for y in 0..self.height {
+            let src = y * self.width;
+            let dst = (y + add_bottom) * w2 + add_left;
+            lo[dst..dst + self.width].copy_from_slice(&self.log_odds[src..src + self.width]);
+            pr[dst..dst + self.width].copy_from_slice(&self.prob[src..src + self.width]);
+        }
+        self.origin = Point2::new(
+            self.origin.x_m - add_left as f64 * r,
+            self.origin.y_m - add_bottom as f64 * r,
+        );
+        self.width = w2;
+        self.height = h2;
+        self.log_odds = lo;
+        self.prob = pr;
+    }
+
+    fn update(&mut self, i: usize, delta: f32) {
+        let l = (self.log_odds[i] + delta).clamp(-CLAMP, CLAMP);
+        self.log_odds[i] = l;
+        self.prob[i] = 1.0 - 1.0 / (1.0 + l.exp());
+    }
+
+    /// Inserts one scan: beams from `sensor` to each endpoint (world frame); endpoints marked
+    /// `hit` are occupied, the others (max-range readings, clipped) only clear free space.
+    pub fn insert(&mut self, sensor: Point2, endpoints: &[(Point2, bool)]) {
+        if endpoints.is_empty() {
+            return;
+        }
+        let (mut min, mut max) = (sensor, sensor);
+        for (p, _) in endpoints {
+            min = Point2::new(min.x_m.min(p.x_m), min.y_m.min(p.y_m));
+            max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
+        }
+        self.ensure(min, max);
+        let r = self.resolution_m;
+        let origin = self.origin;
+        let to_cell = |p: Point2| {
+            (
+                ((p.x_m - origin.x_m) / r).floor() as i64,
+                ((p.y_m - origin.y_m) / r).floor() as i64,
+            )
+        };
+        let (sx, sy) = to_cell(sensor);
+        let w = self.width as i64;
+        for (p, hit) in endpoints {
+            let (ex, ey) = to_cell(*p);
+            // Bresenham from the sensor cell to the endpoint cell, excluding the endpoint.
+            let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
+            let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
+            let (mut x, mut y, mut err) = (sx, sy, dx + dy);
+            while (x, y) != (ex, ey) {
+                self.update((y * w + x) as usize, MISS);
+                let e2 = 2 * err;
+                if e2 >= dy {
+                    err += dy;
+                    x += stx;
+                }
+                if e2 <= dx {
+                    err += dx;
+                    y += sty;
+                }
+            }
+            let i = (ey * w + ex) as usize;
+            self.update(i, if *hit { HIT } else { MISS });
+        }
+    }
+
+    /// Occupancy probability at a world point, bilinear between cell centres, with its
+    /// gradient per metre; 0.5 (unknown) outside the grid.
+    pub fn probability_and_gradient(&self, p: Point2) -> (f64, [f64; 2]) {
+        let r = self.resolution_m;
+        let fx = (p.x_m - self.origin.x_m) / r - 0.5;
+        let fy = (p.y_m - self.origin.y_m) / r - 0.5;
+        if !(fx >= 0.0
+            && fy >= 0.0
+            && fx < (self.width - 1) as f64
+            && fy < (self.height - 1) as f64)
+        {
+            return (0.5, [0.0, 0.0]);
+        }
+        let (x0, y0) = (fx as usize, fy as usize);
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+        let i = y0 * self.width + x0;
+        let (p00, p10) = (self.prob[i] as f64, self.prob[i + 1] as f64);
+        let (p01, p11) = (
+            self.prob[i + self.width] as f64,
+            self.prob[i + self.width + 1] as f64,
+        );
+        let v = (p00 * (1.0 - tx) + p10 * tx) * (1.0 - ty) + (p01 * (1.0 - tx) + p11 * tx) * ty;
+        let gx = ((p10 - p00) * (1.0 - ty) + (p11 - p01) * ty) / r;
+        let gy = ((p01 - p00) * (1.0 - tx) + (p11 - p10) * tx) / r;
+        (v, [gx, gy])
+    }
+
+    /// The state of every cell (log-odds beyond +-0.5 count as known).
+    pub fn states(&self) -> Grid<CellState> {
+        let cells = self
+            .log_odds
+            .iter()
+            .map(|l| {
+                if *l > 0.5 {
+                    CellState::Occupied
+                } else if *l < -0.5 {
+                    CellState::Free
+                } else {
+                    CellState::Unknown
+                }
+            })
+            .collect();
+        Grid::from_cells(self.geometry(), cells).expect("one state per cell")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beams_clear_free_space_and_mark_hits_and_the_grid_grows() {
+        let mut g = OccupancyGrid::new(0.1);
+        // Sensor and beams on cell centres, so the traced cells are unambiguous.
+        let sensor = Point2::new(0.05, 0.05);
+        let beams = [
+            (Point2::new(30.05, 0.05), true),
+            (Point2::new(0.05, -19.95), false),
+        ];
+        for _ in 0..5 {
+            g.insert(sensor, &beams);
+        }
+        let states = g.states();
+        let at = |x, y| {
+            *states
+                .at_world(Point2::new(x, y))
+                .expect("inside the grown grid")
+        };
+        assert_eq!(at(30.05, 0.05), CellState::Occupied);
+        assert_eq!(at(15.05, 0.05), CellState::Free);
+        assert_eq!(
+            at(0.05, -19.95),
+            CellState::Free,
+            "a max-range reading only clears"
+        );
+        assert_eq!(at(5.05, 5.05), CellState::Unknown);
+        let (p, _) = g.probability_and_gradient(Point2::new(30.05, 0.05));
+        assert!(p > 0.9, "{p}");
+    }
+}

@@ -1,0 +1,119 @@
+//! Trajectory files: one `timestamp x y theta` line per pose, the form `realms slam` writes and
+//! `realms slam-eval` reads.
+
+use realms_core::Pose2;
+use std::fmt::Write as _;
+
+/// A pose at a time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StampedPose {
+    /// Seconds.
+    pub timestamp_s: f64,
+    /// Pose.
+    pub pose: Pose2,
+}
+
+/// Why a trajectory could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum TrajectoryError {
+    /// I/O.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A malformed line.
+    #[error("{path} line {line}: {what}")]
+    Line {
+        /// File.
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// What was wrong.
+        what: String,
+    },
+}
+
+/// Formats poses as `timestamp x y theta` lines.
+pub fn to_text(poses: &[StampedPose]) -> String {
+    let mut s = String::with_capacity(poses.len() * 48);
+    for p in poses {
+        let _ = writeln!(
+            s,
+            "{:.6} {:.6} {:.6} {:.6}",
+            p.timestamp_s, p.pose.x_m, p.pose.y_m, p.pose.yaw_rad
+        );
+    }
+    s
+}
+
+/// Parses `timestamp x y theta` lines (blank lines and `#` comments skipped); `path` names the
+/// source in errors.
+pub fn parse(text: &str, path: &str) -> Result<Vec<StampedPose>, TrajectoryError> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let err = |what: String| TrajectoryError::Line {
+            path: path.to_string(),
+            line: i + 1,
+            what,
+        };
+        let v: Vec<f64> = line
+            .split_ascii_whitespace()
+            .map(|f| {
+                f.parse::<f64>()
+                    .map_err(|_| err(format!("{f:?} is not a number")))
+            })
+            .collect::<Result<_, _>>()?;
+        if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
+            return Err(err(format!(
+                "expected 4 finite numbers (timestamp x y theta), got {}",
+                v.len()
+            )));
+        }
+        out.push(StampedPose {
+            timestamp_s: v[0],
+            pose: Pose2::new(v[1], v[2], v[3]),
+        });
+    }
+    Ok(out)
+}
+
+/// Reads a trajectory file.
+pub fn read_file(path: &std::path::Path) -> Result<Vec<StampedPose>, TrajectoryError> {
+    let text = std::fs::read_to_string(path).map_err(|source| TrajectoryError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse(&text, &path.display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trips_and_rejects_bad_lines() {
+        let poses = vec![
+            StampedPose {
+                timestamp_s: 976052857.337284,
+                pose: Pose2::new(1.5, -2.25, 0.125),
+            },
+            StampedPose {
+                timestamp_s: 976052857.5,
+                pose: Pose2::new(0.0, 0.0, -3.0),
+            },
+        ];
+        let back = parse(&to_text(&poses), "t").expect("valid");
+        assert_eq!(back, poses);
+        let e = parse("# x\n1 2 3 4\n1 2 three 4\n", "f.txt").expect_err("bad");
+        assert!(e.to_string().contains("f.txt line 3"), "{e}");
+        assert!(parse("1 2 3\n", "f").is_err());
+        assert!(parse("1 2 3 inf\n", "f").is_err());
+    }
+}

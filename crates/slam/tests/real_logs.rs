@@ -1,0 +1,141 @@
+//! Against the real benchmark logs in `../shared/data/slam` (Kümmerle et al. 2009): the reader,
+//! the evaluator (which must reproduce the published odometry errors), and the matcher.
+
+use realms_core::{Point2, Pose2};
+use realms_slam::carmen::CarmenLog;
+use realms_slam::eval::{Relation, read_relations, relative_pose_error};
+use realms_slam::frontend::{Frontend, FrontendConfig};
+use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
+use realms_slam::trajectory::StampedPose;
+use std::path::PathBuf;
+
+fn data(file: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/slam");
+    assert!(
+        dir.is_dir(),
+        "{} is missing: the real SLAM logs live in ../shared/data beside the clone",
+        dir.display()
+    );
+    dir.join(file)
+}
+
+fn log(name: &str) -> CarmenLog {
+    CarmenLog::read_file(&data(&format!("{name}.clf"))).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn relations(name: &str) -> Vec<Relation> {
+    read_relations(&data(&format!("{name}.relations"))).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn odometry_trajectory(log: &CarmenLog) -> Vec<StampedPose> {
+    log.scans
+        .iter()
+        .map(|s| StampedPose {
+            timestamp_s: s.timestamp_s,
+            pose: s.odom,
+        })
+        .collect()
+}
+
+#[test]
+fn reader_finds_every_scan_and_odometry_reading() {
+    // Counts from SOURCES.md.
+    for (name, scans, odom, beams) in [
+        ("intel", 13_631, 26_915, 180),
+        ("aces", 7_374, 7_375, 180),
+        ("mit-csail", 1_988, 0, 361),
+    ] {
+        let l = log(name);
+        assert_eq!((l.scans.len(), l.odometry.len()), (scans, odom), "{name}");
+        assert!(l.scans.iter().all(|s| s.ranges_m.len() == beams), "{name}");
+        assert!(
+            l.scans
+                .windows(2)
+                .all(|w| w[0].timestamp_s <= w[1].timestamp_s)
+        );
+    }
+}
+
+#[test]
+fn evaluator_reproduces_the_published_odometry_errors() {
+    // "Pure odometry on the same relations" (SOURCES.md): mean +- std, m and deg.
+    for (name, t, ts, r, rs) in [
+        ("intel", 7.37, 14.35, 39.2, 53.8),
+        ("aces", 0.55, 2.67, 2.3, 6.5),
+        ("mit-csail", 1.68, 5.29, 5.1, 8.2),
+    ] {
+        let e = relative_pose_error(&odometry_trajectory(&log(name)), &relations(name))
+            .expect("overlap");
+        assert_eq!(e.missing, 0, "{name}: every relation has both poses");
+        assert!(
+            (e.trans_mean_m - t).abs() < 0.006 && (e.trans_std_m - ts).abs() < 0.006,
+            "{name}: {e:?}"
+        );
+        assert!(
+            (e.rot_mean_deg - r).abs() < 0.06 && (e.rot_std_deg - rs).abs() < 0.06,
+            "{name}: {e:?}"
+        );
+    }
+}
+
+#[test]
+fn matcher_recovers_a_known_offset_on_a_real_scan() {
+    let l = log("intel");
+    let frontend = Frontend::new(FrontendConfig::default());
+    let no_prior = MatcherConfig {
+        prior_translation_weight: 0.0,
+        prior_rotation_weight: 0.0,
+        ..Default::default()
+    };
+    for k in [500, 3000, 9000] {
+        let points = frontend.points_in_robot(&l.scans[k]);
+        let mut map = MultiResMap::new(0.05, 3);
+        let world: Vec<(Point2, bool)> = points.iter().map(|p| (*p, true)).collect();
+        for _ in 0..3 {
+            map.insert(Point2::new(0.0, 0.0), &world);
+        }
+        for offset in [
+            Pose2::new(0.10, -0.05, 3f64.to_radians()),
+            Pose2::new(-0.08, 0.12, -2f64.to_radians()),
+        ] {
+            let m = match_scan(&map, &points, offset, &no_prior);
+            let err = m.pose;
+            assert!(
+                err.x_m.hypot(err.y_m) < 0.02 && err.yaw_rad.abs() < 0.5f64.to_radians(),
+                "scan {k} from {offset:?}: ended at {err:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn frontend_beats_odometry_by_far_on_a_real_segment() {
+    // The first 2000 scans of the Intel lab (~400 s of driving), whose odometry drifts in
+    // heading. (ACES odometry is locally about as good as scan matching in translation.)
+    let l = log("intel");
+    let segment = &l.scans[..2000];
+    let mut frontend = Frontend::new(FrontendConfig::default());
+    for s in segment {
+        frontend.add_scan(s);
+    }
+    let rel = relations("intel");
+    let slam = relative_pose_error(frontend.trajectory(), &rel).expect("segment has relations");
+    let odom_traj: Vec<StampedPose> = segment
+        .iter()
+        .map(|s| StampedPose {
+            timestamp_s: s.timestamp_s,
+            pose: s.odom,
+        })
+        .collect();
+    let odom = relative_pose_error(&odom_traj, &rel).expect("segment has relations");
+    assert_eq!(slam.relations, odom.relations);
+    assert!(
+        slam.relations > 100,
+        "{} relations in the segment",
+        slam.relations
+    );
+    assert!(
+        slam.trans_mean_m < 0.5 * odom.trans_mean_m && slam.rot_mean_deg < 0.5 * odom.rot_mean_deg,
+        "slam {slam:?} vs odometry {odom:?}"
+    );
+}
