@@ -234,7 +234,10 @@ fn speed_trial(scenario: &realms_sim::Scenario, sim_s: f64, plain: bool, msgs: &
             w.command(
                 id,
                 TwistStamped {
-                    stamp: t,
+                    header: realms_core::msgs::Header {
+                        stamp: w.now(),
+                        frame_id: format!("{id}/base_link"),
+                    },
                     twist: Twist {
                         linear: Vec3::new(0.3, 0.0, 0.0),
                         angular: Vec3::new(0.0, 0.0, 0.3 * phase.sin()),

@@ -35,7 +35,8 @@ impl GridGeometry {
     pub fn world_to_cell(&self, p: Point2) -> Option<Cell> {
         let fx = ((p.x_m - self.origin.x_m) / self.resolution_m).floor();
         let fy = ((p.y_m - self.origin.y_m) / self.resolution_m).floor();
-        if fx < 0.0 || fy < 0.0 || fx >= self.width as f64 || fy >= self.height as f64 {
+        // Written so NaN fails the test too.
+        if !(fx >= 0.0 && fy >= 0.0 && fx < self.width as f64 && fy < self.height as f64) {
             return None;
         }
         Some(Cell {
@@ -261,6 +262,7 @@ mod tests {
         );
         assert_eq!(g.world_to_cell(Point2::new(1.0, 3.0)), None);
         assert_eq!(g.world_to_cell(Point2::new(-1.01, 3.0)), None);
+        assert_eq!(g.world_to_cell(Point2::new(f64::NAN, 3.0)), None);
         let c = g.cell_center(Cell { x: 1, y: 2 });
         assert_eq!((c.x_m, c.y_m), (-0.25, 3.25));
         assert_eq!(g.world_to_cell(c), Some(Cell { x: 1, y: 2 }));

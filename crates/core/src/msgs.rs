@@ -116,10 +116,10 @@ pub struct Imu {
 
 /// geometry_msgs/TwistStamped, the form `cmd_vel` takes here so a receiver can drop a stale
 /// command instead of executing it late.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TwistStamped {
-    /// When the command was issued (frame: the rover's base).
-    pub stamp: crate::time::Time,
+    /// When the command was issued, and its frame (the rover's base, e.g. `rover1/base_link`).
+    pub header: Header,
     /// The commanded velocity.
     pub twist: Twist,
 }
@@ -181,7 +181,7 @@ impl Message {
             Message::LaserScan(m) => m.header.stamp,
             Message::Odometry(m) => m.header.stamp,
             Message::Imu(m) => m.header.stamp,
-            Message::CmdVel(m) => m.stamp,
+            Message::CmdVel(m) => m.header.stamp,
             Message::PointCloud(m) => m.header.stamp,
             Message::Image(m) => m.header.stamp,
         }

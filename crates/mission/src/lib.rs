@@ -159,7 +159,7 @@ impl Mission {
                 if let (Some(rover), Message::CmdVel(cmd)) = (topic.rover(), &message)
                     && topic.leaf() == "cmd_vel"
                 {
-                    self.world.command(rover, *cmd);
+                    self.world.command(rover, cmd.clone());
                 }
                 for i in self.bus.subscribers(&topic).to_vec() {
                     let node = &mut self.nodes[i];

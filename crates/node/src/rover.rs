@@ -39,7 +39,10 @@ impl RoverNode {
         self.outbox.push(Outgoing {
             topic: self.id.topic("cmd_vel"),
             message: Message::CmdVel(TwistStamped {
-                stamp: now,
+                header: realms_core::msgs::Header {
+                    stamp: now,
+                    frame_id: format!("{}/base_link", self.name),
+                },
                 twist: Twist {
                     linear: Vec3::new(v_m_s, 0.0, 0.0),
                     angular: Vec3::new(0.0, 0.0, w_rad_s),

@@ -162,7 +162,7 @@ impl RoverBody {
         // The driver's dead-man: a command older than the timeout means stop.
         let timeout = realms_core::Duration::from_secs_f64(spec.cmd_timeout_s);
         let (v_target, w_target) = match &self.command {
-            Some(c) if now - c.stamp <= timeout => (
+            Some(c) if now.0.saturating_sub(c.header.stamp.0) <= timeout.0 => (
                 c.twist
                     .linear
                     .x

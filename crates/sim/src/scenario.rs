@@ -695,6 +695,70 @@ impl Scenario {
         ] {
             non_negative(key, v)?;
         }
+        // Periods must be whole, positive nanoseconds the clock can add up over a mission.
+        for (key, hz) in [
+            ("rovers.lidar.rate_hz", r.lidar.rate_hz),
+            ("rovers.depth.rate_hz", r.depth.rate_hz),
+            ("rovers.camera.rate_hz", r.camera.rate_hz),
+            ("rovers.odometry.rate_hz", r.odometry.rate_hz),
+            ("rovers.imu.rate_hz", r.imu.rate_hz),
+        ] {
+            if !(0.001..=10_000.0).contains(&hz) {
+                return Err(err(
+                    key,
+                    "must be between 0.001 and 10000 Hz",
+                    hz.to_string(),
+                ));
+            }
+        }
+        if !(1e-4..=0.1).contains(&r.physics_step_s) {
+            return Err(err(
+                "rovers.physics_step_s",
+                "must be between 0.0001 and 0.1 s",
+                r.physics_step_s.to_string(),
+            ));
+        }
+        if self.duration_s > 1e7 {
+            return Err(err(
+                "duration_s",
+                "must be at most 1e7 s (115 days)",
+                self.duration_s.to_string(),
+            ));
+        }
+        for (key, deg) in [
+            ("rovers.depth.hfov_deg", r.depth.hfov_deg),
+            ("rovers.depth.vfov_deg", r.depth.vfov_deg),
+            ("rovers.camera.hfov_deg", r.camera.hfov_deg),
+        ] {
+            if deg >= 170.0 {
+                return Err(err(
+                    key,
+                    "must be below 170 degrees (a pinhole camera)",
+                    deg.to_string(),
+                ));
+            }
+        }
+        if r.max_slope_deg >= 80.0 {
+            return Err(err(
+                "rovers.max_slope_deg",
+                "must be below 80 degrees",
+                r.max_slope_deg.to_string(),
+            ));
+        }
+        // Rovers start in a line beside the lander; the line must fit inside the walls.
+        let line_m = f64::from(r.count) * (r.width_m + 0.8);
+        let clear = l.size_m / 2.0 + 1.2 + r.length_m;
+        let room = (a.width_m.min(a.length_m) / 2.0) - a.wall_thickness_m;
+        if line_m > a.width_m.max(a.length_m) - 2.0 * a.wall_thickness_m || clear > room {
+            return Err(err(
+                "rovers.count",
+                "must fit in a line beside the lander inside the arena",
+                format!(
+                    "{} rovers in a {} x {} m arena",
+                    r.count, a.width_m, a.length_m
+                ),
+            ));
+        }
         if r.lidar.range_max_m <= r.lidar.range_min_m {
             return Err(err(
                 "rovers.lidar.range_max_m",
@@ -807,6 +871,25 @@ mod tests {
         )
         .expect_err("no such rover");
         assert!(e.to_string().contains("faults[0].rover"), "{e}");
+        for (text, key) in [
+            ("[rovers.lidar]\nrate_hz = 1e12\n", "rovers.lidar.rate_hz"),
+            (
+                "[rovers]\nphysics_step_s = 1e-12\n",
+                "rovers.physics_step_s",
+            ),
+            (
+                "[rovers.depth]\nhfov_deg = 200.0\n",
+                "rovers.depth.hfov_deg",
+            ),
+            ("[rovers]\nmax_slope_deg = 90.0\n", "rovers.max_slope_deg"),
+            (
+                "[rovers]\ncount = 16\n[arena]\nwidth_m = 4.0\nlength_m = 4.0\n[lander]\nx_m = 2.0\ny_m = 2.0\n",
+                "rovers.count",
+            ),
+        ] {
+            let e = Scenario::parse(text, "t.toml").expect_err(key);
+            assert!(e.to_string().contains(key), "{e}");
+        }
         let e = Scenario::parse(
             "[[faults]]\nkind = \"melt\"\nrover = \"rover1\"\nat_s = 3.0\n",
             "t.toml",

@@ -199,10 +199,29 @@ impl World {
         self.queue.peek_time()
     }
 
-    /// Hands a velocity command to a rover's driver; unknown rovers are ignored.
-    pub fn command(&mut self, rover: RoverId, cmd: TwistStamped) {
-        if let Some(slot) = self.slot_mut(rover) {
-            slot.body.command = Some(cmd);
+    /// Hands a velocity command to a rover's driver. Like a real driver it ignores commands
+    /// it cannot execute: to an unknown rover, with non-finite values, or stamped in the
+    /// future (which would never go stale and would defeat the dead-man timeout). Returns
+    /// whether the command was accepted.
+    pub fn command(&mut self, rover: RoverId, cmd: TwistStamped) -> bool {
+        let t = &cmd.twist;
+        let finite = [
+            t.linear.x,
+            t.linear.y,
+            t.linear.z,
+            t.angular.x,
+            t.angular.y,
+            t.angular.z,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        let now = self.now;
+        match self.slot_mut(rover) {
+            Some(slot) if finite && cmd.header.stamp <= now => {
+                slot.body.command = Some(cmd);
+                true
+            }
+            _ => false,
         }
     }
 

@@ -27,17 +27,8 @@ fn commanded_speed_is_reached_after_the_acceleration_ramp() {
     // v t - v^2 / (2 a): 3.0 - 0.09 = 2.91 m.
     let travelled = body.pose.x_m - 3.0;
     assert!((travelled - 2.91).abs() < 0.01, "{travelled}");
-    assert!(body.pose.y_m.sub(10.0).abs() < 1e-9);
+    assert!((body.pose.y_m - 10.0).abs() < 1e-9);
     assert!((body.wheel_speed_m_s - 0.3).abs() < 1e-9);
-}
-
-trait Sub {
-    fn sub(self, o: f64) -> f64;
-}
-impl Sub for f64 {
-    fn sub(self, o: f64) -> f64 {
-        self - o
-    }
 }
 
 #[test]
@@ -256,4 +247,32 @@ fn a_powered_off_rover_stops_and_falls_silent() {
     let out = drive(&mut world, R1, 0.3, 0.0, 5.0);
     assert!(out.is_empty(), "{} messages after power-off", out.len());
     assert_eq!(world.rovers().next().expect("rover").pose.x_m, x);
+}
+
+#[test]
+fn commands_a_driver_cannot_execute_are_refused() {
+    let s = firm(scenario(1));
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
+    idle_until(&mut world, Time::from_secs_f64(1.0));
+    let cmd = |stamp_s: f64, v: f64| realms_core::msgs::TwistStamped {
+        header: realms_core::msgs::Header {
+            stamp: Time::from_secs_f64(stamp_s),
+            frame_id: "rover1/base_link".into(),
+        },
+        twist: realms_core::msgs::Twist {
+            linear: realms_core::geometry::Vec3::new(v, 0.0, 0.0),
+            angular: realms_core::geometry::Vec3::default(),
+        },
+    };
+    assert!(!world.command(R1, cmd(1.0, f64::NAN)), "NaN speed");
+    assert!(
+        !world.command(R1, cmd(1.0, f64::INFINITY)),
+        "infinite speed"
+    );
+    assert!(!world.command(R1, cmd(99.0, 0.3)), "stamped in the future");
+    assert!(!world.command(RoverId(7), cmd(1.0, 0.3)), "no such rover");
+    assert!(world.command(R1, cmd(1.0, 0.3)));
+    idle_until(&mut world, Time::from_secs_f64(1.2));
+    let body = world.rovers().next().expect("rover");
+    assert!(body.pose.x_m.is_finite() && body.pose.x_m > 3.0);
 }

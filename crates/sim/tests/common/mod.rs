@@ -59,7 +59,10 @@ pub fn drive(
         world.command(
             id,
             TwistStamped {
-                stamp: t,
+                header: realms_core::msgs::Header {
+                    stamp: t,
+                    frame_id: format!("{id}/base_link"),
+                },
                 twist: Twist {
                     linear: Vec3::new(v_m_s, 0.0, 0.0),
                     angular: Vec3::new(0.0, 0.0, w_rad_s),
