@@ -403,9 +403,11 @@ impl HeightPyramid {
         }
     }
 
-    /// Like [`cast`](Self::cast), but starts at `hint_m` when the ray is still above the
-    /// surface there (rays of one image column hit in order, so the previous hit is a good
-    /// start); otherwise searches from `t_min_m`.
+    /// Like [`cast`](Self::cast), but may start at `hint_m` (rays of one image column hit in
+    /// order, so the previous hit is a good guess). The guess is only trusted once the
+    /// clearance field proves the stretch before it empty; where that proof stops short,
+    /// the exact walk continues from there. So the answer is always the first hit, as
+    /// [`cast`](Self::cast) would find it.
     pub fn cast_from_hint(
         &self,
         origin: [f64; 3],
@@ -414,8 +416,13 @@ impl HeightPyramid {
         hint_m: f64,
         t_max_m: f64,
     ) -> Option<f64> {
-        if hint_m <= t_min_m {
+        if hint_m <= t_min_m || self.clearance.is_none() {
             return self.cast(origin, dir, t_min_m, t_max_m);
+        }
+        let hint_m = hint_m.min(t_max_m);
+        if let Some(t) = self.skip_clear_space(origin, dir, t_min_m, hint_m) {
+            // Not provably empty up to the hint: walk exactly from where the proof stopped.
+            return self.cast_from_level(origin, dir, t, t_max_m, 1);
         }
         match self.march_near(origin, dir, hint_m, t_max_m) {
             Near::Settled(hit) => hit,

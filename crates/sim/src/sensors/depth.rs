@@ -71,10 +71,10 @@ pub fn cast_image(
         let mut prev_z = 0.0;
         for v in (0..height).rev() {
             let r = [bottom[0], bottom[1] - (height - 1 - v) as f64 / k.fy, 1.0];
-            // A ray higher in a column stays above the one below it, so in a level camera
-            // it cannot hit nearer than that ray's hit (or, after a miss, its reach); start a
-            // little short. With roll the rays fan sideways a little, and the cast checks that
-            // the start is still above the ground.
+            // A ray higher in a column usually hits no nearer than the one below it (or, after
+            // a miss, than its reach), so that is where its search starts; the cast proves the
+            // stretch before it empty first, because a tilted or rolled camera fans the rays
+            // sideways and a thin silhouette can hide between them.
             let hint = 0.95 * prev_z;
             let hit = world.cast_from_hint(origin, dir, 0.0, hint, z_max_m);
             prev_z = hit.unwrap_or(z_max_m);
