@@ -16,6 +16,14 @@ use realms_node::wander::WanderConfig;
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
 
+/// A node's seed, drawn from the scenario seed's stream for that node.
+fn node_seed(seed: u64, rover: u8) -> u64 {
+    use rand::RngCore;
+    realms_sim::rng::Streams::new(seed)
+        .rng(realms_sim::rng::Purpose::Node(rover))
+        .next_u64()
+}
+
 /// How often rover poses are sampled for trajectories.
 pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 
@@ -66,7 +74,7 @@ impl Mission {
                     depth_origin_m: base_from_optical.origin,
                     max_step_m: spec.max_step_m,
                     max_drop_m: 0.12,
-                    seed: world.scenario().seed ^ (u64::from(body.id.0) << 32),
+                    seed: node_seed(world.scenario().seed, body.id.0),
                 };
                 Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
             })

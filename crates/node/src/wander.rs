@@ -124,11 +124,9 @@ impl Wander {
         match self.mode {
             Mode::Reverse { until } if now < until => return (-0.15, 0.0),
             Mode::Turn { dir, until } if now < until || blocked => {
-                if blocked
-                    && self
-                        .blocked_since
-                        .is_some_and(|s| now - s > Duration::from_secs(8))
-                {
+                // Being blocked mid-turn (a random one, say) counts towards the escape too.
+                let since = blocked.then(|| *self.blocked_since.get_or_insert(now));
+                if since.is_some_and(|s| now - s > Duration::from_secs(8)) {
                     self.blocked_since = None;
                     self.mode = Mode::Reverse {
                         until: now + Duration::from_millis(1500),

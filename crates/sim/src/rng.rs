@@ -23,10 +23,10 @@ pub enum Purpose {
     Lidar(u8),
     /// A rover's depth camera noise.
     Depth(u8),
-    /// A rover's odometry, slip and gyro noise.
+    /// A rover's odometry and slip noise.
     Odometry(u8),
-    /// A rover's camera texture noise.
-    Camera(u8),
+    /// A rover's gyro noise.
+    Gyro(u8),
     /// A node's own decisions (e.g. a wandering behaviour).
     Node(u8),
 }
@@ -44,7 +44,7 @@ impl Streams {
             Purpose::Lidar(r) => 0x100 + r as u64,
             Purpose::Depth(r) => 0x200 + r as u64,
             Purpose::Odometry(r) => 0x300 + r as u64,
-            Purpose::Camera(r) => 0x400 + r as u64,
+            Purpose::Gyro(r) => 0x400 + r as u64,
             Purpose::Node(r) => 0x500 + r as u64,
         };
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);

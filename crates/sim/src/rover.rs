@@ -128,16 +128,17 @@ impl RoverBody {
         self.roll_rad = ((fl + rl) / 2.0 - (fr + rr) / 2.0).atan2(spec.width_m);
     }
 
-    /// Slip fraction at the current place: base + slope + looseness, or almost total during a
-    /// slip burst.
+    /// Slip fraction at the current place: base + slope (the steepest slope under the rover,
+    /// from pitch and roll) + looseness, or almost total during a slip burst.
     pub fn slip(&self, spec: &Rovers, terrain: &Terrain, now: Time) -> f64 {
         if self.slip_burst_until.is_some_and(|until| now < until) {
             return 0.9;
         }
         let loose = bilinear(&terrain.looseness, self.pose.position()).unwrap_or(0.0);
         let o = &spec.odometry;
-        (o.slip_base + o.slip_per_slope * self.pitch_rad.tan().abs() + o.slip_loose * loose)
-            .clamp(0.0, 0.95)
+        // Skid-steer wheels slip on side slopes as well as up and down them.
+        let slope = self.pitch_rad.tan().hypot(self.roll_rad.tan());
+        (o.slip_base + o.slip_per_slope * slope + o.slip_loose * loose).clamp(0.0, 0.95)
     }
 
     /// Advances the rover by `dt_s` at time `now`.

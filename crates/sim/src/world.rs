@@ -66,6 +66,7 @@ struct RoverSlot {
     lidar_rng: SimRng,
     depth_rng: SimRng,
     motion_rng: SimRng,
+    gyro_rng: SimRng,
     camera_wanted: bool,
     dropped: BTreeMap<SensorKind, u32>,
 }
@@ -110,6 +111,7 @@ impl World {
                     lidar_rng: streams.rng(Purpose::Lidar(n)),
                     depth_rng: streams.rng(Purpose::Depth(n)),
                     motion_rng,
+                    gyro_rng: streams.rng(Purpose::Gyro(n)),
                     camera_wanted: false,
                     dropped: BTreeMap::new(),
                 }
@@ -389,7 +391,7 @@ impl World {
                 Message::Imu(Box::new(proprio::imu(
                     &slot.body,
                     spec,
-                    &mut slot.motion_rng,
+                    &mut slot.gyro_rng,
                     t,
                 ))),
             ),
@@ -411,7 +413,9 @@ impl World {
                 SimEventKind::PowerOff
             }
             (FaultKind::SlipBurst, true) => {
-                slot.body.slip_burst_until = Some(end);
+                // Overlapping bursts: the later end wins.
+                let until = slot.body.slip_burst_until.map_or(end, |u| u.max(end));
+                slot.body.slip_burst_until = Some(until);
                 SimEventKind::SlipBurstStart
             }
             (FaultKind::SlipBurst, false) => SimEventKind::SlipBurstEnd,

@@ -60,7 +60,18 @@ pub fn render(
                 (normal[0] * to_sun[0] + normal[1] * to_sun[1] + normal[2] * to_sun[2]).max(0.0);
             let lit = lambert > 0.0
                 && world
-                    .cast([p[0], p[1], p[2] + 0.02], to_sun, 0.0, 40.0)
+                    // Start off the surface towards the sun, so a ray from a lit wall face
+                    // does not begin inside its own column.
+                    .cast(
+                        [
+                            p[0] + 0.03 * to_sun[0],
+                            p[1] + 0.03 * to_sun[1],
+                            p[2] + 0.03 * to_sun[2] + 0.005,
+                        ],
+                        to_sun,
+                        0.0,
+                        40.0,
+                    )
                     .is_none();
             let albedo = match terrain.kind.cells()[g.index(cell)] {
                 SurfaceKind::Floor => 0.30 + 0.06 * texture(x, y),
