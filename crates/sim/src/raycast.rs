@@ -420,11 +420,11 @@ impl HeightPyramid {
             return self.cast(origin, dir, t_min_m, t_max_m);
         }
         let hint_m = hint_m.min(t_max_m);
-        if let Some(t) = self.skip_clear_space(origin, dir, t_min_m, hint_m) {
-            // Not provably empty up to the hint: walk exactly from where the proof stopped.
-            return self.cast_from_level(origin, dir, t, t_max_m, 1);
-        }
-        match self.march_near(origin, dir, hint_m, t_max_m) {
+        // Where the proof stops short of the hint, walk exactly from there instead.
+        let start = self
+            .skip_clear_space(origin, dir, t_min_m, hint_m)
+            .unwrap_or(hint_m);
+        match self.march_near(origin, dir, start, t_max_m) {
             Near::Settled(hit) => hit,
             Near::ContinueFrom(t) => self.cast(origin, dir, t, t_max_m),
             Near::HitBehindStart => self.cast(origin, dir, t_min_m, t_max_m),
@@ -434,7 +434,7 @@ impl HeightPyramid {
     /// Walks level-0 cells from `t_start_m` for a short stretch, for rays whose hit is
     /// expected to be close: no clipping, no pyramid, almost no setup.
     fn march_near(&self, origin: [f64; 3], dir: [f64; 3], t_start_m: f64, t_max_m: f64) -> Near {
-        const STRETCH_CELLS: usize = 24;
+        const STRETCH_CELLS: usize = 64;
         let g = &self.geometry;
         let inv_res = 1.0 / g.resolution_m;
         let ox = (origin[0] - g.origin.x_m) * inv_res;
