@@ -51,37 +51,21 @@ pub enum EvalError {
 
 /// Parses a `.relations` file: `t1 t2 x y z roll pitch yaw` per line.
 pub fn parse_relations(text: &str, path: &str) -> Result<Vec<Relation>, EvalError> {
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let err = |what: String| EvalError::Line {
+    let rows = crate::numeric_lines::parse(text, 8, "t1 t2 x y z roll pitch yaw").map_err(
+        |(line, what)| EvalError::Line {
             path: path.to_string(),
-            line: i + 1,
+            line,
             what,
-        };
-        let v: Vec<f64> = line
-            .split_ascii_whitespace()
-            .map(|f| {
-                f.parse::<f64>()
-                    .map_err(|_| err(format!("{f:?} is not a number")))
-            })
-            .collect::<Result<_, _>>()?;
-        if v.len() != 8 || v.iter().any(|x| !x.is_finite()) {
-            return Err(err(format!(
-                "expected 8 finite numbers (t1 t2 x y z roll pitch yaw), got {}",
-                v.len()
-            )));
-        }
-        out.push(Relation {
+        },
+    )?;
+    Ok(rows
+        .into_iter()
+        .map(|v| Relation {
             t1_s: v[0],
             t2_s: v[1],
             delta: Pose2::new(v[2], v[3], v[7]),
-        });
-    }
-    Ok(out)
+        })
+        .collect())
 }
 
 /// Reads a `.relations` file.

@@ -12,5 +12,6 @@ pub mod carmen;
 pub mod eval;
 pub mod frontend;
 pub mod matcher;
+mod numeric_lines;
 pub mod occupancy;
 pub mod trajectory;

@@ -52,36 +52,21 @@ pub fn to_text(poses: &[StampedPose]) -> String {
 /// Parses `timestamp x y theta` lines (blank lines and `#` comments skipped); `path` names the
 /// source in errors.
 pub fn parse(text: &str, path: &str) -> Result<Vec<StampedPose>, TrajectoryError> {
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let err = |what: String| TrajectoryError::Line {
-            path: path.to_string(),
-            line: i + 1,
-            what,
-        };
-        let v: Vec<f64> = line
-            .split_ascii_whitespace()
-            .map(|f| {
-                f.parse::<f64>()
-                    .map_err(|_| err(format!("{f:?} is not a number")))
-            })
-            .collect::<Result<_, _>>()?;
-        if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
-            return Err(err(format!(
-                "expected 4 finite numbers (timestamp x y theta), got {}",
-                v.len()
-            )));
-        }
-        out.push(StampedPose {
+    let rows =
+        crate::numeric_lines::parse(text, 4, "timestamp x y theta").map_err(|(line, what)| {
+            TrajectoryError::Line {
+                path: path.to_string(),
+                line,
+                what,
+            }
+        })?;
+    Ok(rows
+        .into_iter()
+        .map(|v| StampedPose {
             timestamp_s: v[0],
             pose: Pose2::new(v[1], v[2], v[3]),
-        });
-    }
-    Ok(out)
+        })
+        .collect())
 }
 
 /// Reads a trajectory file.
