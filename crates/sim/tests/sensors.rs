@@ -165,6 +165,71 @@ fn depth_matches_a_flat_floor_with_range_squared_noise() {
 }
 
 #[test]
+fn noise_free_depth_matches_each_pixel_ray_and_keeps_left_on_the_left() {
+    let mut s = scenario(1);
+    s.rovers.depth.noise_per_m2 = 0.0;
+    // A tall rock ahead and to the left (+y of a rover facing +x).
+    let rock = Boulder {
+        center: Point2::new(5.0, 11.0),
+        radius_m: 0.3,
+        height_m: 0.6,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |t| t.add_boulder(rock));
+    let cloud = first_cloud(&idle_until(&mut world, Time::from_secs_f64(0.6)));
+    let body = world.rovers().next().expect("one rover");
+    let optical = World::world_from_base(body).compose(&world.base_from_optical());
+    let d = &s.rovers.depth;
+    let k =
+        realms_sim::sensors::depth::Intrinsics::from_fov(d.width, d.height, d.hfov_deg, d.vfov_deg);
+    let (mut floor_pixels, mut rock_pixels) = (0, 0);
+    for v in 0..d.height {
+        for u in 0..d.width {
+            let p = cloud.points_in_sensor[(v * d.width + u) as usize];
+            let r = k.ray(u, v);
+            let dir = optical.rotate(r);
+            // Where this pixel's ray meets the floor (z = 0), as optical depth.
+            let floor_z = (dir[2] < 0.0).then(|| -optical.origin[2] / dir[2]);
+            let world_p = (!p[2].is_nan())
+                .then(|| optical.transform([p[0] as f64, p[1] as f64, p[2] as f64]));
+            match world_p {
+                Some(w)
+                    if Point2::new(w[0], w[1]).distance_m(rock.center) < rock.radius_m + 0.05 =>
+                {
+                    // On the rock: nearer than the floor behind it, and in the left half.
+                    rock_pixels += 1;
+                    assert!(u < d.width / 2, "rock pixel at u = {u}");
+                    assert!(floor_z.is_none_or(|z| (p[2] as f64) <= z + 1e-4));
+                }
+                Some(_) => {
+                    floor_pixels += 1;
+                    let z = floor_z.expect("a floor point lies on a downward ray");
+                    assert!(
+                        (p[2] as f64 - z).abs() < 1e-4,
+                        "pixel ({u}, {v}): {} vs {z}",
+                        p[2]
+                    );
+                    assert!(
+                        (p[0] as f64 - r[0] * z).abs() < 1e-4
+                            && (p[1] as f64 - r[1] * z).abs() < 1e-4
+                    );
+                }
+                None => {
+                    // No return: the floor is out of range there (or the ray looks up).
+                    assert!(
+                        floor_z.is_none_or(|z| !(d.range_min_m..=d.range_max_m).contains(&z)),
+                        "pixel ({u}, {v}) lost"
+                    );
+                }
+            }
+        }
+    }
+    assert!(
+        floor_pixels > 2000 && rock_pixels > 20,
+        "{floor_pixels} floor, {rock_pixels} rock pixels"
+    );
+}
+
+#[test]
 fn crater_is_invisible_to_the_lidar_and_visible_to_the_depth_camera() {
     let s = noiseless_lidar();
     let crater = Crater {
@@ -220,36 +285,56 @@ fn a_rock_below_the_lidar_plane_is_seen_only_by_the_depth_camera() {
 
 #[test]
 fn camera_renders_only_when_wanted_and_shows_light_and_shadow() {
-    let s = scenario(1);
-    let rock = Boulder {
-        center: Point2::new(7.0, 10.0),
-        radius_m: 0.6,
-        height_m: 0.6,
+    let mut s = scenario(1);
+    // Higher than the default 8 degrees, whose shadows from the 1 m walls of this small test
+    // world would cover most of the floor in view; from the left, so the rock's shadow falls
+    // across the view instead of hiding behind the rock.
+    s.sun.elevation_deg = 20.0;
+    s.sun.azimuth_deg = 90.0;
+    let image = |with_rock: bool| {
+        let rock = Boulder {
+            center: Point2::new(7.0, 10.0),
+            radius_m: 0.6,
+            height_m: 0.6,
+        };
+        let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| {
+            if with_rock {
+                t.add_boulder(rock)
+            }
+        });
+        let none = idle_until(&mut world, Time::from_secs_f64(3.0));
+        assert!(
+            !none.iter().any(|(_, m)| matches!(m, Message::Image(_))),
+            "rendered unasked"
+        );
+        world.set_camera_wanted(realms_core::RoverId(1), true);
+        let out = idle_until(&mut world, Time::from_secs_f64(5.0));
+        let images: Vec<_> = out
+            .into_iter()
+            .filter_map(|(_, m)| match m {
+                Message::Image(img) => Some(img),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(images.len(), 2, "1 Hz for 2 s");
+        images.into_iter().next().expect("two images")
     };
-    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| t.add_boulder(rock));
-    let images = |out: &[(realms_core::Topic, Message)]| {
-        out.iter()
-            .filter(|(_, m)| matches!(m, Message::Image(_)))
-            .count()
-    };
-    assert_eq!(images(&idle_until(&mut world, Time::from_secs_f64(3.0))), 0);
-    world.set_camera_wanted(realms_core::RoverId(1), true);
-    let out = idle_until(&mut world, Time::from_secs_f64(5.0));
-    assert_eq!(images(&out), 2);
-    let Some(Message::Image(img)) = out
+    let (plain, rocky) = (image(false), image(true));
+    assert_eq!(plain.data.len(), (plain.width * plain.height) as usize);
+    assert!(
+        plain.data[..plain.width as usize].iter().all(|p| *p == 0),
+        "the sky is black"
+    );
+    let lit = plain.data.iter().filter(|p| **p > 60).count();
+    assert!(lit > plain.data.len() / 4, "lit floor pixels: {lit}");
+    // The rock's shadow falls to its right: floor that was lit without the rock goes dark.
+    let shadowed = plain
+        .data
         .iter()
-        .map(|(_, m)| m)
-        .find(|m| matches!(m, Message::Image(_)))
-    else {
-        unreachable!("counted above")
-    };
-    assert_eq!(img.data.len(), (img.width * img.height) as usize);
-    let top = &img.data[..img.width as usize];
-    assert!(top.iter().all(|p| *p == 0), "the sky is black");
-    let max = *img.data.iter().max().expect("pixels");
-    let dark = img.data.iter().filter(|p| **p < 15).count();
-    assert!(max > 100, "some lit ground, max {max}");
-    assert!(dark > 100, "sky and shadow pixels: {dark}");
+        .zip(&rocky.data)
+        .filter(|(before, after)| **before > 60 && **after < 15)
+        .count();
+    assert!(shadowed > 100, "shadowed floor pixels: {shadowed}");
 }
 
 mod exactness {
