@@ -7,6 +7,7 @@
 //! - [`occupancy`]: a log-odds occupancy grid that grows as the robot explores.
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
 //! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
+//! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
 
 pub mod carmen;
 pub mod eval;
@@ -14,4 +15,5 @@ pub mod frontend;
 pub mod matcher;
 mod numeric_lines;
 pub mod occupancy;
+pub mod posegraph;
 pub mod trajectory;
