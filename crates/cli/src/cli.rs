@@ -49,6 +49,14 @@ pub struct SlamArgs {
     /// Gauss-Newton iterations per resolution.
     #[arg(long, default_value_t = 6)]
     pub iterations: usize,
+    /// EXPERIMENTAL: submaps, a pose graph and loop closures (not yet more accurate than the
+    /// default scan matching against one map; see BENCHMARKS.md).
+    #[arg(long)]
+    pub loop_closure: bool,
+    /// With --loop-closure: accept a closure only at or above this match score (mean
+    /// occupancy at the scan's endpoints, 0..1).
+    #[arg(long, default_value_t = 0.6)]
+    pub loop_min_score: f64,
 }
 
 /// `realms slam-eval`.

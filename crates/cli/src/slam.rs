@@ -34,10 +34,28 @@ pub fn run(args: SlamArgs) -> Result<()> {
     };
     cfg.matcher.iterations = args.iterations.clamp(1, 100);
     let mut frontend = Frontend::new(cfg);
+    let mut mapper = realms_slam::mapper::Mapper::new(realms_slam::mapper::MapperConfig {
+        frontend: cfg,
+        loop_min_score: args.loop_min_score,
+        ..Default::default()
+    });
     for scan in &log.scans {
-        frontend.add_scan(scan);
+        if args.loop_closure {
+            mapper.add_scan(scan);
+        } else {
+            frontend.add_scan(scan);
+        }
     }
+    let (trajectory, map) = if args.loop_closure {
+        mapper.finish();
+        (mapper.trajectory(), mapper.render_map())
+    } else {
+        (frontend.trajectory().to_vec(), frontend.map().clone())
+    };
     let wall_s = start.elapsed().as_secs_f64();
+    if args.loop_closure {
+        println!("{} loop closures", mapper.closures);
+    }
     let duration = log.duration_s();
     println!(
         "{} scans over {:.0} s of log in {:.2} s ({:.0}x faster than the log, {:.0} scans/s)",
@@ -49,9 +67,9 @@ pub fn run(args: SlamArgs) -> Result<()> {
     );
 
     let traj_path = args.out.join("trajectory.txt");
-    std::fs::write(&traj_path, trajectory::to_text(frontend.trajectory()))
+    std::fs::write(&traj_path, trajectory::to_text(&trajectory))
         .with_context(|| format!("writing {}", traj_path.display()))?;
-    let states = frontend.map().states();
+    let states = map.states();
     let trinary = states.map(|c| match c {
         CellState::Unknown => Trinary::Unknown,
         CellState::Free => Trinary::Free,
@@ -70,7 +88,7 @@ pub fn run(args: SlamArgs) -> Result<()> {
     );
     if let Some(rel) = &args.relations {
         let relations = read_relations(rel)?;
-        print_error(&relative_pose_error(frontend.trajectory(), &relations)?);
+        print_error(&relative_pose_error(&trajectory, &relations)?);
     }
     Ok(())
 }

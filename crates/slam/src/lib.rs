@@ -8,10 +8,12 @@
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
 //! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
+//! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 
 pub mod carmen;
 pub mod eval;
 pub mod frontend;
+pub mod mapper;
 pub mod matcher;
 mod numeric_lines;
 pub mod occupancy;

@@ -34,6 +34,11 @@ impl MultiResMap {
     pub fn finest(&self) -> &OccupancyGrid {
         &self.levels[0]
     }
+
+    /// The coarsest map.
+    pub fn coarsest(&self) -> &OccupancyGrid {
+        self.levels.last().expect("at least one level")
+    }
 }
 
 /// Matcher tuning.

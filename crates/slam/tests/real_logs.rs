@@ -139,3 +139,24 @@ fn frontend_beats_odometry_by_far_on_a_real_segment() {
         "slam {slam:?} vs odometry {odom:?}"
     );
 }
+
+#[test]
+fn experimental_mapper_gives_every_scan_a_pose_and_beats_odometry_on_a_segment() {
+    use realms_slam::mapper::{Mapper, MapperConfig};
+    let l = log("intel");
+    let segment = &l.scans[..2000];
+    let mut mapper = Mapper::new(MapperConfig::default());
+    for s in segment {
+        mapper.add_scan(s);
+    }
+    mapper.finish();
+    let traj = mapper.trajectory();
+    assert_eq!(traj.len(), segment.len());
+    let rel = relations("intel");
+    let slam = relative_pose_error(&traj, &rel).expect("segment has relations");
+    let odom = relative_pose_error(&odometry_trajectory(&l)[..2000], &rel).expect("relations");
+    assert!(
+        slam.trans_mean_m < 0.5 * odom.trans_mean_m && slam.rot_mean_deg < 0.5 * odom.rot_mean_deg,
+        "mapper {slam:?} vs odometry {odom:?}"
+    );
+}
