@@ -40,6 +40,23 @@ impl Default for FrontendConfig {
     }
 }
 
+/// The endpoints of a scan's beams between `min_range_m` and `max_range_m` (and below the
+/// laser's own no-return range), in the robot frame.
+pub fn scan_points(scan: &LaserReading, min_range_m: f64, max_range_m: f64) -> Vec<Point2> {
+    let max = max_range_m.min(scan.max_range_m - 1e-3);
+    scan.ranges_m
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| (**r as f64) >= min_range_m && (**r as f64) < max)
+        .map(|(i, r)| {
+            let a = scan.angle_min_rad + i as f64 * scan.angle_increment_rad;
+            let r = *r as f64;
+            scan.robot_from_laser
+                .transform_point(Point2::new(r * a.cos(), r * a.sin()))
+        })
+        .collect()
+}
+
 /// The scan-matching frontend.
 #[derive(Debug)]
 pub struct Frontend {
@@ -66,18 +83,7 @@ impl Frontend {
 
     /// The endpoints of usable beams, in the robot frame.
     pub fn points_in_robot(&self, scan: &LaserReading) -> Vec<Point2> {
-        let max = self.cfg.max_range_m.min(scan.max_range_m - 1e-3);
-        scan.ranges_m
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| (**r as f64) >= self.cfg.min_range_m && (**r as f64) < max)
-            .map(|(i, r)| {
-                let a = scan.angle_min_rad + i as f64 * scan.angle_increment_rad;
-                let r = *r as f64;
-                scan.robot_from_laser
-                    .transform_point(Point2::new(r * a.cos(), r * a.sin()))
-            })
-            .collect()
+        scan_points(scan, self.cfg.min_range_m, self.cfg.max_range_m)
     }
 
     /// Adds a scan; returns the estimated pose of the robot at the scan.

@@ -112,18 +112,7 @@ impl Mapper {
 
     fn points(&self, scan: &LaserReading) -> Vec<Point2> {
         let f = &self.cfg.frontend;
-        let max = f.max_range_m.min(scan.max_range_m - 1e-3);
-        scan.ranges_m
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| (**r as f64) >= f.min_range_m && (**r as f64) < max)
-            .map(|(i, r)| {
-                let a = scan.angle_min_rad + i as f64 * scan.angle_increment_rad;
-                let r = *r as f64;
-                scan.robot_from_laser
-                    .transform_point(Point2::new(r * a.cos(), r * a.sin()))
-            })
-            .collect()
+        crate::frontend::scan_points(scan, f.min_range_m, f.max_range_m)
     }
 
     fn insert(&mut self, submap: usize, node: usize) {
