@@ -49,13 +49,12 @@ pub struct SlamArgs {
     /// Gauss-Newton iterations per resolution.
     #[arg(long, default_value_t = 6)]
     pub iterations: usize,
-    /// EXPERIMENTAL: submaps, a pose graph and loop closures (not yet more accurate than the
-    /// default scan matching against one map; see BENCHMARKS.md).
+    /// Scan matching against one global map only: no submaps, pose graph or loop closures.
     #[arg(long)]
-    pub loop_closure: bool,
-    /// With --loop-closure: accept a closure only at or above this match score (mean
-    /// occupancy at the scan's endpoints, 0..1).
-    #[arg(long, default_value_t = 0.6)]
+    pub no_loop_closure: bool,
+    /// Accept a loop closure only at or above this match score (mean occupancy at the scan's
+    /// endpoints, 0..1).
+    #[arg(long, default_value_t = 0.65)]
     pub loop_min_score: f64,
 }
 

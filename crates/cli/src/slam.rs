@@ -40,20 +40,20 @@ pub fn run(args: SlamArgs) -> Result<()> {
         ..Default::default()
     });
     for scan in &log.scans {
-        if args.loop_closure {
+        if !args.no_loop_closure {
             mapper.add_scan(scan);
         } else {
             frontend.add_scan(scan);
         }
     }
-    let (trajectory, map) = if args.loop_closure {
+    let (trajectory, map) = if !args.no_loop_closure {
         mapper.finish();
         (mapper.trajectory(), mapper.render_map())
     } else {
         (frontend.trajectory().to_vec(), frontend.map().clone())
     };
     let wall_s = start.elapsed().as_secs_f64();
-    if args.loop_closure {
+    if !args.no_loop_closure {
         println!("{} loop closures", mapper.closures);
     }
     let duration = log.duration_s();

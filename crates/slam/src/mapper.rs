@@ -1,8 +1,7 @@
-//! EXPERIMENTAL (`realms slam --loop-closure`): the full 2D SLAM, local tracking against
-//! submaps, keyframes in a pose graph, and loop closures against finished submaps (the
-//! structure of Cartographer, Hess et al., ICRA 2016, in miniature). Not yet as accurate as the
-//! single-map [`Frontend`](crate::frontend::Frontend): closures are accepted on a score
-//! threshold alone, and false ones get through (see BENCHMARKS.md).
+//! The full 2D SLAM (what `realms slam` runs): local tracking against submaps, keyframes in a
+//! pose graph, and loop closures against finished submaps (the structure of Cartographer,
+//! Hess et al., ICRA 2016, in miniature). Closures are verified by a match-score threshold
+//! only so far; the benchmark figures are in BENCHMARKS.md.
 //!
 //! - Each submap keeps its grid in the frame of its first keyframe, so when the graph moves
 //!   that keyframe the submap moves with it.
@@ -59,7 +58,7 @@ impl Default for MapperConfig {
             loop_search_radius_m: 5.0,
             loop_window_m: 1.0,
             loop_window_rad: 15f64.to_radians(),
-            loop_min_score: 0.6,
+            loop_min_score: 0.65,
         }
     }
 }

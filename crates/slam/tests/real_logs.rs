@@ -141,7 +141,7 @@ fn frontend_beats_odometry_by_far_on_a_real_segment() {
 }
 
 #[test]
-fn experimental_mapper_gives_every_scan_a_pose_and_beats_odometry_on_a_segment() {
+fn mapper_gives_every_scan_a_pose_and_beats_odometry_on_a_segment() {
     use realms_slam::mapper::{Mapper, MapperConfig};
     let l = log("intel");
     let segment = &l.scans[..2000];
