@@ -327,7 +327,7 @@ fn correlative_search(
     let n_a = (window_rad / angle_step).ceil() as i64;
     // Subsample for speed: every other point is plenty at the coarse level.
     let sample: Vec<Point2> = points.iter().step_by(2).copied().collect();
-    let mut best = (f64::MIN, prior);
+    let mut scored: Vec<(f64, i64, i64, i64)> = Vec::new();
     for ia in -n_a..=n_a {
         let yaw = prior.yaw_rad + ia as f64 * angle_step;
         let (s, c) = yaw.sin_cos();
@@ -346,11 +346,30 @@ fn correlative_search(
                             .0
                     })
                     .sum();
-                if score > best.0 {
-                    best = (score, Pose2::new(x, y, yaw));
-                }
+                scored.push((score, ix, iy, ia));
             }
         }
     }
-    (best.0 / sample.len().max(1) as f64 > 0.5).then_some(best.1)
+    let &(best, bx, by, ba) = scored.iter().max_by(|a, b| a.0.total_cmp(&b.0))?;
+    // Ambiguity: the best pose clearly away from the winner (corridors and repeated rooms
+    // give near-ties, and those are the false closures).
+    let rival = scored
+        .iter()
+        .filter(|(_, x, y, a)| (x - bx).abs() > 2 || (y - by).abs() > 2 || (a - ba).abs() > 3)
+        .map(|s| s.0)
+        .fold(f64::MIN, f64::max);
+    let n = sample.len().max(1) as f64;
+    let distinct = best - rival >= AMBIGUITY_MARGIN * n;
+    let yaw = prior.yaw_rad + ba as f64 * angle_step;
+    (best / n > 0.5 && distinct).then(|| {
+        Pose2::new(
+            prior.x_m + bx as f64 * step,
+            prior.y_m + by as f64 * step,
+            yaw,
+        )
+    })
 }
+
+/// How much better (in mean occupancy per point) the best closure pose must score than any
+/// clearly different pose.
+const AMBIGUITY_MARGIN: f64 = 0.03;
