@@ -21,24 +21,9 @@ pub struct Relation {
 /// Why relations could not be read or evaluated.
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
-    /// I/O.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// File.
-        path: String,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// A malformed line.
-    #[error("{path} line {line}: {what}")]
-    Line {
-        /// File.
-        path: String,
-        /// 1-based line.
-        line: usize,
-        /// What was wrong.
-        what: String,
-    },
+    /// The relations file could not be read or has a bad line.
+    #[error(transparent)]
+    File(#[from] crate::numeric_lines::TextFileError),
     /// Nothing to evaluate.
     #[error(
         "no relation has estimated poses at both of its timestamps ({missing} relations lack one)"
@@ -51,13 +36,7 @@ pub enum EvalError {
 
 /// Parses a `.relations` file: `t1 t2 x y z roll pitch yaw` per line.
 pub fn parse_relations(text: &str, path: &str) -> Result<Vec<Relation>, EvalError> {
-    let rows = crate::numeric_lines::parse(text, 8, "t1 t2 x y z roll pitch yaw").map_err(
-        |(line, what)| EvalError::Line {
-            path: path.to_string(),
-            line,
-            what,
-        },
-    )?;
+    let rows = crate::numeric_lines::parse_named(text, path, 8, "t1 t2 x y z roll pitch yaw")?;
     Ok(rows
         .into_iter()
         .map(|v| Relation {
@@ -70,11 +49,10 @@ pub fn parse_relations(text: &str, path: &str) -> Result<Vec<Relation>, EvalErro
 
 /// Reads a `.relations` file.
 pub fn read_relations(path: &std::path::Path) -> Result<Vec<Relation>, EvalError> {
-    let text = std::fs::read_to_string(path).map_err(|source| EvalError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    parse_relations(&text, &path.display().to_string())
+    parse_relations(
+        &crate::numeric_lines::read(path)?,
+        &path.display().to_string(),
+    )
 }
 
 /// The relative pose error over a set of relations.

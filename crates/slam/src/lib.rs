@@ -3,6 +3,7 @@
 //!
 //! - [`carmen`]: reading CARMEN laser logs (FLASER, ODOM, ROBOTLASER1).
 //! - [`trajectory`]: `timestamp x y theta` trajectory files.
+//! - [`numeric_lines`]: the shared reader of such number-per-field text files.
 //! - [`eval`]: the relative pose error of Kümmerle et al. 2009 against `.relations` files.
 //! - [`occupancy`]: a log-odds occupancy grid that grows as the robot explores.
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
@@ -15,7 +16,7 @@ pub mod eval;
 pub mod frontend;
 pub mod mapper;
 pub mod matcher;
-mod numeric_lines;
+pub mod numeric_lines;
 pub mod occupancy;
 pub mod posegraph;
 pub mod trajectory;

@@ -14,27 +14,7 @@ pub struct StampedPose {
 }
 
 /// Why a trajectory could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum TrajectoryError {
-    /// I/O.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// File.
-        path: String,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// A malformed line.
-    #[error("{path} line {line}: {what}")]
-    Line {
-        /// File.
-        path: String,
-        /// 1-based line.
-        line: usize,
-        /// What was wrong.
-        what: String,
-    },
-}
+pub type TrajectoryError = crate::numeric_lines::TextFileError;
 
 /// Formats poses as `timestamp x y theta` lines.
 pub fn to_text(poses: &[StampedPose]) -> String {
@@ -52,14 +32,7 @@ pub fn to_text(poses: &[StampedPose]) -> String {
 /// Parses `timestamp x y theta` lines (blank lines and `#` comments skipped); `path` names the
 /// source in errors.
 pub fn parse(text: &str, path: &str) -> Result<Vec<StampedPose>, TrajectoryError> {
-    let rows =
-        crate::numeric_lines::parse(text, 4, "timestamp x y theta").map_err(|(line, what)| {
-            TrajectoryError::Line {
-                path: path.to_string(),
-                line,
-                what,
-            }
-        })?;
+    let rows = crate::numeric_lines::parse_named(text, path, 4, "timestamp x y theta")?;
     Ok(rows
         .into_iter()
         .map(|v| StampedPose {
@@ -71,11 +44,10 @@ pub fn parse(text: &str, path: &str) -> Result<Vec<StampedPose>, TrajectoryError
 
 /// Reads a trajectory file.
 pub fn read_file(path: &std::path::Path) -> Result<Vec<StampedPose>, TrajectoryError> {
-    let text = std::fs::read_to_string(path).map_err(|source| TrajectoryError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    parse(&text, &path.display().to_string())
+    parse(
+        &crate::numeric_lines::read(path)?,
+        &path.display().to_string(),
+    )
 }
 
 #[cfg(test)]
