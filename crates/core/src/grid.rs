@@ -90,7 +90,7 @@ pub struct Grid<T> {
 #[derive(Debug, thiserror::Error)]
 pub enum GridExportError {
     /// The file could not be written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}")]
     Io {
         /// The file.
         path: String,
@@ -98,7 +98,7 @@ pub enum GridExportError {
         source: std::io::Error,
     },
     /// The PNG encoder failed.
-    #[error("cannot encode PNG {path}: {source}")]
+    #[error("cannot encode PNG {path}")]
     Png {
         /// The file.
         path: String,

@@ -97,7 +97,7 @@ pub struct RoverSummary {
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
     /// Folder or file I/O.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}")]
     Io {
         /// What.
         path: PathBuf,

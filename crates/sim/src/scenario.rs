@@ -500,7 +500,7 @@ impl Default for Imu {
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
     /// The file could not be read.
-    #[error("cannot read scenario {file}: {source}")]
+    #[error("cannot read scenario {file}")]
     Read {
         /// The file.
         file: String,

@@ -49,7 +49,7 @@ pub struct CarmenLog {
 #[derive(Debug, thiserror::Error)]
 pub enum CarmenError {
     /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// File.
         path: String,

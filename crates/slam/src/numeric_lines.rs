@@ -6,7 +6,7 @@
 #[derive(Debug, thiserror::Error)]
 pub enum TextFileError {
     /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// File.
         path: String,
