@@ -12,17 +12,12 @@ pub type Rgb = Grid<[u8; 3]>;
 /// the lander blue and targets yellow.
 pub fn truth_image(terrain: &Terrain, truth: &GroundTruth) -> Rgb {
     let g = *terrain.geometry();
-    let h = terrain.heights.cells();
     let mut img = Grid::new(g, [0u8; 3]);
     let (lx, ly, lz) = (-0.5f64, 0.5f64, 0.707f64);
     for y in 0..g.height {
         for x in 0..g.width {
-            let at =
-                |x: usize, y: usize| h[y.min(g.height - 1) * g.width + x.min(g.width - 1)] as f64;
-            let gx = (at(x + 1, y) - at(x.saturating_sub(1), y)) / (2.0 * g.resolution_m);
-            let gy = (at(x, y + 1) - at(x, y.saturating_sub(1))) / (2.0 * g.resolution_m);
-            let n = (gx * gx + gy * gy + 1.0).sqrt();
-            let shade = ((-gx * lx - gy * ly + lz) / n).clamp(0.0, 1.0);
+            let n = terrain.surface_normal(x, y);
+            let shade = (n[0] * lx + n[1] * ly + n[2] * lz).clamp(0.0, 1.0);
             let base = 70.0 + 150.0 * shade;
             let i = g.index(Cell { x, y });
             let rgb = match (terrain.kind.cells()[i], truth.traversability.cells()[i]) {

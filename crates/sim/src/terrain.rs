@@ -296,29 +296,38 @@ impl Terrain {
             }
         }
         for cr in &craters {
-            stamp(&geometry, cr.center, cr.radius_m * 4.0, |i, r| {
-                floor.cells_mut()[i] += cr.profile_m(r) as f32;
-                if r < cr.radius_m * 1.2 {
-                    // Crater floors and rims collect loose, fine regolith.
-                    let l = &mut looseness.cells_mut()[i];
-                    *l = (*l + 0.4).min(1.0);
-                }
+            // Crater floors and rims collect loose, fine regolith.
+            stamp(&geometry, cr.center, cr.radius_m * 1.2, |i, _| {
+                let l = &mut looseness.cells_mut()[i];
+                *l = (*l + 0.4).min(1.0);
             });
         }
-
-        let mut heights = floor.clone();
-        let mut kind = Grid::new(geometry, SurfaceKind::Floor);
-        for bo in &boulders {
-            stamp(&geometry, bo.center, bo.radius_m, |i, r| {
-                let bump = bo.profile_m(r) as f32;
-                let h = &mut heights.cells_mut()[i];
-                *h = h.max(floor.cells()[i] + bump);
-                if bump > 0.01 {
-                    kind.cells_mut()[i] = SurfaceKind::Rock;
-                }
-            });
+        let mut terrain = Terrain {
+            heights: floor.clone(),
+            floor,
+            kind: Grid::new(geometry, SurfaceKind::Floor),
+            looseness,
+            craters: Vec::new(),
+            boulders: Vec::new(),
+            lander,
+            targets,
+            rover_starts,
+        };
+        for cr in craters {
+            terrain.add_crater(cr);
         }
-        for t in &targets {
+        for bo in boulders {
+            terrain.add_boulder(bo);
+        }
+        // Targets, walls and the lander go on top of the stamped terrain.
+        let Terrain {
+            heights,
+            floor,
+            kind,
+            targets,
+            ..
+        } = &mut terrain;
+        for t in targets {
             stamp(&geometry, *t, 0.15, |i, _| {
                 kind.cells_mut()[i] = SurfaceKind::Target
             });
@@ -342,17 +351,7 @@ impl Terrain {
             }
         }
 
-        Terrain {
-            heights,
-            floor,
-            kind,
-            looseness,
-            craters,
-            boulders,
-            lander,
-            targets,
-            rover_starts,
-        }
+        terrain
     }
 
     /// A flat, firm floor at height 0 with nothing on it: the start of hand-built test worlds.
@@ -417,6 +416,18 @@ impl Terrain {
                 }
             }
         }
+    }
+
+    /// Unit surface normal of cell `(x, y)`, from central differences of the surface heights
+    /// (clamped at the grid's edge).
+    pub fn surface_normal(&self, x: usize, y: usize) -> [f64; 3] {
+        let g = self.geometry();
+        let h = self.heights.cells();
+        let at = |x: usize, y: usize| h[y.min(g.height - 1) * g.width + x.min(g.width - 1)] as f64;
+        let gx = (at(x + 1, y) - at(x.saturating_sub(1), y)) / (2.0 * g.resolution_m);
+        let gy = (at(x, y + 1) - at(x, y.saturating_sub(1))) / (2.0 * g.resolution_m);
+        let n = (gx * gx + gy * gy + 1.0).sqrt();
+        [-gx / n, -gy / n, 1.0 / n]
     }
 
     /// The heightfield's geometry.

@@ -31,7 +31,6 @@ pub fn render(
     let to_sun = [ce * ca, ce * sa, se];
     let exposure = 1.5 / se.max(0.1);
     let g = *terrain.geometry();
-    let heights = terrain.heights.cells();
     let mut data = vec![0u8; (w * h) as usize];
     cast_image(
         world,
@@ -48,14 +47,8 @@ pub fn render(
             let Some(cell) = g.world_to_cell(realms_core::Point2::new(p[0], p[1])) else {
                 return;
             };
-            let at = |x: usize, y: usize| {
-                heights[y.min(g.height - 1) * g.width + x.min(g.width - 1)] as f64
-            };
             let (x, y) = (cell.x, cell.y);
-            let gx = (at(x + 1, y) - at(x.saturating_sub(1), y)) / (2.0 * g.resolution_m);
-            let gy = (at(x, y + 1) - at(x, y.saturating_sub(1))) / (2.0 * g.resolution_m);
-            let n_len = (gx * gx + gy * gy + 1.0).sqrt();
-            let normal = [-gx / n_len, -gy / n_len, 1.0 / n_len];
+            let normal = terrain.surface_normal(x, y);
             let lambert =
                 (normal[0] * to_sun[0] + normal[1] * to_sun[1] + normal[2] * to_sun[2]).max(0.0);
             let lit = lambert > 0.0
