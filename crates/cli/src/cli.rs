@@ -54,7 +54,7 @@ pub struct SlamArgs {
     pub no_loop_closure: bool,
     /// Accept a loop closure only at or above this match score (mean occupancy at the scan's
     /// endpoints, 0..1).
-    #[arg(long, default_value_t = 0.65)]
+    #[arg(long, default_value_t = 0.5)]
     pub loop_min_score: f64,
 }
 

@@ -34,11 +34,12 @@ pub fn run(args: SlamArgs) -> Result<()> {
     };
     cfg.matcher.iterations = args.iterations.clamp(1, 100);
     let mut frontend = Frontend::new(cfg);
-    let mut mapper = realms_slam::mapper::Mapper::new(realms_slam::mapper::MapperConfig {
+    let mcfg = realms_slam::mapper::MapperConfig {
         frontend: cfg,
         loop_min_score: args.loop_min_score,
         ..Default::default()
-    });
+    };
+    let mut mapper = realms_slam::mapper::Mapper::new(mcfg);
     for scan in &log.scans {
         if !args.no_loop_closure {
             mapper.add_scan(scan);

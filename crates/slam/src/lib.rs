@@ -8,9 +8,11 @@
 //! - [`occupancy`]: a log-odds occupancy grid that grows as the robot explores.
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
 //! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
+//! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 
+pub mod bnb;
 pub mod carmen;
 pub mod eval;
 pub mod frontend;

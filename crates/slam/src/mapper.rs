@@ -1,18 +1,21 @@
 //! The full 2D SLAM (what `realms slam` runs): local tracking against submaps, keyframes in a
 //! pose graph, and loop closures against finished submaps (the structure of Cartographer,
-//! Hess et al., ICRA 2016, in miniature). Closures are verified by a match-score threshold
-//! only so far; the benchmark figures are in BENCHMARKS.md.
+//! Hess et al., ICRA 2016, in miniature). The benchmark figures are in BENCHMARKS.md.
 //!
 //! - Each submap keeps its grid in the frame of its first keyframe, so when the graph moves
 //!   that keyframe the submap moves with it.
 //! - Scans are tracked against the older of the (at most two) active submaps.
 //! - A keyframe is added when the robot has moved enough; it is inserted into the active
 //!   submaps and linked to the previous keyframe.
-//! - Loop closure: for finished submaps near the current keyframe, a correlative grid search
-//!   in a window around the current estimate, refined by Gauss-Newton, accepted only if the
-//!   match scores high; accepted closures enter the graph as robust edges and the graph is
+//! - Loop closure: every other keyframe is searched against the nearest finished submaps by
+//!   branch and bound over a window of metres ([`crate::bnb`]), and refined by Gauss-Newton.
+//!   A match becomes a closure only if it passes three checks, because a few false closures
+//!   ruin a map: it scores high, it clearly beats every distinct pose in the window (corridors
+//!   and look-alike rooms do not), and a second closure from a nearby keyframe asks for the
+//!   same correction. Accepted closures enter the graph as robust edges and the graph is
 //!   re-optimised.
 
+use crate::bnb::{self, PrecomputedMap, SearchWindow};
 use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
@@ -21,11 +24,27 @@ use crate::trajectory::StampedPose;
 use realms_core::{Point2, Pose2};
 
 /// Loop closures are searched at every this many keyframes.
-const LOOP_EVERY_KEYFRAMES: usize = 4;
+const LOOP_EVERY_KEYFRAMES: usize = 2;
 /// Accepted closures are folded into the graph at every this many keyframes.
 const OPTIMIZE_EVERY_KEYFRAMES: usize = 20;
-/// Candidate submaps searched per attempt (the nearest).
-const LOOP_CANDIDATES: usize = 2;
+/// A closure is confirmed by another found at most this many keyframes earlier...
+const CONFIRM_WITHIN_KEYFRAMES: usize = 10;
+/// ... that asks for the same correction within this distance ...
+const CONFIRM_TRANSLATION_M: f64 = 0.15;
+/// ... and this angle.
+const CONFIRM_ROTATION_RAD: f64 = 0.035;
+/// At most this many of a keyframe's points take part in the closure search.
+const LOOP_POINTS: usize = 200;
+/// Closure search: rotation steps move a point this far away by about one cell, metres.
+const LOOP_STEP_RANGE_M: f64 = 10.0;
+/// Closure search: branch and bound over blocks up to 2^depth cells.
+const LOOP_DEPTH: usize = 6;
+
+/// Every `n`-th point, so that at most `max` remain.
+fn subsample(points: &[Point2], max: usize) -> Vec<Point2> {
+    let step = points.len().div_ceil(max.max(1)).max(1);
+    points.iter().step_by(step).copied().collect()
+}
 
 /// SLAM tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,6 +65,12 @@ pub struct MapperConfig {
     pub loop_window_rad: f64,
     /// A closure is accepted only at or above this mean occupancy at the scan's endpoints.
     pub loop_min_score: f64,
+    /// The search keeps poses scoring at least this (nearest-cell mean occupancy).
+    pub loop_search_min_score: f64,
+    /// The winner must beat any clearly different pose by this much mean occupancy.
+    pub loop_ambiguity_margin: f64,
+    /// Nearest finished submaps searched per attempt.
+    pub loop_candidates: usize,
 }
 
 impl Default for MapperConfig {
@@ -55,10 +80,13 @@ impl Default for MapperConfig {
             keyframe_translation_m: 0.2,
             keyframe_rotation_rad: 6f64.to_radians(),
             submap_keyframes: 30,
-            loop_search_radius_m: 5.0,
-            loop_window_m: 1.0,
+            loop_search_radius_m: 8.0,
+            loop_window_m: 2.5,
             loop_window_rad: 15f64.to_radians(),
-            loop_min_score: 0.65,
+            loop_min_score: 0.5,
+            loop_search_min_score: 0.55,
+            loop_ambiguity_margin: 0.08,
+            loop_candidates: 3,
         }
     }
 }
@@ -69,6 +97,8 @@ struct Submap {
     map: MultiResMap,
     keyframes: usize,
     finished: bool,
+    /// The closure search's precomputation, made when first searched (the map is final).
+    precomputed: Option<PrecomputedMap>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -89,6 +119,8 @@ pub struct Mapper {
     pose: Pose2,
     last_odom: Option<Pose2>,
     pending_closures: bool,
+    /// Closures found in the last few keyframes, and whether each is in the graph.
+    recent_closures: Vec<(Edge, bool)>,
     /// Accepted loop closures.
     pub closures: usize,
 }
@@ -105,6 +137,7 @@ impl Mapper {
             pose: Pose2::IDENTITY,
             last_odom: None,
             pending_closures: false,
+            recent_closures: Vec::new(),
             closures: 0,
         }
     }
@@ -199,6 +232,7 @@ impl Mapper {
                 map: MultiResMap::new(f.resolution_m, f.levels),
                 keyframes: 0,
                 finished: false,
+                precomputed: None,
             });
         }
         let active: Vec<usize> = (0..self.submaps.len())
@@ -240,39 +274,98 @@ impl Mapper {
             })
             .collect();
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (_, s) in candidates.into_iter().take(LOOP_CANDIDATES) {
-            let sub = &self.submaps[s];
-            let origin = self.graph.nodes[sub.origin_node];
-            let points = &self.keyframe_points[node];
+        let points = subsample(&self.keyframe_points[node], LOOP_POINTS);
+        for (_, s) in candidates.into_iter().take(self.cfg.loop_candidates) {
+            let window = SearchWindow {
+                linear_m: self.cfg.loop_window_m,
+                angular_rad: self.cfg.loop_window_rad,
+                step_range_m: LOOP_STEP_RANGE_M,
+            };
+            let origin = self.graph.nodes[self.submaps[s].origin_node];
             let prior = origin.inverse() * pose;
-            let Some(found) = correlative_search(
-                &sub.map,
-                points,
+            let sub = &mut self.submaps[s];
+            let precomputed = sub
+                .precomputed
+                .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
+            let Some(found) = bnb::search(
+                precomputed,
+                &points,
                 prior,
-                self.cfg.loop_window_m,
-                self.cfg.loop_window_rad,
+                &window,
+                self.cfg.loop_search_min_score,
+                self.cfg.loop_ambiguity_margin,
             ) else {
                 continue;
             };
+            if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
+                continue;
+            }
             let refine = MatcherConfig {
                 prior_translation_weight: 0.0,
                 prior_rotation_weight: 0.0,
                 ..self.cfg.frontend.matcher
             };
-            let m = match_scan(&sub.map, points, found, &refine);
-            if m.score >= self.cfg.loop_min_score {
-                self.graph.edges.push(Edge {
-                    from: sub.origin_node,
+            let m = match_scan(&sub.map, &self.keyframe_points[node], found.pose, &refine);
+            let moved = m.pose.relative_to(&found.pose);
+            if m.score >= self.cfg.loop_min_score && moved.x_m.hypot(moved.y_m) < 0.2 {
+                let origin_node = sub.origin_node;
+                added |= self.propose_closure(Edge {
+                    from: origin_node,
                     to: node,
                     measurement: m.pose,
                     information: [400.0, 400.0, 2500.0],
                     robust: true,
                 });
-                self.closures += 1;
-                added = true;
             }
         }
         added
+    }
+
+    /// The correction a closure asks of its keyframe: where the closure puts the keyframe,
+    /// relative to where the graph has it now (in the world frame).
+    fn correction(&self, closure: &Edge) -> Pose2 {
+        let wanted = self.graph.nodes[closure.from] * closure.measurement;
+        wanted * self.graph.nodes[closure.to].inverse()
+    }
+
+    /// A closure enters the graph only when another closure found within the last few
+    /// keyframes asks for the same correction: drift changes slowly, so two true closures
+    /// from nearby keyframes agree, while a false match in a look-alike place rarely has a
+    /// partner that is wrong in the same way. Returns whether edges were added.
+    fn propose_closure(&mut self, closure: Edge) -> bool {
+        let node = closure.to;
+        self.recent_closures
+            .retain(|(c, _)| c.to + CONFIRM_WITHIN_KEYFRAMES >= node);
+        let mine = self.correction(&closure);
+        // Compare the corrections where they act: at this keyframe.
+        let at = self.graph.nodes[node];
+        let mut confirmed = false;
+        let mut to_accept = Vec::new();
+        for (i, (other, accepted)) in self.recent_closures.iter().enumerate() {
+            if other.to == node && other.from == closure.from {
+                continue;
+            }
+            let d = (mine * at).relative_to(&(self.correction(other) * at));
+            if d.x_m.hypot(d.y_m) <= CONFIRM_TRANSLATION_M
+                && d.yaw_rad.abs() <= CONFIRM_ROTATION_RAD
+            {
+                confirmed = true;
+                if !accepted {
+                    to_accept.push(i);
+                }
+            }
+        }
+        for i in to_accept {
+            self.recent_closures[i].1 = true;
+            self.graph.edges.push(self.recent_closures[i].0);
+            self.closures += 1;
+        }
+        if confirmed {
+            self.graph.edges.push(closure);
+            self.closures += 1;
+        }
+        self.recent_closures.push((closure, confirmed));
+        confirmed
     }
 
     /// Every scan's pose, from the optimised keyframes.
@@ -308,68 +401,3 @@ impl Mapper {
         self.graph.optimize(10);
     }
 }
-
-/// Best pose of `points` in `map` within a window around `prior`, by exhaustive search on the
-/// coarsest level (cells as translation steps, rotation steps that move the farthest point by
-/// about a cell); `None` if the map is empty there.
-fn correlative_search(
-    map: &MultiResMap,
-    points: &[Point2],
-    prior: Pose2,
-    window_m: f64,
-    window_rad: f64,
-) -> Option<Pose2> {
-    let coarse = map.coarsest();
-    let step = coarse.resolution_m();
-    // Rotation steps that move a point 8 m away by about a cell (farther points are few).
-    let angle_step = (step / 8.0).max(0.5f64.to_radians());
-    let n_t = (window_m / step).ceil() as i64;
-    let n_a = (window_rad / angle_step).ceil() as i64;
-    // Subsample for speed: every other point is plenty at the coarse level.
-    let sample: Vec<Point2> = points.iter().step_by(2).copied().collect();
-    let mut scored: Vec<(f64, i64, i64, i64)> = Vec::new();
-    for ia in -n_a..=n_a {
-        let yaw = prior.yaw_rad + ia as f64 * angle_step;
-        let (s, c) = yaw.sin_cos();
-        let rotated: Vec<(f64, f64)> = sample
-            .iter()
-            .map(|p| (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m))
-            .collect();
-        for ix in -n_t..=n_t {
-            for iy in -n_t..=n_t {
-                let (x, y) = (prior.x_m + ix as f64 * step, prior.y_m + iy as f64 * step);
-                let score: f64 = rotated
-                    .iter()
-                    .map(|(px, py)| {
-                        coarse
-                            .probability_and_gradient(Point2::new(x + px, y + py))
-                            .0
-                    })
-                    .sum();
-                scored.push((score, ix, iy, ia));
-            }
-        }
-    }
-    let &(best, bx, by, ba) = scored.iter().max_by(|a, b| a.0.total_cmp(&b.0))?;
-    // Ambiguity: the best pose clearly away from the winner (corridors and repeated rooms
-    // give near-ties, and those are the false closures).
-    let rival = scored
-        .iter()
-        .filter(|(_, x, y, a)| (x - bx).abs() > 2 || (y - by).abs() > 2 || (a - ba).abs() > 3)
-        .map(|s| s.0)
-        .fold(f64::MIN, f64::max);
-    let n = sample.len().max(1) as f64;
-    let distinct = best - rival >= AMBIGUITY_MARGIN * n;
-    let yaw = prior.yaw_rad + ba as f64 * angle_step;
-    (best / n > 0.5 && distinct).then(|| {
-        Pose2::new(
-            prior.x_m + bx as f64 * step,
-            prior.y_m + by as f64 * step,
-            yaw,
-        )
-    })
-}
-
-/// How much better (in mean occupancy per point) the best closure pose must score than any
-/// clearly different pose.
-const AMBIGUITY_MARGIN: f64 = 0.03;

@@ -197,6 +197,12 @@ impl OccupancyGrid {
         (v, [gx, gy])
     }
 
+    /// Occupancy probability of every cell, row by row from the grid's origin (see
+    /// [`OccupancyGrid::geometry`]).
+    pub fn probabilities(&self) -> &[f32] {
+        &self.prob
+    }
+
     /// The state of every cell (log-odds beyond +-0.5 count as known).
     pub fn states(&self) -> Grid<CellState> {
         let cells = self
