@@ -89,6 +89,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
             sim_s / wall.elapsed().as_secs_f64().max(1e-9)
         ));
     }
+    mission.finish();
     bar.finish_and_clear();
     let wall_s = wall.elapsed().as_secs_f64();
     let report = write_results(&mission, &out, &source, wall_s)
@@ -108,9 +109,24 @@ pub fn run(args: MissionArgs) -> Result<()> {
             if r.powered { "powered" } else { "powered off" },
             if r.stuck { ", stuck" } else { "" }
         );
+        let e = &r.slam;
+        println!(
+            "    SLAM pose error {:.2} m RMS ({:.2} m max), odometry {:.2} m RMS; {} localisation changes{}",
+            e.pose_error.rmse_m,
+            e.pose_error.max_m,
+            e.odometry_error.rmse_m,
+            e.localisation.len(),
+            e.map.map_or(String::new(), |m| format!(
+                "; map: {:.1} % of occupied cells right, {:.0} % of the explorable area known",
+                100.0 * m.occupied_correct,
+                100.0 * m.explorable_known
+            ))
+        );
     }
     println!("results in {}/", out.display());
-    println!("  mission.json  truth.png  trajectories.png  trajectories.csv");
+    println!(
+        "  mission.json  truth.png  trajectories.png  trajectories.csv  roverN_map.png/.pgm/.yaml"
+    );
     Ok(())
 }
 

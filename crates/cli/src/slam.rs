@@ -43,6 +43,14 @@ pub fn run(args: SlamArgs) -> Result<()> {
     for scan in &log.scans {
         if !args.no_loop_closure {
             mapper.add_scan(scan);
+            for (t, change) in mapper.take_transitions() {
+                println!(
+                    "{:.1} s into the log: {:?}: {}",
+                    t - log.scans[0].timestamp_s,
+                    change.state,
+                    change.reason
+                );
+            }
         } else {
             frontend.add_scan(scan);
         }

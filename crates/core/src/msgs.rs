@@ -156,6 +156,77 @@ pub struct Image {
     pub data: Vec<u8>,
 }
 
+/// geometry_msgs/PoseWithCovarianceStamped: a rover's SLAM pose in its map frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovarianceStamped {
+    /// Stamp (of the scan the pose is for) and the map frame, e.g. `rover1/map`.
+    pub header: Header,
+    /// The pose and its uncertainty.
+    pub pose: PoseWithCovariance,
+}
+
+/// What a rover can say about its own localisation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LocalisationState {
+    /// Scan matching and odometry agree.
+    #[default]
+    Tracking,
+    /// Scan matching tracks, but wheel odometry disagrees with it (slip, a failed encoder).
+    OdometryUnreliable,
+    /// The scans no longer fit the map: the pose is unknown and the map is frozen until the
+    /// rover relocalises.
+    Lost,
+}
+
+/// A change of a rover's localisation state, and why (`localisation`; no ROS counterpart,
+/// sent only on change).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LocalisationStatus {
+    /// When the change was noticed (the scan's stamp), and the map frame.
+    pub header: Header,
+    /// The new state.
+    pub state: LocalisationState,
+    /// Why, in words for the operator.
+    pub reason: String,
+}
+
+/// nav_msgs/MapMetaData.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapMetaData {
+    /// Cell edge, metres.
+    pub resolution_m: f32,
+    /// Cells along x.
+    pub width: u32,
+    /// Cells along y.
+    pub height: u32,
+    /// The pose of cell (0, 0)'s outer corner in the map frame.
+    pub origin: Pose3,
+}
+
+/// nav_msgs/OccupancyGrid, row-major from the origin. Cell values follow ROS (-1 unknown,
+/// 0 free, 100 occupied) with one addition: [`OccupancyGrid::HAZARD`] marks ground the
+/// rover must not drive on that the lidar does not see (crater slopes, low rocks).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct OccupancyGrid {
+    /// Stamp and the map frame.
+    pub header: Header,
+    /// Geometry.
+    pub info: MapMetaData,
+    /// One value per cell.
+    pub data: Vec<i8>,
+}
+
+impl OccupancyGrid {
+    /// Never observed.
+    pub const UNKNOWN: i8 = -1;
+    /// Observed free.
+    pub const FREE: i8 = 0;
+    /// Not drivable though the lidar sees nothing there.
+    pub const HAZARD: i8 = 90;
+    /// An obstacle the lidar sees.
+    pub const OCCUPIED: i8 = 100;
+}
+
 /// Every message that can travel between nodes. New kinds are appended at the end so older
 /// encodings keep decoding.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -172,6 +243,12 @@ pub enum Message {
     PointCloud(PointCloud),
     /// `camera/image`: the grayscale camera.
     Image(Image),
+    /// `pose`: a rover's SLAM pose.
+    Pose(Box<PoseWithCovarianceStamped>),
+    /// `localisation`: a change of a rover's localisation state.
+    Localisation(LocalisationStatus),
+    /// `map`: a rover's map.
+    Map(OccupancyGrid),
 }
 
 impl Message {
@@ -184,6 +261,9 @@ impl Message {
             Message::CmdVel(m) => m.header.stamp,
             Message::PointCloud(m) => m.header.stamp,
             Message::Image(m) => m.header.stamp,
+            Message::Pose(m) => m.header.stamp,
+            Message::Localisation(m) => m.header.stamp,
+            Message::Map(m) => m.header.stamp,
         }
     }
 }

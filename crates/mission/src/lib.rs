@@ -7,14 +7,17 @@
 
 pub mod bus;
 pub mod report;
+pub mod slam_record;
 
 use bus::Bus;
 use realms_core::msgs::Message;
 use realms_core::{Duration, Point2, RoverId, Time, Topic};
+use realms_node::mapping::{MappingConfig, rover_mapper_config};
 use realms_node::rover::RoverNode;
 use realms_node::wander::WanderConfig;
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
+use slam_record::RoverSlamRecord;
 
 /// A node's seed, drawn from the scenario seed's stream for that node.
 fn node_seed(seed: u64, rover: u8) -> u64 {
@@ -23,6 +26,9 @@ fn node_seed(seed: u64, rover: u8) -> u64 {
         .rng(realms_sim::rng::Purpose::Node(rover))
         .next_u64()
 }
+
+/// How often each rover publishes its map.
+pub const MAP_PERIOD: Duration = Duration::from_secs(60);
 
 /// How often rover poses are sampled for trajectories.
 pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
@@ -48,6 +54,7 @@ pub struct Mission {
     trajectories: Vec<Vec<PoseSample>>,
     next_sample: Time,
     published: Vec<(Topic, Message)>,
+    slam: Vec<RoverSlamRecord>,
 }
 
 impl Mission {
@@ -76,7 +83,12 @@ impl Mission {
                     max_drop_m: 0.12,
                     seed: node_seed(world.scenario().seed, body.id.0),
                 };
-                Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
+                let mapping = MappingConfig {
+                    lidar_x_m: spec.lidar.mount_x_m,
+                    mapper: rover_mapper_config(),
+                    map_period: MAP_PERIOD,
+                };
+                Box::new(RoverNode::new(body.id, cfg, mapping)) as Box<dyn Node>
             })
             .collect();
         let mut bus = Bus::default();
@@ -86,6 +98,7 @@ impl Mission {
             }
         }
         let trajectories = vec![Vec::new(); nodes.len()];
+        let n_rovers = nodes.len();
         let mut mission = Mission {
             world,
             nodes,
@@ -93,6 +106,7 @@ impl Mission {
             trajectories,
             next_sample: Time::ZERO,
             published: Vec::new(),
+            slam: vec![RoverSlamRecord::default(); n_rovers],
         };
         mission.update_camera_wants();
         mission
@@ -154,6 +168,57 @@ impl Mission {
         self.deliver(end, rest);
     }
 
+    /// What each rover's SLAM reported, in rover order.
+    pub fn slam_records(&self) -> &[RoverSlamRecord] {
+        &self.slam
+    }
+
+    /// Ends the mission at the time reached: nodes publish their final products.
+    pub fn finish(&mut self) {
+        let t = self.now();
+        let mut pending = Vec::new();
+        for node in &mut self.nodes {
+            node.on_shutdown(t);
+            pending.extend(
+                node.drain_outbox()
+                    .into_iter()
+                    .map(|o| (o.topic, o.message)),
+            );
+        }
+        self.deliver(t, pending);
+    }
+
+    /// Keeps what the rovers' SLAM says, with the truth at that moment.
+    fn record_slam(&mut self, t: Time, topic: &Topic, message: &Message) {
+        let Some(rover) = topic.rover() else { return };
+        let Some(i) = self.world.rovers().position(|b| b.id == rover) else {
+            return;
+        };
+        let record = &mut self.slam[i];
+        match message {
+            Message::Pose(p) => {
+                let body = self
+                    .world
+                    .rovers()
+                    .nth(i)
+                    .expect("the index came from the same list");
+                let q = &p.pose.pose;
+                let estimate =
+                    realms_core::Pose2::new(q.position.x, q.position.y, q.orientation.yaw_rad());
+                record.pose(t, estimate, body.odom_pose, body.pose);
+            }
+            Message::Localisation(change) => {
+                record.changes.push(slam_record::StateChange {
+                    t_s: change.header.stamp.as_secs_f64(),
+                    state: change.state,
+                    reason: change.reason.clone(),
+                });
+            }
+            Message::Map(map) => record.map = Some(map.clone()),
+            _ => {}
+        }
+    }
+
     /// Delivers messages (and whatever they cause) at time `t`, in order.
     fn deliver(&mut self, t: Time, mut pending: Vec<(Topic, Message)>) {
         // Nodes answer messages with messages; bounded so a chatty loop cannot hang a run.
@@ -164,6 +229,9 @@ impl Mission {
             let mut next = Vec::new();
             for (topic, message) in pending {
                 self.bus.count(&topic);
+                if matches!(topic.leaf(), "pose" | "localisation" | "map") {
+                    self.record_slam(t, &topic, &message);
+                }
                 if let (Some(rover), Message::CmdVel(cmd)) = (topic.rover(), &message)
                     && topic.leaf() == "cmd_vel"
                 {

@@ -2,6 +2,10 @@
 //! `docs/mission-json.md`; later issues add fields, never change or remove them).
 
 use crate::Mission;
+use crate::slam_record::RoverSlamSummary;
+use realms_core::map_server::{self, Trinary};
+use realms_core::msgs::OccupancyGrid;
+use realms_core::{Grid, GridGeometry, Point2};
 use realms_sim::SimEvent;
 use realms_sim::render;
 use serde::Serialize;
@@ -91,6 +95,8 @@ pub struct RoverSummary {
     pub stuck: bool,
     /// Final true pose `[x_m, y_m, yaw_rad]`.
     pub final_pose: [f64; 3],
+    /// What its SLAM achieved.
+    pub slam: RoverSlamSummary,
 }
 
 /// Why the results could not be written.
@@ -127,7 +133,8 @@ impl MissionReport {
         let t = world.terrain();
         let rovers: Vec<RoverSummary> = world
             .rovers()
-            .map(|b| RoverSummary {
+            .zip(mission.slam_records())
+            .map(|(b, record)| RoverSummary {
                 name: b.id.to_string(),
                 distance_m: b.stats.distance_m,
                 collisions: b.stats.collisions,
@@ -136,6 +143,13 @@ impl MissionReport {
                 powered: b.powered,
                 stuck: b.stuck,
                 final_pose: [b.pose.x_m, b.pose.y_m, b.pose.yaw_rad],
+                slam: record.summary(
+                    world.truth(),
+                    record
+                        .map
+                        .as_ref()
+                        .map(|_| map_stem(&b.id.to_string()) + ".png"),
+                ),
             })
             .collect();
         let sim_duration_s = mission.now().as_secs_f64();
@@ -186,8 +200,47 @@ impl MissionReport {
     }
 }
 
+/// File stem of a rover's map in the results folder.
+fn map_stem(rover: &str) -> String {
+    format!("{rover}_map")
+}
+
+/// A published map as a grid of its cell values.
+fn map_grid(map: &OccupancyGrid) -> Option<Grid<i8>> {
+    let geometry = GridGeometry {
+        width: map.info.width as usize,
+        height: map.info.height as usize,
+        resolution_m: map.info.resolution_m as f64,
+        origin: Point2::new(map.info.origin.position.x, map.info.origin.position.y),
+    };
+    Grid::from_cells(geometry, map.data.clone())
+}
+
+/// Writes `<rover>_map.png` (unknown grey, free white, occupied black, hazard orange) and
+/// the ROS map_server pair `<rover>_map.pgm` + `.yaml` (hazards as occupied).
+fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportError> {
+    let Some(grid) = map_grid(map) else {
+        // A map whose size does not match its data is not drawn; the grade still says so.
+        return Ok(());
+    };
+    let stem = map_stem(rover);
+    grid.write_png(&dir.join(format!("{stem}.png")), |v| match *v {
+        OccupancyGrid::FREE => [254, 254, 254],
+        OccupancyGrid::OCCUPIED => [0, 0, 0],
+        OccupancyGrid::HAZARD => [240, 140, 20],
+        _ => [205, 205, 205],
+    })?;
+    let trinary = grid.map(|v| match *v {
+        OccupancyGrid::FREE => Trinary::Free,
+        OccupancyGrid::UNKNOWN => Trinary::Unknown,
+        _ => Trinary::Occupied,
+    });
+    map_server::write(&trinary, dir, &stem)?;
+    Ok(())
+}
+
 /// Writes the results folder: `mission.json`, `truth.png`, `trajectories.png`,
-/// `trajectories.csv`. Creates the folder if needed.
+/// `trajectories.csv`, and each rover's map. Creates the folder if needed.
 pub fn write_results(
     mission: &Mission,
     dir: &Path,
@@ -232,6 +285,12 @@ pub fn write_results(
     }
     let csv_path = dir.join("trajectories.csv");
     std::fs::write(&csv_path, csv).map_err(io(&csv_path))?;
+
+    for (body, record) in world.rovers().zip(mission.slam_records()) {
+        if let Some(map) = &record.map {
+            write_map(map, dir, &body.id.to_string())?;
+        }
+    }
 
     let report = MissionReport::new(mission, scenario_source, wall_s);
     let json = serde_json::to_string_pretty(&report)

@@ -6,7 +6,9 @@
 //!
 //! - [`Node`]: the interface every node implements.
 //! - [`rover::RoverNode`]: a rover's on-board logic.
+//! - [`mapping::Mapping`]: the rover's SLAM on board, and what it publishes.
 
+pub mod mapping;
 pub mod rover;
 pub mod wander;
 
@@ -41,4 +43,7 @@ pub trait Node {
 
     /// When the node next wants [`on_tick`](Node::on_tick), if ever.
     fn next_wakeup(&self) -> Option<Time>;
+
+    /// The mission ends at `now`: the node may publish its final products (a rover its map).
+    fn on_shutdown(&mut self, _now: Time) {}
 }

@@ -1,7 +1,10 @@
-//! The rover node: a rover's on-board logic. For now it drives with the placeholder
-//! [`Wander`](crate::wander::Wander) behaviour; SLAM, navigation and exploration take its
-//! place as their issues land. It stops the rover if its lidar falls silent.
+//! The rover node: a rover's on-board logic. It runs SLAM on its own scans and odometry
+//! ([`Mapping`](crate::mapping::Mapping)), publishing its pose, its localisation state and its
+//! map. For now it drives with the placeholder [`Wander`](crate::wander::Wander) behaviour;
+//! navigation and exploration take its place as their issues land. It stops the rover if
+//! its lidar falls silent.
 
+use crate::mapping::{Mapping, MappingConfig};
 use crate::wander::{Wander, WanderConfig};
 use crate::{Node, Outgoing};
 use realms_core::geometry::Vec3;
@@ -17,6 +20,7 @@ pub struct RoverNode {
     id: RoverId,
     name: String,
     wander: Wander,
+    mapping: Mapping,
     last_scan: Option<Time>,
     stopped_for_silence: bool,
     outbox: Vec<Outgoing>,
@@ -24,11 +28,12 @@ pub struct RoverNode {
 
 impl RoverNode {
     /// The node of rover `id`.
-    pub fn new(id: RoverId, wander: WanderConfig) -> Self {
+    pub fn new(id: RoverId, wander: WanderConfig, mapping: MappingConfig) -> Self {
         RoverNode {
             id,
             name: id.namespace(),
             wander: Wander::new(wander),
+            mapping: Mapping::new(id, mapping),
             last_scan: None,
             stopped_for_silence: false,
             outbox: Vec::new(),
@@ -72,9 +77,12 @@ impl Node for RoverNode {
             Message::LaserScan(scan) => {
                 self.last_scan = Some(now);
                 self.stopped_for_silence = false;
+                self.mapping.on_scan(scan, &mut self.outbox);
                 let (v, w) = self.wander.on_scan(now, scan);
                 self.send_cmd(now, v, w);
             }
+            Message::Odometry(odom) => self.mapping.on_odometry(odom),
+            Message::Imu(imu) => self.mapping.on_imu(imu),
             Message::PointCloud(cloud) => self.wander.on_depth(now, cloud),
             _ => {}
         }
@@ -88,6 +96,10 @@ impl Node for RoverNode {
             self.stopped_for_silence = true;
             self.send_cmd(now, 0.0, 0.0);
         }
+    }
+
+    fn on_shutdown(&mut self, now: Time) {
+        self.mapping.publish_map(now, &mut self.outbox);
     }
 
     fn drain_outbox(&mut self) -> Vec<Outgoing> {

@@ -9,6 +9,7 @@
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
 //! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
 //! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
+//! - [`health`]: notices unreliable odometry and lost tracking, from the scans.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 
@@ -16,6 +17,7 @@ pub mod bnb;
 pub mod carmen;
 pub mod eval;
 pub mod frontend;
+pub mod health;
 pub mod mapper;
 pub mod matcher;
 pub mod numeric_lines;

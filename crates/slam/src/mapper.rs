@@ -18,6 +18,7 @@
 use crate::bnb::{self, PrecomputedMap, SearchWindow};
 use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
+use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
 use crate::posegraph::{Edge, PoseGraph};
 use crate::trajectory::StampedPose;
@@ -71,6 +72,8 @@ pub struct MapperConfig {
     pub loop_ambiguity_margin: f64,
     /// Nearest finished submaps searched per attempt.
     pub loop_candidates: usize,
+    /// When to call the estimate unreliable or lost.
+    pub health: HealthConfig,
 }
 
 impl Default for MapperConfig {
@@ -87,6 +90,7 @@ impl Default for MapperConfig {
             loop_search_min_score: 0.55,
             loop_ambiguity_margin: 0.08,
             loop_candidates: 3,
+            health: HealthConfig::default(),
         }
     }
 }
@@ -108,6 +112,26 @@ struct ScanPose {
     keyframe_from_scan: Pose2,
 }
 
+/// What became of one scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tracked {
+    /// The pose estimate at the scan.
+    pub pose: Pose2,
+    /// The tracking match score, if the scan was matched.
+    pub score: Option<f64>,
+    /// The localisation state after it.
+    pub state: LocalisationState,
+    /// Whether the scan became a keyframe (and went into the map).
+    pub keyframe_added: bool,
+}
+
+/// Scans with fewer endpoints than this are neither matched nor mapped.
+const MIN_POINTS: usize = 10;
+/// Relocalisation searches this far around the dead-reckoned pose, metres ...
+const RELOCALISE_WINDOW_M: f64 = 3.0;
+/// ... and this far in heading, radians.
+const RELOCALISE_WINDOW_RAD: f64 = 0.6;
+
 /// The mapper.
 #[derive(Debug)]
 pub struct Mapper {
@@ -121,6 +145,10 @@ pub struct Mapper {
     pending_closures: bool,
     /// Closures found in the last few keyframes, and whether each is in the graph.
     recent_closures: Vec<(Edge, bool)>,
+    health: HealthMonitor,
+    transitions: Vec<(f64, Transition)>,
+    lost_at: Option<Pose2>,
+    last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
 }
@@ -138,6 +166,10 @@ impl Mapper {
             last_odom: None,
             pending_closures: false,
             recent_closures: Vec::new(),
+            health: HealthMonitor::new(cfg.health),
+            transitions: Vec::new(),
+            lost_at: None,
+            last_information: [[0.0; 3]; 3],
             closures: 0,
         }
     }
@@ -159,32 +191,69 @@ impl Mapper {
         s.keyframes += 1;
     }
 
-    /// Adds a scan.
-    pub fn add_scan(&mut self, scan: &LaserReading) {
-        let predicted = match self.last_odom {
-            Some(prev) => self.pose * (prev.inverse() * scan.odom),
-            None => scan.odom,
-        };
-        self.last_odom = Some(scan.odom);
+    /// Adds a scan from a CARMEN log.
+    pub fn add_scan(&mut self, scan: &LaserReading) -> Tracked {
         let points = self.points(scan);
-        // Track against the older active submap, in its own frame.
-        let tracking = self
-            .submaps
-            .iter()
-            .position(|s| !s.finished && s.keyframes > 0);
-        self.pose = match tracking {
-            Some(i) if points.len() >= 10 => {
-                let origin = self.graph.nodes[self.submaps[i].origin_node];
-                let m = match_scan(
-                    &self.submaps[i].map,
-                    &points,
-                    origin.inverse() * predicted,
-                    &self.cfg.frontend.matcher,
-                );
-                origin * m.pose
-            }
-            _ => predicted,
+        self.add_points(scan.timestamp_s, scan.odom, points)
+    }
+
+    /// Adds a scan taken at `time_s`: its endpoints in the robot frame, and the wheel
+    /// odometry pose at that time (any fixed odometry frame).
+    pub fn add_points(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>) -> Tracked {
+        let odom_delta = self
+            .last_odom
+            .map_or(Pose2::IDENTITY, |prev| prev.inverse() * odom);
+        let predicted = match self.last_odom {
+            Some(_) => self.pose * odom_delta,
+            None => odom,
         };
+        self.last_odom = Some(odom);
+        let before = self.pose;
+        let mut score = None;
+        if self.health.state() == LocalisationState::Lost {
+            self.pose = predicted;
+            self.try_relocalise(&points);
+        } else {
+            // Track against the older active submap, in its own frame.
+            let tracking = self
+                .submaps
+                .iter()
+                .position(|s| !s.finished && s.keyframes > 0);
+            self.pose = match tracking {
+                Some(i) if points.len() >= MIN_POINTS => {
+                    let origin = self.graph.nodes[self.submaps[i].origin_node];
+                    let m = match_scan(
+                        &self.submaps[i].map,
+                        &points,
+                        origin.inverse() * predicted,
+                        &self.cfg.frontend.matcher,
+                    );
+                    score = Some(m.score);
+                    self.last_information = m.information;
+                    origin * m.pose
+                }
+                _ => predicted,
+            };
+            let observed = TrackedScan {
+                time_s,
+                odom_delta,
+                matched_delta: if self.scans.is_empty() {
+                    Pose2::IDENTITY
+                } else {
+                    before.inverse() * self.pose
+                },
+                score,
+            };
+            if let Some(t) = self.health.observe(&observed) {
+                if t.state == LocalisationState::Lost {
+                    // The scan that tipped it is not trusted either.
+                    self.pose = predicted;
+                    self.lost_at = Some(before);
+                }
+                self.transitions.push((time_s, t));
+            }
+        }
+        let lost = self.health.state() == LocalisationState::Lost;
         let new_keyframe = match self.graph.nodes.last() {
             None => true,
             Some(last) => {
@@ -193,16 +262,120 @@ impl Mapper {
                     || d.yaw_rad.abs() >= self.cfg.keyframe_rotation_rad
             }
         };
-        if new_keyframe && points.len() >= 10 {
+        // While lost nothing is written into the map.
+        let keyframe_added = new_keyframe && !lost && points.len() >= MIN_POINTS;
+        if keyframe_added {
             self.add_keyframe(points);
         }
         let keyframe = self.graph.nodes.len().saturating_sub(1);
         let kf_pose = self.graph.nodes.get(keyframe).copied().unwrap_or(self.pose);
         self.scans.push(ScanPose {
-            timestamp_s: scan.timestamp_s,
+            timestamp_s: time_s,
             keyframe,
             keyframe_from_scan: kf_pose.inverse() * self.pose,
         });
+        Tracked {
+            pose: self.pose,
+            score,
+            state: self.health.state(),
+            keyframe_added,
+        }
+    }
+
+    /// While lost: search the submaps around the dead-reckoned pose for the scan, widely
+    /// (odometry may have been wrong for a while), and take the pose only if it is
+    /// unambiguous. Nothing is written until then.
+    fn try_relocalise(&mut self, points: &[Point2]) {
+        if points.len() < MIN_POINTS {
+            return;
+        }
+        let sample = subsample(points, LOOP_POINTS);
+        let window = SearchWindow {
+            linear_m: RELOCALISE_WINDOW_M,
+            angular_rad: RELOCALISE_WINDOW_RAD,
+            step_range_m: LOOP_STEP_RANGE_M,
+        };
+        let pose = self.pose;
+        let mut order: Vec<(f64, usize)> = (0..self.submaps.len())
+            .filter(|s| self.submaps[*s].keyframes > 0)
+            .map(|s| {
+                let origin = self.graph.nodes[self.submaps[s].origin_node];
+                (origin.position().distance_m(pose.position()), s)
+            })
+            .filter(|(d, _)| *d <= self.cfg.loop_search_radius_m + RELOCALISE_WINDOW_M)
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (_, s) in order.into_iter().take(self.cfg.loop_candidates) {
+            let origin = self.graph.nodes[self.submaps[s].origin_node];
+            let prior = origin.inverse() * pose;
+            let sub = &mut self.submaps[s];
+            // The map is frozen while lost, so an active submap's precomputation stays valid
+            // until tracking resumes (it is dropped then).
+            let precomputed = sub
+                .precomputed
+                .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
+            let Some(found) = bnb::search(
+                precomputed,
+                &sample,
+                prior,
+                &window,
+                self.cfg.loop_search_min_score,
+                self.cfg.loop_ambiguity_margin,
+            ) else {
+                continue;
+            };
+            if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
+                continue;
+            }
+            let refine = MatcherConfig {
+                prior_translation_weight: 0.0,
+                prior_rotation_weight: 0.0,
+                ..self.cfg.frontend.matcher
+            };
+            let m = match_scan(&sub.map, points, found.pose, &refine);
+            if m.score < self.cfg.loop_min_score {
+                continue;
+            }
+            self.pose = origin * m.pose;
+            let moved = self
+                .lost_at
+                .map_or(0.0, |p| p.position().distance_m(self.pose.position()));
+            let reason = format!(
+                "relocalised against submap {s} (match {:.2}, {:.2} m from where it was lost)",
+                m.score, moved
+            );
+            for sub in &mut self.submaps {
+                if !sub.finished {
+                    sub.precomputed = None;
+                }
+            }
+            if let Some(t) = self.health.relocalised(reason) {
+                let time_s = self.scans.last().map_or(0.0, |s| s.timestamp_s);
+                self.transitions.push((time_s, t));
+            }
+            self.lost_at = None;
+            return;
+        }
+    }
+
+    /// The current pose estimate.
+    pub fn pose(&self) -> Pose2 {
+        self.pose
+    }
+
+    /// The localisation state now.
+    pub fn state(&self) -> LocalisationState {
+        self.health.state()
+    }
+
+    /// Changes of localisation state since last asked, with the scan time of each.
+    pub fn take_transitions(&mut self) -> Vec<(f64, Transition)> {
+        std::mem::take(&mut self.transitions)
+    }
+
+    /// The last tracking match's information matrix (x, y, theta), for the covariance.
+    pub fn last_information(&self) -> [[f64; 3]; 3] {
+        self.last_information
     }
 
     fn add_keyframe(&mut self, points: Vec<Point2>) {

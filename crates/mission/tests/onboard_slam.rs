@@ -1,0 +1,70 @@
+//! The rovers' on-board SLAM in a simulated mission, graded against the simulator's truth:
+//! where each rover thinks it is, what its map says, and whether it notices its wheels
+//! slipping.
+
+use realms_core::Time;
+use realms_core::msgs::LocalisationState;
+use realms_mission::Mission;
+use realms_sim::Scenario;
+use std::path::Path;
+
+fn small() -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
+    Scenario::load(&path).expect("small scenario loads")
+}
+
+#[test]
+fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
+    // small.toml: 14 m x 10 m, two rovers, rover2's lidar drops out at 30 s for 5 s and
+    // rover1's wheels slip at 40 s for 4 s.
+    let s = small();
+    let mut mission = Mission::new(&s);
+    mission.run_until(Time::from_secs_f64(120.0));
+    mission.finish();
+    let truth = mission.world().truth().clone();
+    for (i, record) in mission.slam_records().iter().enumerate() {
+        let summary = record.summary(&truth, None);
+        let (slam, odom) = (summary.pose_error, summary.odometry_error);
+        assert!(
+            summary.checks > 100,
+            "rover{}: {} checks",
+            i + 1,
+            summary.checks
+        );
+        assert!(
+            slam.rmse_m < 0.15 && slam.rmse_m < odom.rmse_m / 5.0,
+            "rover{}: SLAM {slam:?} against odometry {odom:?}",
+            i + 1
+        );
+        assert!(slam.heading_rmse_deg < 2.0, "rover{}: {slam:?}", i + 1);
+        let map = summary.map.expect("the final map was published");
+        assert!(
+            map.occupied_correct > 0.9 && map.free_correct > 0.98,
+            "rover{}: {map:?}",
+            i + 1
+        );
+        assert!(map.explorable_known > 0.7, "rover{}: {map:?}", i + 1);
+        assert!(
+            !summary
+                .localisation
+                .iter()
+                .any(|c| c.state == LocalisationState::Lost),
+            "rover{}: {:?}",
+            i + 1,
+            summary.localisation
+        );
+    }
+    // The slip burst is noticed within two seconds, and the all-clear follows it.
+    let changes = &mission.slam_records()[0].changes;
+    let noticed = changes
+        .iter()
+        .find(|c| c.state == LocalisationState::OdometryUnreliable)
+        .unwrap_or_else(|| panic!("rover1 never noticed its slip: {changes:?}"));
+    assert!((40.0..42.0).contains(&noticed.t_s), "{changes:?}");
+    assert!(
+        changes
+            .iter()
+            .any(|c| c.state == LocalisationState::Tracking && c.t_s > noticed.t_s),
+        "{changes:?}"
+    );
+}

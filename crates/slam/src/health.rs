@@ -1,0 +1,266 @@
+//! Is the pose estimate still trustworthy? The fielded system this project re-builds lost its
+//! odometry without noticing, and the operator found out from a smeared map. This monitor
+//! watches every tracked scan and says, in a state the rover publishes, when
+//!
+//! - the wheel odometry disagrees with scan matching over the last couple of seconds (the
+//!   wheels slip or an encoder fails): SLAM goes on from the scans alone and says so;
+//! - scan matching itself stops fitting the map (too few points, a poor match score, or a
+//!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
+//!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.
+//!
+//! It is plain bookkeeping over numbers the mapper already has; the decisions about the map
+//! are the mapper's.
+
+use realms_core::Pose2;
+
+pub use realms_core::msgs::LocalisationState;
+
+/// Thresholds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HealthConfig {
+    /// Odometry is compared with scan matching over this much time, seconds.
+    pub window_s: f64,
+    /// Odometry is unreliable when its distance differs from the matched distance by more
+    /// than this (metres) ...
+    pub slip_min_m: f64,
+    /// ... and by more than this fraction of the larger of the two.
+    pub slip_fraction: f64,
+    /// Odometry counts as reliable again after agreeing for this long, seconds.
+    pub recover_after_s: f64,
+    /// A match scoring below this is a poor match.
+    pub poor_score: f64,
+    /// Lost after this many poor matches in a row.
+    pub poor_matches_to_lose: usize,
+    /// Lost when the scans stop for longer than this, seconds.
+    pub max_scan_gap_s: f64,
+}
+
+impl Default for HealthConfig {
+    fn default() -> Self {
+        HealthConfig {
+            window_s: 2.0,
+            slip_min_m: 0.15,
+            slip_fraction: 0.3,
+            recover_after_s: 3.0,
+            poor_score: 0.35,
+            poor_matches_to_lose: 5,
+            max_scan_gap_s: 10.0,
+        }
+    }
+}
+
+/// One tracked scan, as the monitor sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackedScan {
+    /// When, seconds.
+    pub time_s: f64,
+    /// Motion since the previous scan by wheel odometry.
+    pub odom_delta: Pose2,
+    /// Motion since the previous scan by scan matching.
+    pub matched_delta: Pose2,
+    /// The match score (mean occupancy at the endpoints), or `None` if the scan was not
+    /// matched (too few points, or no map yet).
+    pub score: Option<f64>,
+}
+
+/// A change of state, with the reason in words (for the operator).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Transition {
+    /// The new state.
+    pub state: LocalisationState,
+    /// Why.
+    pub reason: String,
+}
+
+/// The monitor.
+#[derive(Clone, Debug)]
+pub struct HealthMonitor {
+    cfg: HealthConfig,
+    state: LocalisationState,
+    recent: std::collections::VecDeque<(f64, Pose2, Pose2)>,
+    poor_in_a_row: usize,
+    agreeing_since_s: Option<f64>,
+    last_time_s: Option<f64>,
+}
+
+impl HealthMonitor {
+    /// A monitor that starts out tracking.
+    pub fn new(cfg: HealthConfig) -> Self {
+        HealthMonitor {
+            cfg,
+            state: LocalisationState::Tracking,
+            recent: std::collections::VecDeque::new(),
+            poor_in_a_row: 0,
+            agreeing_since_s: None,
+            last_time_s: None,
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> LocalisationState {
+        self.state
+    }
+
+    fn go(&mut self, state: LocalisationState, reason: String) -> Option<Transition> {
+        (self.state != state).then(|| {
+            self.state = state;
+            Transition { state, reason }
+        })
+    }
+
+    /// The mapper relocalised: tracking again, with a fresh history.
+    pub fn relocalised(&mut self, reason: String) -> Option<Transition> {
+        self.recent.clear();
+        self.poor_in_a_row = 0;
+        self.agreeing_since_s = None;
+        self.go(LocalisationState::Tracking, reason)
+    }
+
+    /// Takes one scan; returns the change of state it causes, if any.
+    pub fn observe(&mut self, scan: &TrackedScan) -> Option<Transition> {
+        let gap = self.last_time_s.map(|t| scan.time_s - t);
+        self.last_time_s = Some(scan.time_s);
+        if self.state == LocalisationState::Lost {
+            // Only relocalisation leaves this state.
+            return None;
+        }
+        if let Some(gap) = gap
+            && gap > self.cfg.max_scan_gap_s
+        {
+            return self.go(
+                LocalisationState::Lost,
+                format!("no lidar scan for {gap:.1} s"),
+            );
+        }
+        match scan.score {
+            Some(s) if s < self.cfg.poor_score => self.poor_in_a_row += 1,
+            Some(_) => self.poor_in_a_row = 0,
+            None => {}
+        }
+        if self.poor_in_a_row >= self.cfg.poor_matches_to_lose {
+            return self.go(
+                LocalisationState::Lost,
+                format!(
+                    "{} scans in a row fit the map poorly (score below {:.2})",
+                    self.poor_in_a_row, self.cfg.poor_score
+                ),
+            );
+        }
+        // Net motion over the window by each source, composed from the per-scan deltas:
+        // jitter of a standing robot cancels out instead of adding up.
+        self.recent
+            .push_back((scan.time_s, scan.odom_delta, scan.matched_delta));
+        while self
+            .recent
+            .front()
+            .is_some_and(|(t, _, _)| *t < scan.time_s - self.cfg.window_s)
+        {
+            self.recent.pop_front();
+        }
+        let (odom, matched) = self
+            .recent
+            .iter()
+            .fold((Pose2::IDENTITY, Pose2::IDENTITY), |(a, b), (_, o, m)| {
+                (a * *o, b * *m)
+            });
+        let odom_m = odom.x_m.hypot(odom.y_m);
+        let matched_m = matched.x_m.hypot(matched.y_m);
+        let differ = (odom.x_m - matched.x_m).hypot(odom.y_m - matched.y_m);
+        let disagree =
+            differ > self.cfg.slip_min_m && differ > self.cfg.slip_fraction * odom_m.max(matched_m);
+        if disagree {
+            self.agreeing_since_s = None;
+            return self.go(
+                LocalisationState::OdometryUnreliable,
+                format!(
+                    "over the last {:.0} s wheel odometry moved {odom_m:.2} m, scan matching \
+                     {matched_m:.2} m; they differ by {differ:.2} m",
+                    self.cfg.window_s
+                ),
+            );
+        }
+        if self.state == LocalisationState::OdometryUnreliable {
+            let since = *self.agreeing_since_s.get_or_insert(scan.time_s);
+            if scan.time_s - since >= self.cfg.recover_after_s {
+                return self.go(
+                    LocalisationState::Tracking,
+                    format!(
+                        "wheel odometry agrees with scan matching again for {:.0} s",
+                        self.cfg.recover_after_s
+                    ),
+                );
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(t: f64, odom_m: f64, matched_m: f64, score: f64) -> TrackedScan {
+        TrackedScan {
+            time_s: t,
+            odom_delta: Pose2::new(odom_m, 0.0, 0.0),
+            matched_delta: Pose2::new(matched_m, 0.0, 0.0),
+            score: Some(score),
+        }
+    }
+
+    #[test]
+    fn slipping_wheels_are_reported_and_the_all_clear_follows() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        let mut states = Vec::new();
+        // 10 s driving at 0.3 m/s, then 3 s of wheels spinning at the same rate while the
+        // rover stands still, then 10 s of normal driving.
+        for k in 0..230 {
+            let t = k as f64 * 0.1;
+            let matched = if (10.0..13.0).contains(&t) { 0.0 } else { 0.03 };
+            if let Some(tr) = m.observe(&scan(t, 0.03, matched, 0.8)) {
+                states.push((t, tr.state));
+            }
+        }
+        assert_eq!(states.len(), 2, "{states:?}");
+        let (t_slip, s) = states[0];
+        assert_eq!(s, LocalisationState::OdometryUnreliable);
+        assert!((10.0..11.5).contains(&t_slip), "noticed at {t_slip}");
+        let (t_ok, s) = states[1];
+        assert_eq!(s, LocalisationState::Tracking);
+        assert!((15.0..19.0).contains(&t_ok), "all clear at {t_ok}");
+    }
+
+    #[test]
+    fn noise_in_normal_driving_raises_nothing() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 0..600 {
+            let t = k as f64 * 0.1;
+            // Odometry 10 % long, the scans a little noisy: ordinary skid-steer driving.
+            let wobble = if k % 2 == 0 { 0.004 } else { -0.004 };
+            assert_eq!(m.observe(&scan(t, 0.033, 0.03 + wobble, 0.7)), None, "{t}");
+        }
+    }
+
+    #[test]
+    fn poor_matches_or_a_long_gap_mean_lost_until_relocalised() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 0..10 {
+            m.observe(&scan(k as f64 * 0.1, 0.03, 0.03, 0.8));
+        }
+        let mut lost_at = None;
+        for k in 10..20 {
+            if let Some(tr) = m.observe(&scan(k as f64 * 0.1, 0.03, 0.03, 0.2)) {
+                lost_at.get_or_insert((k, tr.state));
+            }
+        }
+        assert_eq!(lost_at, Some((14, LocalisationState::Lost)));
+        // Good matches alone do not end it: the mapper must relocalise.
+        assert_eq!(m.observe(&scan(2.1, 0.03, 0.03, 0.9)), None);
+        assert_eq!(m.state(), LocalisationState::Lost);
+        assert!(m.relocalised("found".into()).is_some());
+        assert_eq!(m.state(), LocalisationState::Tracking);
+        let tr = m.observe(&scan(13.0, 0.03, 0.03, 0.9)).expect("a gap");
+        assert_eq!(tr.state, LocalisationState::Lost);
+        assert!(tr.reason.contains("no lidar scan"), "{}", tr.reason);
+    }
+}
