@@ -27,6 +27,13 @@ fn node_seed(seed: u64, rover: u8) -> u64 {
         .next_u64()
 }
 
+/// Lidar returns lower than this above the ground under the rover are floor hits, metres:
+/// twice the default floor undulation, so the floor ahead rising does not count as a rock.
+pub const GROUND_CLEARANCE_M: f64 = 0.12;
+
+/// Rovers stand still this long at the start to measure their gyro's bias.
+pub const GYRO_CALIBRATION: Duration = Duration::from_secs(5);
+
 /// How often each rover publishes its map.
 pub const MAP_PERIOD: Duration = Duration::from_secs(60);
 
@@ -85,8 +92,11 @@ impl Mission {
                 };
                 let mapping = MappingConfig {
                     lidar_x_m: spec.lidar.mount_x_m,
+                    lidar_height_m: spec.lidar.mount_height_m,
+                    ground_clearance_m: GROUND_CLEARANCE_M,
                     mapper: rover_mapper_config(),
                     map_period: MAP_PERIOD,
+                    gyro_calibration: GYRO_CALIBRATION,
                 };
                 Box::new(RoverNode::new(body.id, cfg, mapping)) as Box<dyn Node>
             })

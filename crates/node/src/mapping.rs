@@ -24,10 +24,17 @@ use realms_slam::occupancy::CellState;
 pub struct MappingConfig {
     /// The lidar's position forward of the base, metres (it looks straight ahead).
     pub lidar_x_m: f64,
+    /// The lidar's height above the ground under the base, metres.
+    pub lidar_height_m: f64,
+    /// Returns whose endpoint lies less than this above the ground under the rover (with
+    /// the rover's pitch and roll undone) are taken for the floor, not an obstacle, metres.
+    pub ground_clearance_m: f64,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
     pub map_period: Duration,
+    /// The rover stands still this long at the start while the gyro's bias is measured.
+    pub gyro_calibration: Duration,
 }
 
 /// SLAM tuned for the simulated rover: the lidar reaches 12 m, the arena is small, and the
@@ -53,6 +60,13 @@ pub struct Mapping {
     gyro_yaw_rad: f64,
     last_gyro: Option<Time>,
     gyro_heard: bool,
+    bias_sum: f64,
+    bias_samples: u64,
+    gyro_bias_rad_s: Option<f64>,
+    /// Smoothed specific force in the body frame (gravity, for a slow rover), m/s^2.
+    gravity: [f64; 3],
+    /// Returns dropped as floor hits, for the record.
+    floor_hits: u64,
     next_map: Time,
 }
 
@@ -68,8 +82,18 @@ impl Mapping {
             gyro_yaw_rad: 0.0,
             last_gyro: None,
             gyro_heard: false,
+            bias_sum: 0.0,
+            bias_samples: 0,
+            gyro_bias_rad_s: None,
+            gravity: [0.0, 0.0, 9.81],
+            floor_hits: 0,
             next_map: Time::ZERO,
         }
+    }
+
+    /// Lidar returns dropped so far as hits on the floor.
+    pub fn floor_hits(&self) -> u64 {
+        self.floor_hits
     }
 
     /// The localisation state now.
@@ -114,16 +138,51 @@ impl Mapping {
         self.odometry.push((odom.header.stamp, fused));
     }
 
-    /// Takes a gyro reading: integrates its yaw rate since the previous one.
+    /// Takes an IMU reading: integrates the gyro's yaw rate since the previous one, and
+    /// smooths the accelerometer's gravity for the rover's tilt.
     pub fn on_imu(&mut self, imu: &Imu) {
+        if imu.linear_acceleration_covariance[0][0] >= 0.0 {
+            let a = imu.linear_acceleration;
+            let g = &mut self.gravity;
+            // About 0.1 s of smoothing at 50 Hz: the noise goes, the tilt stays current.
+            let k = 0.2;
+            *g = [
+                g[0] + k * (a.x - g[0]),
+                g[1] + k * (a.y - g[1]),
+                g[2] + k * (a.z - g[2]),
+            ];
+        }
         let t = imu.header.stamp;
+        let rate = imu.angular_velocity.z;
+        if self.calibrating(t) {
+            // Standing still: what the gyro reads is its bias (and noise), not a turn.
+            self.bias_sum += rate;
+            self.bias_samples += 1;
+            self.last_gyro = Some(t);
+            self.gyro_heard = true;
+            return;
+        } else if self.bias_samples > 0 && self.gyro_bias_rad_s.is_none() {
+            self.gyro_bias_rad_s = Some(self.bias_sum / self.bias_samples as f64);
+        }
         if let Some(prev) = self.last_gyro
             && t > prev
         {
-            self.gyro_yaw_rad += imu.angular_velocity.z * (t - prev).as_secs_f64();
+            let bias = self.gyro_bias_rad_s.unwrap_or(0.0);
+            self.gyro_yaw_rad += (rate - bias) * (t - prev).as_secs_f64();
         }
         self.last_gyro = Some(t);
         self.gyro_heard = true;
+    }
+
+    /// Whether the rover must stand still at `now` so the gyro's bias can be measured: for
+    /// the first [`MappingConfig::gyro_calibration`] of the mission, as on a real rover.
+    pub fn calibrating(&self, now: Time) -> bool {
+        now < Time::ZERO + self.cfg.gyro_calibration
+    }
+
+    /// The gyro bias measured at the start, rad/s, once known.
+    pub fn gyro_bias_rad_s(&self) -> Option<f64> {
+        self.gyro_bias_rad_s
     }
 
     /// Odometry at `t`, interpolated (or extrapolated a little) from the latest two readings.
@@ -161,17 +220,28 @@ impl Mapping {
         };
         let max = (self.cfg.mapper.frontend.max_range_m as f32).min(scan.range_max_m);
         let min = (self.cfg.mapper.frontend.min_range_m as f32).max(scan.range_min_m);
-        let points: Vec<Point2> = scan
-            .ranges_m
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| r.is_finite() && **r >= min && **r < max)
-            .map(|(i, r)| {
-                let a = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad) as f64;
-                let r = *r as f64;
-                Point2::new(self.cfg.lidar_x_m + r * a.cos(), r * a.sin())
-            })
-            .collect();
+        // The tilt from gravity: the third row of the body's rotation (REP 103, Z-Y-X) is
+        // the unit gravity reaction seen in the body frame.
+        let [gx, gy, gz] = self.gravity;
+        let norm = (gx * gx + gy * gy + gz * gz).sqrt().max(1e-6);
+        let up = [gx / norm, gy / norm, gz / norm];
+        let (lx, lh) = (self.cfg.lidar_x_m, self.cfg.lidar_height_m);
+        let mut points = Vec::with_capacity(scan.ranges_m.len());
+        for (i, r) in scan.ranges_m.iter().enumerate() {
+            if !(r.is_finite() && *r >= min && *r < max) {
+                continue;
+            }
+            let a = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad) as f64;
+            let r = *r as f64;
+            let (x, y) = (lx + r * a.cos(), r * a.sin());
+            // Height of the return above the ground under the rover, levelled.
+            let height = up[0] * x + up[1] * y + up[2] * lh;
+            if height < self.cfg.ground_clearance_m {
+                self.floor_hits += 1;
+                continue;
+            }
+            points.push(Point2::new(x, y));
+        }
         let tracked = self.mapper.add_points(stamp.as_secs_f64(), odom, points);
         for (_, change) in self.mapper.take_transitions() {
             out.push(Outgoing {
@@ -264,5 +334,104 @@ impl Mapping {
                 })
                 .collect(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realms_core::msgs::PoseWithCovariance;
+
+    fn mapping() -> Mapping {
+        Mapping::new(
+            RoverId(1),
+            MappingConfig {
+                lidar_x_m: 0.1,
+                lidar_height_m: 0.3,
+                ground_clearance_m: 0.12,
+                mapper: rover_mapper_config(),
+                map_period: Duration::from_secs(60),
+                gyro_calibration: Duration::from_secs(5),
+            },
+        )
+    }
+
+    fn imu(t: Time, yaw_rate: f64, pitch_rad: f64) -> Imu {
+        let g = 9.81;
+        let mut m = Imu {
+            linear_acceleration: Vec3::new(-g * pitch_rad.sin(), 0.0, g * pitch_rad.cos()),
+            ..Imu::default()
+        };
+        m.header.stamp = t;
+        m.angular_velocity.z = yaw_rate;
+        m
+    }
+
+    fn odom(t: Time) -> Odometry {
+        let mut o = Odometry {
+            pose: PoseWithCovariance::default(),
+            ..Odometry::default()
+        };
+        o.pose.pose.orientation = Quaternion::IDENTITY;
+        o.header.stamp = t;
+        o
+    }
+
+    /// One beam straight ahead at `range_m`, the rest without a return.
+    fn scan_ahead(t: Time, range_m: f32) -> LaserScan {
+        let n = 360;
+        let mut ranges = vec![f32::INFINITY; n];
+        ranges[n / 2] = range_m;
+        let mut s = LaserScan {
+            angle_min_rad: -std::f32::consts::PI,
+            angle_increment_rad: std::f32::consts::TAU / n as f32,
+            range_min_m: 0.15,
+            range_max_m: 12.0,
+            ranges_m: ranges,
+            ..LaserScan::default()
+        };
+        s.header.stamp = t;
+        s
+    }
+
+    #[test]
+    fn a_return_from_the_floor_ahead_of_a_nose_down_rover_is_dropped() {
+        // Pitched 5 degrees nose down (REP 103: positive pitch), the beam ahead meets flat
+        // ground where 0.3 m - (0.1 + r) sin 5deg = 0, at r = 3.34 m; a rock face there at
+        // the same range would have returned from higher up only on level ground.
+        let pitch = 5f64.to_radians();
+        for (pitch_rad, expect_drop) in [(pitch, true), (0.0, false)] {
+            let mut m = mapping();
+            for k in 0..20 {
+                m.on_imu(&imu(Time::from_secs_f64(k as f64 * 0.02), 0.0, pitch_rad));
+            }
+            m.on_odometry(&odom(Time::from_secs_f64(0.4)));
+            let mut out = Vec::new();
+            m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.34), &mut out);
+            assert_eq!(m.floor_hits() == 1, expect_drop, "pitch {pitch_rad}");
+        }
+    }
+
+    #[test]
+    fn the_gyro_bias_is_measured_while_standing_and_then_removed() {
+        let mut m = mapping();
+        let bias = 0.004;
+        for k in 0..=600 {
+            let t = Time::from_secs_f64(k as f64 * 0.02);
+            m.on_imu(&imu(t, bias, 0.0));
+            if k % 5 == 0 {
+                m.on_odometry(&odom(t));
+            }
+        }
+        assert!(!m.calibrating(Time::from_secs_f64(12.0)));
+        let measured = m.gyro_bias_rad_s().expect("measured by now");
+        assert!((measured - bias).abs() < 1e-9, "{measured}");
+        // Standing still with the bias removed: the heading has not moved (without the
+        // correction it would have turned 0.048 rad in 12 s).
+        let heading = m
+            .odometry_at(Time::from_secs_f64(12.0))
+            .expect("odometry")
+            .yaw_rad;
+        assert!(heading.abs() < 1e-9, "{heading}");
     }
 }

@@ -78,7 +78,11 @@ impl Node for RoverNode {
                 self.last_scan = Some(now);
                 self.stopped_for_silence = false;
                 self.mapping.on_scan(scan, &mut self.outbox);
-                let (v, w) = self.wander.on_scan(now, scan);
+                let (v, w) = if self.mapping.calibrating(now) {
+                    (0.0, 0.0)
+                } else {
+                    self.wander.on_scan(now, scan)
+                };
                 self.send_cmd(now, v, w);
             }
             Message::Odometry(odom) => self.mapping.on_odometry(odom),

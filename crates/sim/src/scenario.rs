@@ -247,7 +247,8 @@ pub struct Odometry {
     pub yaw_scale_error_std: f64,
 }
 
-/// Yaw gyro.
+/// IMU: a yaw gyro and an accelerometer (which, on a slow rover, measures gravity and so
+/// the rover's pitch and roll).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Imu {
@@ -257,6 +258,8 @@ pub struct Imu {
     pub gyro_noise_rad_s: f64,
     /// Standard deviation of the constant bias drawn per rover, rad/s.
     pub gyro_bias_std_rad_s: f64,
+    /// Accelerometer white noise standard deviation per axis, m/s^2.
+    pub accel_noise_m_s2: f64,
 }
 
 /// A scheduled fault.
@@ -492,6 +495,7 @@ impl Default for Imu {
             rate_hz: 50.0,
             gyro_noise_rad_s: 0.003,
             gyro_bias_std_rad_s: 0.002,
+            accel_noise_m_s2: 0.02,
         }
     }
 }
@@ -692,6 +696,7 @@ impl Scenario {
             ),
             ("rovers.imu.gyro_noise_rad_s", r.imu.gyro_noise_rad_s),
             ("rovers.imu.gyro_bias_std_rad_s", r.imu.gyro_bias_std_rad_s),
+            ("rovers.imu.accel_noise_m_s2", r.imu.accel_noise_m_s2),
         ] {
             non_negative(key, v)?;
         }

@@ -1,5 +1,6 @@
 //! Proprioceptive sensors: wheel odometry (the encoder-integrated pose, which drifts with slip
-//! and the skid-steer yaw error) and a yaw gyro (true rate plus a fixed bias and white noise).
+//! and the skid-steer yaw error) and an IMU: a yaw gyro (true rate plus a fixed bias and white
+//! noise) and an accelerometer (gravity in the tilted body frame plus white noise).
 
 use super::gaussian;
 use crate::rng::SimRng;
@@ -55,11 +56,26 @@ pub fn odometry(body: &RoverBody, spec: &Rovers, stamp: Time) -> Odometry {
     }
 }
 
-/// The gyro message: the true yaw rate plus bias and noise.
+/// Standard gravity, m/s^2 (the analogue hall is on Earth).
+const GRAVITY_M_S2: f64 = 9.81;
+
+/// The IMU message: the true yaw rate plus bias and noise, and the accelerometer's specific
+/// force, which for a rover this slow is gravity seen in the tilted body frame (REP 103:
+/// x forward, z up) plus noise.
 pub fn imu(body: &RoverBody, spec: &Rovers, rng: &mut SimRng, stamp: Time) -> Imu {
     let sigma = spec.imu.gyro_noise_rad_s;
     let not_provided = [[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
     let var = sigma * sigma;
+    let (sp, cp) = body.pitch_rad.sin_cos();
+    let (sr, cr) = body.roll_rad.sin_cos();
+    let a_sigma = spec.imu.accel_noise_m_s2;
+    let a_var = a_sigma * a_sigma;
+    let gyro_z = body.yaw_rate_rad_s + body.gyro_bias_rad_s + gaussian(rng, sigma);
+    let accel = Vec3::new(
+        -GRAVITY_M_S2 * sp + gaussian(rng, a_sigma),
+        GRAVITY_M_S2 * cp * sr + gaussian(rng, a_sigma),
+        GRAVITY_M_S2 * cp * cr + gaussian(rng, a_sigma),
+    );
     Imu {
         header: Header {
             stamp,
@@ -67,13 +83,9 @@ pub fn imu(body: &RoverBody, spec: &Rovers, rng: &mut SimRng, stamp: Time) -> Im
         },
         orientation: Quaternion::IDENTITY,
         orientation_covariance: not_provided,
-        angular_velocity: Vec3::new(
-            0.0,
-            0.0,
-            body.yaw_rate_rad_s + body.gyro_bias_rad_s + gaussian(rng, sigma),
-        ),
+        angular_velocity: Vec3::new(0.0, 0.0, gyro_z),
         angular_velocity_covariance: [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, var]],
-        linear_acceleration: Vec3::default(),
-        linear_acceleration_covariance: not_provided,
+        linear_acceleration: accel,
+        linear_acceleration_covariance: [[a_var, 0.0, 0.0], [0.0, a_var, 0.0], [0.0, 0.0, a_var]],
     }
 }
