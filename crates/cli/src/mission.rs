@@ -117,9 +117,12 @@ pub fn run(args: MissionArgs) -> Result<()> {
             e.odometry_error.rmse_m,
             e.localisation.len(),
             e.map.map_or(String::new(), |m| format!(
-                "; map: {:.1} % of occupied cells right, {:.0} % of the explorable area known",
+                "; map: {:.1} % of occupied cells right, {:.0} % of the explorable area known, \
+                 {:.0} % of known true hazards flagged ({:.0} % of hazard cells right)",
                 100.0 * m.occupied_correct,
-                100.0 * m.explorable_known
+                100.0 * m.explorable_known,
+                100.0 * m.true_hazards_flagged,
+                100.0 * m.hazard_correct
             ))
         );
     }

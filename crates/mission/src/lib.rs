@@ -17,6 +17,7 @@ use realms_node::rover::RoverNode;
 use realms_node::wander::WanderConfig;
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
+use realms_slam::traversability::TraversabilityConfig;
 use slam_record::RoverSlamRecord;
 
 /// A node's seed, drawn from the scenario seed's stream for that node.
@@ -97,6 +98,13 @@ impl Mission {
                     mapper: rover_mapper_config(),
                     map_period: MAP_PERIOD,
                     gyro_calibration: GYRO_CALIBRATION,
+                    depth_rot: base_from_optical.rot,
+                    depth_origin_m: base_from_optical.origin,
+                    traversability: TraversabilityConfig {
+                        max_step_m: spec.max_step_m,
+                        max_slope_rad: spec.max_slope_deg.to_radians(),
+                        ..TraversabilityConfig::default()
+                    },
                 };
                 Box::new(RoverNode::new(body.id, cfg, mapping)) as Box<dyn Node>
             })

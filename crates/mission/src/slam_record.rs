@@ -1,11 +1,11 @@
 //! What the rovers' SLAM said during a mission, kept beside what was true, so the report can
 //! grade it: pose estimates against the true pose (and wheel odometry against it, as the
 //! baseline SLAM must beat), every change of localisation state, and each rover's latest map
-//! graded against the simulator's ground truth.
+//! graded against the simulator's ground truth, hazards included.
 
 use realms_core::msgs::{LocalisationState, OccupancyGrid};
 use realms_core::{Duration, Point2, Pose2, Time};
-use realms_sim::GroundTruth;
+use realms_sim::{GroundTruth, TruthCell};
 use serde::Serialize;
 
 /// How often a pose estimate is kept for grading.
@@ -111,6 +111,16 @@ pub struct MapGrade {
     pub free_correct: f64,
     /// Fraction of the explorable area the map knows (free or occupied).
     pub explorable_known: f64,
+    /// Cells the map calls hazards (from the depth camera).
+    pub hazard_cells: usize,
+    /// Of those, the fraction within one map cell of ground the rover truly must not enter
+    /// (a hazard or an obstacle in the truth's traversability).
+    pub hazard_correct: f64,
+    /// True hazard cells (crater interiors, too-steep ground) the map knows.
+    pub true_hazards_known: usize,
+    /// Of those, the fraction the map marks as hazard or obstacle: the rest it would let the
+    /// rover drive into.
+    pub true_hazards_flagged: f64,
 }
 
 /// Grades `map` (in the arena frame) against `truth`.
@@ -137,8 +147,24 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
             })
         })
     };
+    let untraversable_near = |p: Point2| {
+        let t = &truth.traversability;
+        let reach = (res / t.resolution_m()).ceil() as i64;
+        let Some(c) = t.geometry().world_to_cell(p) else {
+            return false;
+        };
+        (-reach..=reach).any(|dy| {
+            (-reach..=reach).any(|dx| {
+                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+                x >= 0
+                    && y >= 0
+                    && t.get(x as usize, y as usize)
+                        .is_some_and(|v| *v != TruthCell::Free)
+            })
+        })
+    };
     let mut g = MapGrade::default();
-    let (mut occ_ok, mut free_ok) = (0usize, 0usize);
+    let (mut occ_ok, mut free_ok, mut hazard_ok) = (0usize, 0usize, 0usize);
     for (i, v) in map.data.iter().enumerate() {
         let p = Point2::new(
             ox + ((i % w) as f64 + 0.5) * res,
@@ -148,6 +174,10 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
             OccupancyGrid::OCCUPIED => {
                 g.occupied_cells += 1;
                 occ_ok += usize::from(obstacle_near(p));
+            }
+            OccupancyGrid::HAZARD => {
+                g.hazard_cells += 1;
+                hazard_ok += usize::from(untraversable_near(p));
             }
             OccupancyGrid::FREE => {
                 g.free_cells += 1;
@@ -173,6 +203,26 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
         }
     }
     g.explorable_known = known as f64 / explorable.max(1) as f64;
+    g.hazard_correct = hazard_ok as f64 / g.hazard_cells.max(1) as f64;
+    let map_at = |p: Point2| {
+        let (fx, fy) = ((p.x_m - ox) / res, (p.y_m - oy) / res);
+        (fx >= 0.0 && fy >= 0.0 && (fx as usize) < w && (fy as usize) < map.info.height as usize)
+            .then(|| map.data[fy as usize * w + fx as usize])
+    };
+    let mut flagged = 0usize;
+    for (c, t) in truth.traversability.iter() {
+        if *t != TruthCell::Hazard {
+            continue;
+        }
+        match map_at(truth.traversability.geometry().cell_center(c)) {
+            None | Some(OccupancyGrid::UNKNOWN) => {}
+            Some(v) => {
+                g.true_hazards_known += 1;
+                flagged += usize::from(v == OccupancyGrid::HAZARD || v == OccupancyGrid::OCCUPIED);
+            }
+        }
+    }
+    g.true_hazards_flagged = flagged as f64 / g.true_hazards_known.max(1) as f64;
     g
 }
 

@@ -2,7 +2,8 @@
 //! to the
 //! [`Mapper`](realms_slam::mapper::Mapper), and publishes what the rest of the mission needs
 //! to know: the pose with its covariance after every scan, every change of localisation state
-//! with its reason, and the map now and then.
+//! with its reason, and the map now and then. Depth frames feed a hazard layer
+//! ([`HazardMap`]) that marks what the lidar cannot see (crater bowls, low rocks) in the map.
 //!
 //! The map frame is the odometry frame at the first scan, so a rover that starts where its
 //! odometry says (as in the simulator, where odometry starts at the true pose) maps in the
@@ -12,12 +13,13 @@ use crate::Outgoing;
 use realms_core::geometry::{Quaternion, Vec3, normalize_angle_rad};
 use realms_core::msgs::{
     Header, Imu, LaserScan, LocalisationStatus, MapMetaData, Message, OccupancyGrid, Odometry,
-    Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
+    PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
 };
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
+use realms_slam::traversability::{HazardMap, TraversabilityConfig, judge_frame};
 
 /// Setup of the on-board SLAM.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,15 +37,25 @@ pub struct MappingConfig {
     pub map_period: Duration,
     /// The rover stands still this long at the start while the gyro's bias is measured.
     pub gyro_calibration: Duration,
+    /// `base_from_optical` of the depth camera: rotation (row-major) ...
+    pub depth_rot: [[f64; 3]; 3],
+    /// ... and origin in the base frame, metres.
+    pub depth_origin_m: [f64; 3],
+    /// What the rover can drive over, for the hazard layer.
+    pub traversability: TraversabilityConfig,
 }
 
 /// SLAM tuned for the simulated rover: the lidar reaches 12 m, the arena is small, and the
-/// rover is slow, so keyframes are sparser than on the office logs.
+/// rover is slow, so keyframes are sparser than on the office logs, and submaps covering
+/// ground a newer one covers are dropped.
 pub fn rover_mapper_config() -> MapperConfig {
     let mut cfg = MapperConfig::default();
     cfg.frontend.max_range_m = 12.0;
     cfg.keyframe_translation_m = 0.3;
     cfg.keyframe_rotation_rad = 10f64.to_radians();
+    // Hours of driving in one hall: keep one submap per few metres of ground, not per few
+    // metres driven.
+    cfg.trim_radius_m = Some(3.0);
     cfg
 }
 
@@ -53,6 +65,7 @@ pub struct Mapping {
     id: RoverId,
     cfg: MappingConfig,
     mapper: Mapper,
+    hazards: HazardMap,
     /// The two latest odometry poses (wheel translation, gyro heading), oldest first, to
     /// interpolate at a scan's stamp.
     odometry: Vec<(Time, Pose2)>,
@@ -76,6 +89,7 @@ impl Mapping {
         Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
+            hazards: HazardMap::new(cfg.traversability.resolution_m),
             cfg,
             odometry: Vec::new(),
             last_wheel: None,
@@ -183,6 +197,53 @@ impl Mapping {
     /// The gyro bias measured at the start, rad/s, once known.
     pub fn gyro_bias_rad_s(&self) -> Option<f64> {
         self.gyro_bias_rad_s
+    }
+
+    /// The rotation that levels body-frame vectors (undoes pitch and roll, keeps yaw), from
+    /// the smoothed gravity: the body's rotation is Rz(yaw) Ry(pitch) Rx(roll) (REP 103), and
+    /// gravity's reaction in the body frame is the last row of Ry(pitch) Rx(roll).
+    fn levelling(&self) -> [[f64; 3]; 3] {
+        let [gx, gy, gz] = self.gravity;
+        let norm = (gx * gx + gy * gy + gz * gz).sqrt().max(1e-6);
+        let pitch = (-gx / norm).clamp(-1.0, 1.0).asin();
+        let roll = gy.atan2(gz);
+        let (sp, cp) = pitch.sin_cos();
+        let (sr, cr) = roll.sin_cos();
+        [
+            [cp, sp * sr, sp * cr],
+            [0.0, cr, -sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    }
+
+    /// Takes a depth frame: judges the ground it sees and fuses the verdicts into the hazard
+    /// layer at the current pose. Nothing is written while lost.
+    pub fn on_depth(&mut self, cloud: &PointCloud) {
+        if self.mapper.state() == LocalisationState::Lost || self.odometry.is_empty() {
+            return;
+        }
+        let level = self.levelling();
+        let (r, o) = (&self.cfg.depth_rot, &self.cfg.depth_origin_m);
+        let points: Vec<[f64; 3]> = cloud
+            .points_in_sensor
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .map(|p| {
+                let v = [p[0] as f64, p[1] as f64, p[2] as f64];
+                let b = [
+                    r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2] + o[0],
+                    r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2] + o[1],
+                    r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2] + o[2],
+                ];
+                [
+                    level[0][0] * b[0] + level[0][1] * b[1] + level[0][2] * b[2],
+                    level[1][0] * b[0] + level[1][1] * b[1] + level[1][2] * b[2],
+                    level[2][0] * b[0] + level[2][1] * b[1] + level[2][2] * b[2],
+                ]
+            })
+            .collect();
+        let verdicts = judge_frame(&points, &self.cfg.traversability);
+        self.hazards.insert(self.mapper.pose(), &verdicts);
     }
 
     /// Odometry at `t`, interpolated (or extrapolated a little) from the latest two readings.
@@ -324,13 +385,17 @@ impl Mapping {
                     orientation: Quaternion::IDENTITY,
                 },
             },
+            // The lidar passes over crater bowls and low rocks and calls them free: the
+            // hazard layer overrules it everywhere but on what the lidar sees as obstacles.
             data: states
-                .cells()
                 .iter()
-                .map(|c| match c {
+                .map(|(cell, c)| match c {
+                    CellState::Occupied => OccupancyGrid::OCCUPIED,
+                    _ if self.hazards.hazard_at(g.cell_center(cell)) == Some(true) => {
+                        OccupancyGrid::HAZARD
+                    }
                     CellState::Unknown => OccupancyGrid::UNKNOWN,
                     CellState::Free => OccupancyGrid::FREE,
-                    CellState::Occupied => OccupancyGrid::OCCUPIED,
                 })
                 .collect(),
         }
@@ -352,6 +417,9 @@ mod tests {
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 gyro_calibration: Duration::from_secs(5),
+                depth_rot: [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]],
+                depth_origin_m: [0.2, 0.0, 0.3],
+                traversability: TraversabilityConfig::default(),
             },
         )
     }

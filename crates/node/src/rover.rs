@@ -87,7 +87,10 @@ impl Node for RoverNode {
             }
             Message::Odometry(odom) => self.mapping.on_odometry(odom),
             Message::Imu(imu) => self.mapping.on_imu(imu),
-            Message::PointCloud(cloud) => self.wander.on_depth(now, cloud),
+            Message::PointCloud(cloud) => {
+                self.mapping.on_depth(cloud);
+                self.wander.on_depth(now, cloud);
+            }
             _ => {}
         }
     }

@@ -11,6 +11,7 @@
 //! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
 //! - [`health`]: notices unreliable odometry and lost tracking, from the scans.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
+//! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 
 pub mod bnb;
@@ -24,3 +25,4 @@ pub mod numeric_lines;
 pub mod occupancy;
 pub mod posegraph;
 pub mod trajectory;
+pub mod traversability;

@@ -74,6 +74,9 @@ pub struct MapperConfig {
     pub loop_candidates: usize,
     /// When to call the estimate unreliable or lost.
     pub health: HealthConfig,
+    /// A finished submap whose origin lies this close to a newer finished one's is dropped
+    /// (`None`: keep every submap, as for a recorded log).
+    pub trim_radius_m: Option<f64>,
 }
 
 impl Default for MapperConfig {
@@ -91,6 +94,7 @@ impl Default for MapperConfig {
             loop_ambiguity_margin: 0.08,
             loop_candidates: 3,
             health: HealthConfig::default(),
+            trim_radius_m: None,
         }
     }
 }
@@ -103,6 +107,8 @@ struct Submap {
     finished: bool,
     /// The closure search's precomputation, made when first searched (the map is final).
     precomputed: Option<PrecomputedMap>,
+    /// Its grids were dropped because a newer submap covers the same ground.
+    trimmed: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -297,7 +303,7 @@ impl Mapper {
         };
         let pose = self.pose;
         let mut order: Vec<(f64, usize)> = (0..self.submaps.len())
-            .filter(|s| self.submaps[*s].keyframes > 0)
+            .filter(|s| self.submaps[*s].keyframes > 0 && !self.submaps[*s].trimmed)
             .map(|s| {
                 let origin = self.graph.nodes[self.submaps[s].origin_node];
                 (origin.position().distance_m(pose.position()), s)
@@ -406,6 +412,7 @@ impl Mapper {
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
+                trimmed: false,
             });
         }
         let active: Vec<usize> = (0..self.submaps.len())
@@ -415,6 +422,7 @@ impl Mapper {
             self.insert(s, node);
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
+                self.trim_submaps(s);
             }
         }
         // Closures are searched every few keyframes and the graph re-optimised in batches:
@@ -437,7 +445,10 @@ impl Mapper {
         let mut candidates: Vec<(f64, usize)> = (0..self.submaps.len())
             .filter_map(|s| {
                 let sub = &self.submaps[s];
-                if !sub.finished || sub.origin_node + 2 * self.cfg.submap_keyframes > node {
+                if !sub.finished
+                    || sub.trimmed
+                    || sub.origin_node + 2 * self.cfg.submap_keyframes > node
+                {
                     return None;
                 }
                 let d = self.graph.nodes[sub.origin_node]
@@ -556,17 +567,56 @@ impl Mapper {
             .collect()
     }
 
-    /// A map of every keyframe at its optimised pose.
+    /// The whole map: every kept submap at its optimised pose, their evidence added up (as
+    /// Cartographer assembles its global map from submaps). Costs the submaps' cells, not
+    /// the keyframes' beams, so a rover can publish it often.
     pub fn render_map(&self) -> crate::occupancy::OccupancyGrid {
         let mut grid = crate::occupancy::OccupancyGrid::new(self.cfg.frontend.resolution_m);
-        for (pose, points) in self.graph.nodes.iter().zip(&self.keyframe_points) {
-            let world: Vec<(Point2, bool)> = points
-                .iter()
-                .map(|p| (pose.transform_point(*p), true))
-                .collect();
-            grid.insert(pose.position(), &world);
+        for sub in self
+            .submaps
+            .iter()
+            .filter(|s| s.keyframes > 0 && !s.trimmed)
+        {
+            let origin = self.graph.nodes[sub.origin_node];
+            let local = sub.map.finest();
+            let (lo, hi) = local.bounds();
+            let corners = [
+                lo,
+                Point2::new(hi.x_m, lo.y_m),
+                hi,
+                Point2::new(lo.x_m, hi.y_m),
+            ]
+            .map(|c| origin.transform_point(c));
+            let min = corners.iter().fold(corners[0], |m, c| {
+                Point2::new(m.x_m.min(c.x_m), m.y_m.min(c.y_m))
+            });
+            let max = corners.iter().fold(corners[0], |m, c| {
+                Point2::new(m.x_m.max(c.x_m), m.y_m.max(c.y_m))
+            });
+            let to_local = origin.inverse();
+            grid.accumulate(min, max, |p| local.log_odds_at(to_local.transform_point(p)));
         }
         grid
+    }
+
+    /// Drops the grids of finished submaps that the just-finished submap `newest` makes
+    /// redundant: their origins lie within the trim radius of its origin, so it covers
+    /// nearly the same ground. Keeps a long mission's memory bounded by the area explored,
+    /// not the distance driven. Their keyframes stay in the graph.
+    fn trim_submaps(&mut self, newest: usize) {
+        let Some(radius) = self.cfg.trim_radius_m else {
+            return;
+        };
+        let at = self.graph.nodes[self.submaps[newest].origin_node].position();
+        for s in 0..newest {
+            let origin = self.graph.nodes[self.submaps[s].origin_node].position();
+            let sub = &mut self.submaps[s];
+            if sub.finished && !sub.trimmed && origin.distance_m(at) <= radius {
+                sub.map.release();
+                sub.precomputed = None;
+                sub.trimmed = true;
+            }
+        }
     }
 
     /// Optimises the whole graph once more (at the end of a log).

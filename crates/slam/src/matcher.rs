@@ -30,6 +30,13 @@ impl MultiResMap {
         }
     }
 
+    /// Gives the memory of every level back (see [`OccupancyGrid::release`]).
+    pub fn release(&mut self) {
+        for l in &mut self.levels {
+            l.release();
+        }
+    }
+
     /// The finest map.
     pub fn finest(&self) -> &OccupancyGrid {
         &self.levels[0]

@@ -170,6 +170,85 @@ impl OccupancyGrid {
         }
     }
 
+    /// The log-odds of the cell holding `p`; 0 (no evidence) outside the grid.
+    pub fn log_odds_at(&self, p: Point2) -> f32 {
+        let r = self.resolution_m;
+        let (fx, fy) = (
+            ((p.x_m - self.origin.x_m) / r).floor(),
+            ((p.y_m - self.origin.y_m) / r).floor(),
+        );
+        if fx >= 0.0 && fy >= 0.0 && fx < self.width as f64 && fy < self.height as f64 {
+            self.log_odds[fy as usize * self.width + fx as usize]
+        } else {
+            0.0
+        }
+    }
+
+    /// Adds `evidence(p)` (log-odds) to every cell in the world box `[min, max]`, at the
+    /// cell's centre `p`; grows the grid to hold the box.
+    pub fn accumulate(&mut self, min: Point2, max: Point2, evidence: impl Fn(Point2) -> f32) {
+        self.ensure(min, max);
+        let r = self.resolution_m;
+        let x0 = ((min.x_m - self.origin.x_m) / r).floor().max(0.0) as usize;
+        let y0 = ((min.y_m - self.origin.y_m) / r).floor().max(0.0) as usize;
+        let x1 = (((max.x_m - self.origin.x_m) / r).floor() as usize).min(self.width - 1);
+        let y1 = (((max.y_m - self.origin.y_m) / r).floor() as usize).min(self.height - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let p = Point2::new(
+                    self.origin.x_m + (x as f64 + 0.5) * r,
+                    self.origin.y_m + (y as f64 + 0.5) * r,
+                );
+                let e = evidence(p);
+                if e != 0.0 {
+                    self.update(y * self.width + x, e);
+                }
+            }
+        }
+    }
+
+    /// The world box the grid covers now.
+    pub fn bounds(&self) -> (Point2, Point2) {
+        let r = self.resolution_m;
+        (
+            self.origin,
+            Point2::new(
+                self.origin.x_m + self.width as f64 * r,
+                self.origin.y_m + self.height as f64 * r,
+            ),
+        )
+    }
+
+    /// Gives the memory back: an empty one-cell grid remains (for a submap that another
+    /// covers).
+    pub fn release(&mut self) {
+        self.width = 1;
+        self.height = 1;
+        self.log_odds = vec![0.0];
+        self.prob = vec![0.5];
+    }
+
+    /// Updates the cells under single observations, without tracing beams: `true` is
+    /// evidence for the cell's property (occupied, or hazardous in a hazard layer), `false`
+    /// against it.
+    pub fn observe_cells(&mut self, observations: &[(Point2, bool)]) {
+        let Some(first) = observations.first() else {
+            return;
+        };
+        let (mut min, mut max) = (first.0, first.0);
+        for (p, _) in observations {
+            min = Point2::new(min.x_m.min(p.x_m), min.y_m.min(p.y_m));
+            max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
+        }
+        self.ensure(min, max);
+        let r = self.resolution_m;
+        for (p, yes) in observations {
+            let x = ((p.x_m - self.origin.x_m) / r).floor() as usize;
+            let y = ((p.y_m - self.origin.y_m) / r).floor() as usize;
+            self.update(y * self.width + x, if *yes { HIT } else { MISS });
+        }
+    }
+
     /// Occupancy probability at a world point, bilinear between cell centres, with its
     /// gradient per metre; 0.5 (unknown) outside the grid.
     pub fn probability_and_gradient(&self, p: Point2) -> (f64, [f64; 2]) {

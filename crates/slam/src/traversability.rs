@@ -1,0 +1,254 @@
+//! Where the rover must not drive although its 2D lidar sees nothing there: rocks lower than
+//! the lidar plane but taller than the rover can climb, crater slopes and bowls. Built from
+//! depth-camera points, one frame at a time, as a local elevation grid in the rover's levelled
+//! frame; each cell is judged by its step (the highest point above the local floor), its
+//! slope (the height change to the cells around it) and its depth below the ground the rover
+//! stands on. The verdicts are fused into a [`HazardMap`] in the map frame, a log-odds grid
+//! like the occupancy map, so one noisy frame does not decide a cell.
+//!
+//! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
+//! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
+
+use crate::occupancy::{CellState, OccupancyGrid};
+use realms_core::{Grid, Point2, Pose2};
+
+/// Limits and sampling.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraversabilityConfig {
+    /// Elevation cell edge, metres.
+    pub resolution_m: f64,
+    /// Tallest step the rover drives over, metres.
+    pub max_step_m: f64,
+    /// Steepest slope it drives on, radians.
+    pub max_slope_rad: f64,
+    /// Ground this far below the ground under the rover is a drop (a crater bowl), metres.
+    pub max_drop_m: f64,
+    /// Points farther than this are not judged (depth noise grows with range), metres.
+    pub max_range_m: f64,
+    /// A cell needs at least this many points to be judged.
+    pub min_points: usize,
+}
+
+impl Default for TraversabilityConfig {
+    fn default() -> Self {
+        TraversabilityConfig {
+            resolution_m: 0.1,
+            max_step_m: 0.08,
+            max_slope_rad: 20f64.to_radians(),
+            max_drop_m: 0.15,
+            max_range_m: 4.0,
+            min_points: 2,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Column {
+    n: u32,
+    sum_z: f64,
+    min_z: f64,
+    max_z: f64,
+}
+
+/// Judges the cells one depth frame sees. `points` are `[x, y, z]` in the rover's levelled
+/// frame: x forward, y left, z up from the ground under the rover, gravity-aligned. Returns
+/// each judged cell's centre in that frame and whether it is hazardous.
+pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Point2, bool)> {
+    let r = cfg.resolution_m;
+    let half = (cfg.max_range_m / r).ceil() as i64;
+    let side = (2 * half + 1) as usize;
+    let mut cols = vec![Column::default(); side * side];
+    let index = |x: f64, y: f64| -> Option<usize> {
+        let (ix, iy) = ((x / r).floor() as i64 + half, (y / r).floor() as i64 + half);
+        (ix >= 0 && iy >= 0 && ix < side as i64 && iy < side as i64)
+            .then(|| iy as usize * side + ix as usize)
+    };
+    for p in points {
+        if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
+            || p[0].hypot(p[1]) > cfg.max_range_m
+        {
+            continue;
+        }
+        let Some(i) = index(p[0], p[1]) else { continue };
+        let c = &mut cols[i];
+        if c.n == 0 {
+            c.min_z = p[2];
+            c.max_z = p[2];
+        }
+        c.n += 1;
+        c.sum_z += p[2];
+        c.min_z = c.min_z.min(p[2]);
+        c.max_z = c.max_z.max(p[2]);
+    }
+    let judged = |i: usize| cols[i].n as usize >= cfg.min_points;
+    let mean = |i: usize| cols[i].sum_z / cols[i].n as f64;
+    // The slope is measured over two cells so depth noise matters less.
+    let baseline = 2i64;
+    let max_rise = cfg.max_slope_rad.tan() * baseline as f64 * r;
+    let mut out = Vec::new();
+    for iy in 0..side as i64 {
+        for ix in 0..side as i64 {
+            let i = iy as usize * side + ix as usize;
+            if !judged(i) {
+                continue;
+            }
+            // The local floor: the lowest point within 0.25 m.
+            let reach = (0.25 / r).ceil() as i64;
+            let mut floor = cols[i].min_z;
+            let mut steep = false;
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let (x, y) = (ix + dx, iy + dy);
+                    if x < 0 || y < 0 || x >= side as i64 || y >= side as i64 {
+                        continue;
+                    }
+                    let j = y as usize * side + x as usize;
+                    if !judged(j) {
+                        continue;
+                    }
+                    floor = floor.min(cols[j].min_z);
+                    if dx.abs().max(dy.abs()) == baseline
+                        && (dx == 0 || dy == 0)
+                        && (mean(j) - mean(i)).abs() > max_rise
+                    {
+                        steep = true;
+                    }
+                }
+            }
+            let step = cols[i].max_z - floor > cfg.max_step_m;
+            let drop = mean(i) < -cfg.max_drop_m;
+            let centre = Point2::new(
+                (ix - half) as f64 * r + r / 2.0,
+                (iy - half) as f64 * r + r / 2.0,
+            );
+            out.push((centre, step || steep || drop));
+        }
+    }
+    out
+}
+
+/// The fused hazard layer, in the map frame.
+#[derive(Clone, Debug)]
+pub struct HazardMap {
+    grid: OccupancyGrid,
+}
+
+impl HazardMap {
+    /// An empty layer with `resolution_m` cells.
+    pub fn new(resolution_m: f64) -> Self {
+        HazardMap {
+            grid: OccupancyGrid::new(resolution_m),
+        }
+    }
+
+    /// Fuses one frame's verdicts, judged with the rover at `pose` (map frame).
+    pub fn insert(&mut self, pose: Pose2, verdicts: &[(Point2, bool)]) {
+        let world: Vec<(Point2, bool)> = verdicts
+            .iter()
+            .map(|(p, h)| (pose.transform_point(*p), *h))
+            .collect();
+        self.grid.observe_cells(&world);
+    }
+
+    /// Whether the layer holds the cell at `p` hazardous (`Some(true)`), safe
+    /// (`Some(false)`), or has not seen it (`None`).
+    pub fn hazard_at(&self, p: Point2) -> Option<bool> {
+        let (prob, _) = self.grid.probability_and_gradient(p);
+        if prob > 0.6 {
+            Some(true)
+        } else if prob < 0.4 {
+            Some(false)
+        } else {
+            None
+        }
+    }
+
+    /// Every cell: hazardous (`Occupied`), safe (`Free`) or unseen.
+    pub fn states(&self) -> Grid<CellState> {
+        self.grid.states()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points every 2 cm over `[0.5, 3.5] x [-1.5, 1.5]` of a floor given by `height`.
+    fn surface(height: impl Fn(f64, f64) -> f64) -> Vec<[f64; 3]> {
+        let mut pts = Vec::new();
+        for i in 0..150 {
+            for j in 0..150 {
+                let (x, y) = (0.5 + i as f64 * 0.02, -1.5 + j as f64 * 0.02);
+                pts.push([x, y, height(x, y)]);
+            }
+        }
+        pts
+    }
+
+    fn verdict_at(v: &[(Point2, bool)], x: f64, y: f64) -> Option<bool> {
+        v.iter()
+            .find(|(c, _)| (c.x_m - x).abs() <= 0.05 && (c.y_m - y).abs() <= 0.05)
+            .map(|(_, h)| *h)
+    }
+
+    #[test]
+    fn a_flat_gently_undulating_floor_is_safe_everywhere() {
+        let floor = |x: f64, y: f64| 0.05 * (x * std::f64::consts::TAU / 6.0).sin() + 0.01 * y;
+        let v = judge_frame(&surface(floor), &TraversabilityConfig::default());
+        assert!(v.len() > 500, "{} cells judged", v.len());
+        assert!(v.iter().all(|(_, h)| !h), "a hazard on a flat floor");
+    }
+
+    #[test]
+    fn a_low_rock_a_steep_bank_and_a_bowl_are_hazards_and_their_surroundings_are_not() {
+        let cfg = TraversabilityConfig::default();
+        // A 12 cm rock (under the 30 cm lidar plane, over the 8 cm step limit) at (1.5, 0.8).
+        let rock = |x: f64, y: f64| {
+            if (x - 1.5).hypot(y - 0.8) < 0.15 {
+                0.12
+            } else {
+                0.0
+            }
+        };
+        let v = judge_frame(&surface(rock), &cfg);
+        assert_eq!(verdict_at(&v, 1.55, 0.85), Some(true));
+        assert_eq!(verdict_at(&v, 1.55, -0.75), Some(false));
+        // A 35 degree bank rising from x = 2.5.
+        let bank = |x: f64, _y: f64| if x > 2.5 { (x - 2.5) * 0.7 } else { 0.0 };
+        let v = judge_frame(&surface(bank), &cfg);
+        assert_eq!(verdict_at(&v, 2.95, 0.05), Some(true));
+        assert_eq!(verdict_at(&v, 1.05, 0.05), Some(false));
+        // A bowl 30 cm deep with gentle walls beyond x = 2.8: too deep to enter.
+        let bowl = |x: f64, _y: f64| {
+            if x > 2.8 {
+                -0.3
+            } else if x > 2.0 {
+                -(x - 2.0) * 0.3
+            } else {
+                0.0
+            }
+        };
+        let v = judge_frame(&surface(bowl), &cfg);
+        assert_eq!(verdict_at(&v, 3.25, 0.05), Some(true));
+        assert_eq!(verdict_at(&v, 1.05, 0.05), Some(false));
+    }
+
+    #[test]
+    fn the_layer_fuses_frames_in_the_map_frame() {
+        let mut layer = HazardMap::new(0.1);
+        let pose = Pose2::new(10.0, 5.0, std::f64::consts::FRAC_PI_2);
+        // The rover faces +y in the map: a verdict 1 m ahead lands at (10, 6).
+        for _ in 0..3 {
+            layer.insert(
+                pose,
+                &[
+                    (Point2::new(1.05, 0.05), true),
+                    (Point2::new(2.05, 0.05), false),
+                ],
+            );
+        }
+        assert_eq!(layer.hazard_at(Point2::new(9.95, 6.05)), Some(true));
+        assert_eq!(layer.hazard_at(Point2::new(9.95, 7.05)), Some(false));
+        assert_eq!(layer.hazard_at(Point2::new(0.0, 0.0)), None);
+    }
+}
