@@ -19,7 +19,10 @@ use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
-use realms_slam::traversability::{HazardMap, TraversabilityConfig, judge_frame};
+use realms_slam::traversability::{HazardMap, TraversabilityConfig, judge_frame, shadow_gaps};
+
+/// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
+const SHADOW_MIN_GAP_M: f64 = 0.5;
 
 /// Setup of the on-board SLAM.
 #[derive(Clone, Debug, PartialEq)]
@@ -66,6 +69,7 @@ pub struct Mapping {
     cfg: MappingConfig,
     mapper: Mapper,
     hazards: HazardMap,
+    tracked_once: bool,
     /// The two latest odometry poses (wheel translation, gyro heading), oldest first, to
     /// interpolate at a scan's stamp.
     odometry: Vec<(Time, Pose2)>,
@@ -90,6 +94,7 @@ impl Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
             hazards: HazardMap::new(cfg.traversability.resolution_m),
+            tracked_once: false,
             cfg,
             odometry: Vec::new(),
             last_wheel: None,
@@ -219,15 +224,15 @@ impl Mapping {
     /// Takes a depth frame: judges the ground it sees and fuses the verdicts into the hazard
     /// layer at the current pose. Nothing is written while lost.
     pub fn on_depth(&mut self, cloud: &PointCloud) {
-        if self.mapper.state() == LocalisationState::Lost || self.odometry.is_empty() {
+        // Nothing before the first scan has placed the rover, and nothing while lost.
+        if self.mapper.state() == LocalisationState::Lost || !self.tracked_once {
             return;
         }
         let level = self.levelling();
         let (r, o) = (&self.cfg.depth_rot, &self.cfg.depth_origin_m);
-        let points: Vec<[f64; 3]> = cloud
+        let levelled: Vec<[f64; 3]> = cloud
             .points_in_sensor
             .iter()
-            .filter(|p| p.iter().all(|v| v.is_finite()))
             .map(|p| {
                 let v = [p[0] as f64, p[1] as f64, p[2] as f64];
                 let b = [
@@ -242,7 +247,24 @@ impl Mapping {
                 ]
             })
             .collect();
-        let verdicts = judge_frame(&points, &self.cfg.traversability);
+        let points: Vec<[f64; 3]> = levelled
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .copied()
+            .collect();
+        let mut verdicts = judge_frame(&points, &self.cfg.traversability);
+        // The organised cloud's columns, for the ground hidden behind rims.
+        let (w, h) = (cloud.width as usize, cloud.height as usize);
+        if w * h == cloud.points_in_sensor.len() && w > 0 {
+            let columns: Vec<Vec<[f64; 3]>> = (0..w)
+                .map(|c| (0..h).map(|r| levelled[r * w + c]).collect())
+                .collect();
+            verdicts.extend(shadow_gaps(
+                &columns,
+                &self.cfg.traversability,
+                SHADOW_MIN_GAP_M,
+            ));
+        }
         self.hazards.insert(self.mapper.pose(), &verdicts);
     }
 
@@ -304,6 +326,7 @@ impl Mapping {
             points.push(Point2::new(x, y));
         }
         let tracked = self.mapper.add_points(stamp.as_secs_f64(), odom, points);
+        self.tracked_once = true;
         for (_, change) in self.mapper.take_transitions() {
             out.push(Outgoing {
                 topic: self.id.topic("localisation"),
@@ -393,6 +416,12 @@ impl Mapping {
                     CellState::Occupied => OccupancyGrid::OCCUPIED,
                     _ if self.hazards.hazard_at(g.cell_center(cell)) == Some(true) => {
                         OccupancyGrid::HAZARD
+                    }
+                    // Ground the depth camera saw and judged drivable is known free too.
+                    CellState::Unknown
+                        if self.hazards.hazard_at(g.cell_center(cell)) == Some(false) =>
+                    {
+                        OccupancyGrid::FREE
                     }
                     CellState::Unknown => OccupancyGrid::UNKNOWN,
                     CellState::Free => OccupancyGrid::FREE,

@@ -6,6 +6,9 @@
 //! stands on. The verdicts are fused into a [`HazardMap`] in the map frame, a log-odds grid
 //! like the occupancy map, so one noisy frame does not decide a cell.
 //!
+//! Crater bowls seen from outside are mostly hidden behind the rim; [`shadow_gaps`] marks
+//! the hidden ground as hazardous when the visible ground resumes lower beyond it.
+//!
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
 
@@ -37,10 +40,13 @@ impl Default for TraversabilityConfig {
             max_slope_rad: 20f64.to_radians(),
             max_drop_m: 0.15,
             max_range_m: 4.0,
-            min_points: 2,
+            min_points: 1,
         }
     }
 }
+
+/// Height differences up to this are depth noise, not slope, metres.
+const SLOPE_NOISE_M: f64 = 0.02;
 
 #[derive(Clone, Copy, Debug, Default)]
 struct Column {
@@ -84,7 +90,7 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     let mean = |i: usize| cols[i].sum_z / cols[i].n as f64;
     // The slope is measured over two cells so depth noise matters less.
     let baseline = 2i64;
-    let max_rise = cfg.max_slope_rad.tan() * baseline as f64 * r;
+    let slope = cfg.max_slope_rad.tan();
     let mut out = Vec::new();
     for iy in 0..side as i64 {
         for ix in 0..side as i64 {
@@ -107,9 +113,11 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
                         continue;
                     }
                     floor = floor.min(cols[j].min_z);
-                    if dx.abs().max(dy.abs()) == baseline
-                        && (dx == 0 || dy == 0)
-                        && (mean(j) - mean(i)).abs() > max_rise
+                    // Far from the camera the points thin out to a few cells per row, so
+                    // the slope is taken to any judged neighbour at least two cells away.
+                    let dist = ((dx * dx + dy * dy) as f64).sqrt();
+                    if dist >= baseline as f64
+                        && (mean(j) - mean(i)).abs() > slope * dist * r + SLOPE_NOISE_M
                     {
                         steep = true;
                     }
@@ -122,6 +130,47 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
                 (iy - half) as f64 * r + r / 2.0,
             );
             out.push((centre, step || steep || drop));
+        }
+    }
+    out
+}
+
+/// Negative obstacles: the ground the camera cannot see behind a crater's rim. Along each
+/// image column (`columns[c]`: that column's points in the levelled frame, any order), the
+/// ground points are walked outwards; where they stop and resume more than `min_gap_m`
+/// farther out *and lower*, the ground in between dropped out of sight, and every cell of the
+/// gap is judged hazardous. A rise (a rock's shadow) is left to [`judge_frame`].
+pub fn shadow_gaps(
+    columns: &[Vec<[f64; 3]>],
+    cfg: &TraversabilityConfig,
+    min_gap_m: f64,
+) -> Vec<(Point2, bool)> {
+    let mut out = Vec::new();
+    for col in columns {
+        let mut pts: Vec<(f64, [f64; 3])> = col
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .map(|p| (p[0].hypot(p[1]), *p))
+            .filter(|(d, _)| *d <= cfg.max_range_m)
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for w in pts.windows(2) {
+            let ((d0, near), (d1, far)) = (w[0], w[1]);
+            if d1 - d0 < min_gap_m || far[2] > near[2] - cfg.max_step_m {
+                continue;
+            }
+            // Cells along the hidden stretch, at the resolution of the layer.
+            let steps = ((d1 - d0) / cfg.resolution_m).ceil() as usize;
+            for k in 1..steps {
+                let t = k as f64 / steps as f64;
+                out.push((
+                    Point2::new(
+                        near[0] + t * (far[0] - near[0]),
+                        near[1] + t * (far[1] - near[1]),
+                    ),
+                    true,
+                ));
+            }
         }
     }
     out
@@ -231,6 +280,26 @@ mod tests {
         let v = judge_frame(&surface(bowl), &cfg);
         assert_eq!(verdict_at(&v, 3.25, 0.05), Some(true));
         assert_eq!(verdict_at(&v, 1.05, 0.05), Some(false));
+    }
+
+    #[test]
+    fn ground_hidden_behind_a_rim_and_resuming_lower_is_a_hazard_but_a_rock_shadow_is_not() {
+        let cfg = TraversabilityConfig::default();
+        // One column: floor to 2.0 m, nothing seen until 3.6 m, then ground 12 cm lower.
+        let mut col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
+        col.extend((0..4).map(|k| [3.6 + k as f64 * 0.1, 0.0, -0.12]));
+        let v = shadow_gaps(&[col.clone()], &cfg, 0.5);
+        assert!(
+            v.iter().any(|(p, h)| *h && (p.x_m - 3.0).abs() < 0.1),
+            "{v:?}"
+        );
+        assert!(v.iter().all(|(p, _)| p.x_m > 2.0 && p.x_m < 3.6));
+        // The same gap with the far ground at the same height (a rock's shadow on the
+        // floor, or just sparse points): nothing.
+        for p in col.iter_mut().skip(20) {
+            p[2] = 0.0;
+        }
+        assert!(shadow_gaps(&[col], &cfg, 0.5).is_empty());
     }
 
     #[test]
