@@ -4,7 +4,7 @@
 //! graded against the simulator's ground truth, hazards included.
 
 use realms_core::msgs::{LocalisationState, OccupancyGrid};
-use realms_core::{Duration, Point2, Pose2, Time};
+use realms_core::{Duration, Grid, Point2, Pose2, Time};
 use realms_sim::{GroundTruth, TruthCell};
 use serde::Serialize;
 
@@ -123,46 +123,28 @@ pub struct MapGrade {
     pub true_hazards_flagged: f64,
 }
 
+/// Whether any cell of `grid` within `reach_m` (per axis) of `p` satisfies `pred`.
+fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> bool) -> bool {
+    let reach = (reach_m / grid.resolution_m()).ceil() as i64;
+    let Some(c) = grid.geometry().world_to_cell(p) else {
+        return false;
+    };
+    (-reach..=reach).any(|dy| {
+        (-reach..=reach).any(|dx| {
+            let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+            x >= 0 && y >= 0 && grid.get(x as usize, y as usize).is_some_and(&pred)
+        })
+    })
+}
+
 /// Grades `map` (in the arena frame) against `truth`.
 pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
     let res = map.info.resolution_m as f64;
     let (ox, oy) = (map.info.origin.position.x, map.info.origin.position.y);
     let w = map.info.width as usize;
-    let obstacle_near = |p: Point2| {
-        let r = truth.lidar_obstacles.resolution_m();
-        let reach = (res / r).ceil() as i64;
-        let Some(c) = truth.lidar_obstacles.geometry().world_to_cell(p) else {
-            return false;
-        };
-        (-reach..=reach).any(|dy| {
-            (-reach..=reach).any(|dx| {
-                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
-                x >= 0
-                    && y >= 0
-                    && truth
-                        .lidar_obstacles
-                        .get(x as usize, y as usize)
-                        .copied()
-                        .unwrap_or(false)
-            })
-        })
-    };
-    let untraversable_near = |p: Point2| {
-        let t = &truth.traversability;
-        let reach = (res / t.resolution_m()).ceil() as i64;
-        let Some(c) = t.geometry().world_to_cell(p) else {
-            return false;
-        };
-        (-reach..=reach).any(|dy| {
-            (-reach..=reach).any(|dx| {
-                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
-                x >= 0
-                    && y >= 0
-                    && t.get(x as usize, y as usize)
-                        .is_some_and(|v| *v != TruthCell::Free)
-            })
-        })
-    };
+    let obstacle_near = |p: Point2| any_within(&truth.lidar_obstacles, p, res, |v| *v);
+    let untraversable_near =
+        |p: Point2| any_within(&truth.traversability, p, res, |v| *v != TruthCell::Free);
     let mut g = MapGrade::default();
     let (mut occ_ok, mut free_ok, mut hazard_ok) = (0usize, 0usize, 0usize);
     for (i, v) in map.data.iter().enumerate() {

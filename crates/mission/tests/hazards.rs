@@ -4,7 +4,7 @@
 use realms_core::msgs::OccupancyGrid;
 use realms_core::{Point2, Pose2, Time};
 use realms_mission::Mission;
-use realms_sim::terrain::{Boulder, Crater, Rect};
+use realms_sim::terrain::{Boulder, Crater};
 use realms_sim::{Scenario, Terrain, World};
 
 fn value_at(map: &OccupancyGrid, p: Point2) -> i8 {
@@ -31,26 +31,7 @@ fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
         height_m: 0.15,
     };
     let mut t = Terrain::flat(20.0, 20.0, 0.05);
-    for r in [
-        Rect {
-            min: Point2::new(0.0, 0.0),
-            max: Point2::new(20.0, 0.2),
-        },
-        Rect {
-            min: Point2::new(0.0, 19.8),
-            max: Point2::new(20.0, 20.0),
-        },
-        Rect {
-            min: Point2::new(0.0, 0.0),
-            max: Point2::new(0.2, 20.0),
-        },
-        Rect {
-            min: Point2::new(19.8, 0.0),
-            max: Point2::new(20.0, 20.0),
-        },
-    ] {
-        t.add_wall(r, 1.0);
-    }
+    t.add_perimeter_walls(0.2, 1.0);
     t.add_crater(crater);
     t.add_boulder(rock);
     t.rover_starts = vec![Pose2::new(4.5, 10.0, 0.0)];

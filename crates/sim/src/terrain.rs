@@ -403,6 +403,24 @@ impl Terrain {
         self.boulders.push(boulder);
     }
 
+    /// Walls `thickness_m` thick and `height_m` tall along the four edges.
+    pub fn add_perimeter_walls(&mut self, thickness_m: f64, height_m: f64) {
+        let g = *self.geometry();
+        let (w, l) = (g.width_m(), g.height_m());
+        for (min, max) in [
+            ((0.0, 0.0), (w, thickness_m)),
+            ((0.0, l - thickness_m), (w, l)),
+            ((0.0, 0.0), (thickness_m, l)),
+            ((w - thickness_m, 0.0), (w, l)),
+        ] {
+            let rect = Rect {
+                min: Point2::new(g.origin.x_m + min.0, g.origin.y_m + min.1),
+                max: Point2::new(g.origin.x_m + max.0, g.origin.y_m + max.1),
+            };
+            self.add_wall(rect, height_m);
+        }
+    }
+
     /// Raises every cell whose centre is inside `rect` to `height_m` above the floor, as wall.
     pub fn add_wall(&mut self, rect: Rect, height_m: f64) {
         let g = *self.geometry();

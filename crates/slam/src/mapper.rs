@@ -131,6 +131,8 @@ pub struct Tracked {
     pub keyframe_added: bool,
 }
 
+/// A refinement that moves the searched pose farther than this found another basin: refused.
+const MAX_REFINE_SHIFT_M: f64 = 0.2;
 /// Scans with fewer endpoints than this are neither matched nor mapped.
 const MIN_POINTS: usize = 10;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
@@ -312,36 +314,12 @@ impl Mapper {
             .collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         for (_, s) in order.into_iter().take(self.cfg.loop_candidates) {
-            let origin = self.graph.nodes[self.submaps[s].origin_node];
-            let prior = origin.inverse() * pose;
-            let sub = &mut self.submaps[s];
             // The map is frozen while lost, so an active submap's precomputation stays valid
             // until tracking resumes (it is dropped then).
-            let precomputed = sub
-                .precomputed
-                .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
-            let Some(found) = bnb::search(
-                precomputed,
-                &sample,
-                prior,
-                &window,
-                self.cfg.loop_search_min_score,
-                self.cfg.loop_ambiguity_margin,
-            ) else {
+            let Some(m) = self.verified_match(s, &sample, points, pose, &window) else {
                 continue;
             };
-            if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
-                continue;
-            }
-            let refine = MatcherConfig {
-                prior_translation_weight: 0.0,
-                prior_rotation_weight: 0.0,
-                ..self.cfg.frontend.matcher
-            };
-            let m = match_scan(&sub.map, points, found.pose, &refine);
-            if m.score < self.cfg.loop_min_score {
-                continue;
-            }
+            let origin = self.graph.nodes[self.submaps[s].origin_node];
             self.pose = origin * m.pose;
             let moved = self
                 .lost_at
@@ -362,6 +340,46 @@ impl Mapper {
             self.lost_at = None;
             return;
         }
+    }
+
+    /// Searches submap `s` for `points` (robot frame; `sample` a subset for the search)
+    /// around `prior` (world frame) and refines the winner; returns the pose in the submap's
+    /// frame only if it passes the checks every closure and relocalisation must: a high
+    /// search score, no rival within the ambiguity margin, a high refined score, and a
+    /// refinement that stayed near the searched pose.
+    fn verified_match(
+        &mut self,
+        s: usize,
+        sample: &[Point2],
+        points: &[Point2],
+        prior: Pose2,
+        window: &SearchWindow,
+    ) -> Option<crate::matcher::Match> {
+        let origin = self.graph.nodes[self.submaps[s].origin_node];
+        let sub = &mut self.submaps[s];
+        let precomputed = sub
+            .precomputed
+            .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
+        let found = bnb::search(
+            precomputed,
+            sample,
+            origin.inverse() * prior,
+            window,
+            self.cfg.loop_search_min_score,
+            self.cfg.loop_ambiguity_margin,
+        )?;
+        if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
+            return None;
+        }
+        let refine = MatcherConfig {
+            prior_translation_weight: 0.0,
+            prior_rotation_weight: 0.0,
+            ..self.cfg.frontend.matcher
+        };
+        let m = match_scan(&sub.map, points, found.pose, &refine);
+        let moved = m.pose.relative_to(&found.pose);
+        (m.score >= self.cfg.loop_min_score && moved.x_m.hypot(moved.y_m) < MAX_REFINE_SHIFT_M)
+            .then_some(m)
     }
 
     /// The current pose estimate.
@@ -465,36 +483,13 @@ impl Mapper {
                 angular_rad: self.cfg.loop_window_rad,
                 step_range_m: LOOP_STEP_RANGE_M,
             };
-            let origin = self.graph.nodes[self.submaps[s].origin_node];
-            let prior = origin.inverse() * pose;
-            let sub = &mut self.submaps[s];
-            let precomputed = sub
-                .precomputed
-                .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
-            let Some(found) = bnb::search(
-                precomputed,
-                &points,
-                prior,
-                &window,
-                self.cfg.loop_search_min_score,
-                self.cfg.loop_ambiguity_margin,
-            ) else {
-                continue;
-            };
-            if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
-                continue;
-            }
-            let refine = MatcherConfig {
-                prior_translation_weight: 0.0,
-                prior_rotation_weight: 0.0,
-                ..self.cfg.frontend.matcher
-            };
-            let m = match_scan(&sub.map, &self.keyframe_points[node], found.pose, &refine);
-            let moved = m.pose.relative_to(&found.pose);
-            if m.score >= self.cfg.loop_min_score && moved.x_m.hypot(moved.y_m) < 0.2 {
-                let origin_node = sub.origin_node;
+            let full = std::mem::take(&mut self.keyframe_points[node]);
+            let found = self.verified_match(s, &points, &full, pose, &window);
+            self.keyframe_points[node] = full;
+            if let Some(m) = found {
+                let from = self.submaps[s].origin_node;
                 added |= self.propose_closure(Edge {
-                    from: origin_node,
+                    from,
                     to: node,
                     measurement: m.pose,
                     information: [400.0, 400.0, 2500.0],

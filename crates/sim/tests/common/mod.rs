@@ -3,8 +3,7 @@
 
 use realms_core::geometry::Vec3;
 use realms_core::msgs::{Message, Twist, TwistStamped};
-use realms_core::{Duration, Point2, Pose2, RoverId, Time, Topic};
-use realms_sim::terrain::Rect;
+use realms_core::{Duration, Pose2, RoverId, Time, Topic};
 use realms_sim::{Scenario, Terrain, World};
 
 /// A scenario whose rover is the default one, with `count` rovers and no faults.
@@ -18,26 +17,7 @@ pub fn scenario(count: u8) -> Scenario {
 /// A flat 20 m x 20 m floor with walls round the edge and rovers at `starts`.
 pub fn flat_world(s: &Scenario, starts: &[Pose2], build: impl FnOnce(&mut Terrain)) -> World {
     let mut t = Terrain::flat(20.0, 20.0, 0.05);
-    for r in [
-        Rect {
-            min: Point2::new(0.0, 0.0),
-            max: Point2::new(20.0, 0.2),
-        },
-        Rect {
-            min: Point2::new(0.0, 19.8),
-            max: Point2::new(20.0, 20.0),
-        },
-        Rect {
-            min: Point2::new(0.0, 0.0),
-            max: Point2::new(0.2, 20.0),
-        },
-        Rect {
-            min: Point2::new(19.8, 0.0),
-            max: Point2::new(20.0, 20.0),
-        },
-    ] {
-        t.add_wall(r, 1.0);
-    }
+    t.add_perimeter_walls(0.2, 1.0);
     build(&mut t);
     t.rover_starts = starts.to_vec();
     World::with_terrain(s, t)
