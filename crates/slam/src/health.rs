@@ -25,6 +25,8 @@ pub struct HealthConfig {
     pub slip_min_m: f64,
     /// ... and by more than this fraction of the larger of the two.
     pub slip_fraction: f64,
+    /// ... for at least this long without a break, seconds.
+    pub confirm_s: f64,
     /// Odometry counts as reliable again after agreeing for this long, seconds.
     pub recover_after_s: f64,
     /// A match scoring below this is a poor match.
@@ -41,6 +43,7 @@ impl Default for HealthConfig {
             window_s: 2.0,
             slip_min_m: 0.15,
             slip_fraction: 0.3,
+            confirm_s: 0.5,
             recover_after_s: 3.0,
             poor_score: 0.35,
             poor_matches_to_lose: 5,
@@ -80,6 +83,7 @@ pub struct HealthMonitor {
     recent: std::collections::VecDeque<(f64, Pose2, Pose2)>,
     poor_in_a_row: usize,
     agreeing_since_s: Option<f64>,
+    disagreeing_since_s: Option<f64>,
     last_time_s: Option<f64>,
 }
 
@@ -92,6 +96,7 @@ impl HealthMonitor {
             recent: std::collections::VecDeque::new(),
             poor_in_a_row: 0,
             agreeing_since_s: None,
+            disagreeing_since_s: None,
             last_time_s: None,
         }
     }
@@ -168,7 +173,14 @@ impl HealthMonitor {
         let differ = (odom.x_m - matched.x_m).hypot(odom.y_m - matched.y_m);
         let disagree =
             differ > self.cfg.slip_min_m && differ > self.cfg.slip_fraction * odom_m.max(matched_m);
-        if disagree {
+        if !disagree {
+            self.disagreeing_since_s = None;
+        }
+        // A disagreement must last a moment: single bumps and skids in turns are not slip.
+        let held = disagree
+            && scan.time_s - *self.disagreeing_since_s.get_or_insert(scan.time_s)
+                >= self.cfg.confirm_s;
+        if held {
             self.agreeing_since_s = None;
             return self.go(
                 LocalisationState::OdometryUnreliable,
