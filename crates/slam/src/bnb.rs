@@ -146,6 +146,51 @@ struct Candidate {
     score: u32,
 }
 
+/// How a search window is discretised: rotation steps that move a point at the window's
+/// step range by about one cell, translation steps of one cell.
+struct Discretised {
+    angle_step: f64,
+    n_angles: i64,
+    n_cells: i64,
+}
+
+impl Discretised {
+    fn new(map: &PrecomputedMap, window: &SearchWindow) -> Self {
+        let r = map.resolution_m;
+        let d = window.step_range_m.max(r);
+        let angle_step = (1.0 - r * r / (2.0 * d * d)).acos();
+        Discretised {
+            angle_step,
+            n_angles: (window.angular_rad / angle_step).ceil() as i64,
+            n_cells: (window.linear_m / r).ceil() as i64,
+        }
+    }
+
+    /// The cells of `points` with the prior's translation and its heading turned by `k`
+    /// steps.
+    fn cells(
+        &self,
+        map: &PrecomputedMap,
+        points: &[Point2],
+        prior: Pose2,
+        k: i64,
+    ) -> Vec<(i64, i64)> {
+        let r = map.resolution_m;
+        let (s, c) = (prior.yaw_rad + k as f64 * self.angle_step).sin_cos();
+        points
+            .iter()
+            .map(|p| {
+                let x = prior.x_m + c * p.x_m - s * p.y_m;
+                let y = prior.y_m + s * p.x_m + c * p.y_m;
+                (
+                    ((x - map.origin.x_m) / r).floor() as i64,
+                    ((y - map.origin.y_m) / r).floor() as i64,
+                )
+            })
+            .collect()
+    }
+}
+
 /// Finds the best pose of `points` (robot frame) in `map` within `window` around `prior`,
 /// among poses scoring at least `min_score`; `None` if none does. The rival is looked for
 /// only down to `rival_margin` below the winner.
@@ -161,29 +206,11 @@ pub fn search(
         return None;
     }
     let r = map.resolution_m;
-    let angle_step = {
-        let d = window.step_range_m.max(r);
-        (1.0 - r * r / (2.0 * d * d)).acos()
-    };
-    let n_angles = (window.angular_rad / angle_step).ceil() as i64;
-    let n_cells = (window.linear_m / r).ceil() as i64;
+    let grid = Discretised::new(map, window);
+    let (angle_step, n_angles, n_cells) = (grid.angle_step, grid.n_angles, grid.n_cells);
     // The discretised scan at each heading, in cells relative to the prior's translation.
     let scans: Vec<Vec<(i64, i64)>> = (-n_angles..=n_angles)
-        .map(|k| {
-            let yaw = prior.yaw_rad + k as f64 * angle_step;
-            let (s, c) = yaw.sin_cos();
-            points
-                .iter()
-                .map(|p| {
-                    let x = prior.x_m + c * p.x_m - s * p.y_m;
-                    let y = prior.y_m + s * p.x_m + c * p.y_m;
-                    (
-                        ((x - map.origin.x_m) / r).floor() as i64,
-                        ((y - map.origin.y_m) / r).floor() as i64,
-                    )
-                })
-                .collect()
-        })
+        .map(|k| grid.cells(map, points, prior, k))
         .collect();
     // Each heading's bounding box of cells, so that a candidate lying wholly inside the map
     // is scored without a bounds test per point.
@@ -402,26 +429,11 @@ mod tests {
         prior: Pose2,
         window: &SearchWindow,
     ) -> f64 {
-        let r = map.resolution_m;
-        let d = window.step_range_m.max(r);
-        let angle_step = (1.0 - r * r / (2.0 * d * d)).acos();
-        let n_a = (window.angular_rad / angle_step).ceil() as i64;
-        let n_c = (window.linear_m / r).ceil() as i64;
+        let grid = Discretised::new(map, window);
+        let (n_a, n_c) = (grid.n_angles, grid.n_cells);
         let mut best = 0u32;
         for k in -n_a..=n_a {
-            let yaw = prior.yaw_rad + k as f64 * angle_step;
-            let (s, c) = yaw.sin_cos();
-            let cells: Vec<(i64, i64)> = points
-                .iter()
-                .map(|p| {
-                    let x = prior.x_m + c * p.x_m - s * p.y_m;
-                    let y = prior.y_m + s * p.x_m + c * p.y_m;
-                    (
-                        ((x - map.origin.x_m) / r).floor() as i64,
-                        ((y - map.origin.y_m) / r).floor() as i64,
-                    )
-                })
-                .collect();
+            let cells = grid.cells(map, points, prior, k);
             for dx in -n_c..=n_c {
                 for dy in -n_c..=n_c {
                     let s: u32 = cells
