@@ -2,10 +2,9 @@
 //! `docs/mission-json.md`; later issues add fields, never change or remove them).
 
 use crate::Mission;
-use crate::slam_record::RoverSlamSummary;
+use crate::slam_record::{RoverSlamSummary, map_grid};
 use realms_core::map_server::{self, Trinary};
 use realms_core::msgs::OccupancyGrid;
-use realms_core::{Grid, GridGeometry, Point2};
 use realms_sim::SimEvent;
 use realms_sim::render;
 use serde::Serialize;
@@ -203,17 +202,6 @@ impl MissionReport {
 /// File stem of a rover's map in the results folder.
 fn map_stem(rover: &str) -> String {
     format!("{rover}_map")
-}
-
-/// A published map as a grid of its cell values.
-fn map_grid(map: &OccupancyGrid) -> Option<Grid<i8>> {
-    let geometry = GridGeometry {
-        width: map.info.width as usize,
-        height: map.info.height as usize,
-        resolution_m: map.info.resolution_m as f64,
-        origin: Point2::new(map.info.origin.position.x, map.info.origin.position.y),
-    };
-    Grid::from_cells(geometry, map.data.clone())
 }
 
 /// Writes `<rover>_map.png` (unknown grey, free white, occupied black, hazard orange) and

@@ -4,7 +4,7 @@
 //! graded against the simulator's ground truth, hazards included.
 
 use realms_core::msgs::{LocalisationState, OccupancyGrid};
-use realms_core::{Duration, Grid, Point2, Pose2, Time};
+use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, Time};
 use realms_sim::{GroundTruth, TruthCell};
 use serde::Serialize;
 
@@ -123,6 +123,17 @@ pub struct MapGrade {
     pub true_hazards_flagged: f64,
 }
 
+/// A published map as a grid of its cell values; `None` if its size does not match its data.
+pub fn map_grid(map: &OccupancyGrid) -> Option<Grid<i8>> {
+    let geometry = GridGeometry {
+        width: map.info.width as usize,
+        height: map.info.height as usize,
+        resolution_m: map.info.resolution_m as f64,
+        origin: Point2::new(map.info.origin.position.x, map.info.origin.position.y),
+    };
+    Grid::from_cells(geometry, map.data.clone())
+}
+
 /// Whether any cell of `grid` within `reach_m` (per axis) of `p` satisfies `pred`.
 fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> bool) -> bool {
     let reach = (reach_m / grid.resolution_m()).ceil() as i64;
@@ -139,19 +150,18 @@ fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> b
 
 /// Grades `map` (in the arena frame) against `truth`.
 pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
-    let res = map.info.resolution_m as f64;
-    let (ox, oy) = (map.info.origin.position.x, map.info.origin.position.y);
-    let w = map.info.width as usize;
+    let Some(grid) = map_grid(map) else {
+        // A map whose size does not match its data grades as empty.
+        return MapGrade::default();
+    };
+    let res = grid.resolution_m();
     let obstacle_near = |p: Point2| any_within(&truth.lidar_obstacles, p, res, |v| *v);
     let untraversable_near =
         |p: Point2| any_within(&truth.traversability, p, res, |v| *v != TruthCell::Free);
     let mut g = MapGrade::default();
     let (mut occ_ok, mut free_ok, mut hazard_ok) = (0usize, 0usize, 0usize);
-    for (i, v) in map.data.iter().enumerate() {
-        let p = Point2::new(
-            ox + ((i % w) as f64 + 0.5) * res,
-            oy + ((i / w) as f64 + 0.5) * res,
-        );
+    for (cell, v) in grid.iter() {
+        let p = grid.geometry().cell_center(cell);
         match *v {
             OccupancyGrid::OCCUPIED => {
                 g.occupied_cells += 1;
@@ -178,25 +188,22 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
         }
         explorable += 1;
         let p = truth.explorable.geometry().cell_center(c);
-        let (fx, fy) = ((p.x_m - ox) / res, (p.y_m - oy) / res);
-        if fx >= 0.0 && fy >= 0.0 && (fx as usize) < w && (fy as usize) < map.info.height as usize {
-            let v = map.data[fy as usize * w + fx as usize];
-            known += usize::from(v != OccupancyGrid::UNKNOWN);
-        }
+        known += usize::from(
+            grid.at_world(p)
+                .is_some_and(|v| *v != OccupancyGrid::UNKNOWN),
+        );
     }
     g.explorable_known = known as f64 / explorable.max(1) as f64;
     g.hazard_correct = hazard_ok as f64 / g.hazard_cells.max(1) as f64;
-    let map_at = |p: Point2| {
-        let (fx, fy) = ((p.x_m - ox) / res, (p.y_m - oy) / res);
-        (fx >= 0.0 && fy >= 0.0 && (fx as usize) < w && (fy as usize) < map.info.height as usize)
-            .then(|| map.data[fy as usize * w + fx as usize])
-    };
     let mut flagged = 0usize;
     for (c, t) in truth.traversability.iter() {
         if *t != TruthCell::Hazard {
             continue;
         }
-        match map_at(truth.traversability.geometry().cell_center(c)) {
+        match grid
+            .at_world(truth.traversability.geometry().cell_center(c))
+            .copied()
+        {
             None | Some(OccupancyGrid::UNKNOWN) => {}
             Some(v) => {
                 g.true_hazards_known += 1;

@@ -303,11 +303,9 @@ impl Mapping {
         };
         let max = (self.cfg.mapper.frontend.max_range_m as f32).min(scan.range_max_m);
         let min = (self.cfg.mapper.frontend.min_range_m as f32).max(scan.range_min_m);
-        // The tilt from gravity: the third row of the body's rotation (REP 103, Z-Y-X) is
-        // the unit gravity reaction seen in the body frame.
-        let [gx, gy, gz] = self.gravity;
-        let norm = (gx * gx + gy * gy + gz * gz).sqrt().max(1e-6);
-        let up = [gx / norm, gy / norm, gz / norm];
+        // A point's height after levelling is the last row of the levelling rotation
+        // (the unit gravity reaction in the body frame) applied to it.
+        let up = self.levelling()[2];
         let (lx, lh) = (self.cfg.lidar_x_m, self.cfg.lidar_height_m);
         let mut points = Vec::with_capacity(scan.ranges_m.len());
         for (i, r) in scan.ranges_m.iter().enumerate() {
@@ -412,19 +410,16 @@ impl Mapping {
             // hazard layer overrules it everywhere but on what the lidar sees as obstacles.
             data: states
                 .iter()
-                .map(|(cell, c)| match c {
-                    CellState::Occupied => OccupancyGrid::OCCUPIED,
-                    _ if self.hazards.hazard_at(g.cell_center(cell)) == Some(true) => {
-                        OccupancyGrid::HAZARD
+                .map(|(cell, c)| {
+                    if *c == CellState::Occupied {
+                        return OccupancyGrid::OCCUPIED;
                     }
-                    // Ground the depth camera saw and judged drivable is known free too.
-                    CellState::Unknown
-                        if self.hazards.hazard_at(g.cell_center(cell)) == Some(false) =>
-                    {
-                        OccupancyGrid::FREE
+                    match (self.hazards.hazard_at(g.cell_center(cell)), c) {
+                        (Some(true), _) => OccupancyGrid::HAZARD,
+                        // Ground the depth camera saw and judged drivable is known free too.
+                        (Some(false), _) | (None, CellState::Free) => OccupancyGrid::FREE,
+                        (None, _) => OccupancyGrid::UNKNOWN,
                     }
-                    CellState::Unknown => OccupancyGrid::UNKNOWN,
-                    CellState::Free => OccupancyGrid::FREE,
                 })
                 .collect(),
         }

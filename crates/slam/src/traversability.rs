@@ -45,6 +45,8 @@ impl Default for TraversabilityConfig {
     }
 }
 
+/// A cell's step is measured from the lowest point within this distance, metres.
+const FLOOR_REACH_M: f64 = 0.25;
 /// Height differences up to this are depth noise, not slope, metres.
 const SLOPE_NOISE_M: f64 = 0.02;
 
@@ -91,6 +93,7 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     // The slope is measured over two cells so depth noise matters less.
     let baseline = 2i64;
     let slope = cfg.max_slope_rad.tan();
+    let reach = (FLOOR_REACH_M / r).ceil() as i64;
     let mut out = Vec::new();
     for iy in 0..side as i64 {
         for ix in 0..side as i64 {
@@ -98,8 +101,7 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             if !judged(i) {
                 continue;
             }
-            // The local floor: the lowest point within 0.25 m.
-            let reach = (0.25 / r).ceil() as i64;
+            // The local floor: the lowest point within `reach` cells.
             let mut floor = cols[i].min_z;
             let mut steep = false;
             for dy in -reach..=reach {
