@@ -1,0 +1,291 @@
+//! The costmap the planner and the follower drive on, built from a rover's map (a ROS-style
+//! occupancy grid: -1 unknown, 0..=100 occupancy, where the rover's hazard cells count as
+//! occupied).
+//!
+//! Costs follow Nav2's inflation layer: an obstacle cell is [`LETHAL`]; every cell closer to
+//! one than the rover's inscribed radius is [`INSCRIBED`] (the rover's centre there means its
+//! body touches the obstacle); beyond that the cost falls off exponentially to zero at the
+//! inflation radius, so paths keep away from rocks and crater rims when they can. Unknown
+//! space is passable at a price ([`CostmapConfig::unknown_cost`]): a rover exploring must plan
+//! into the unknown and replan as it fills in, instead of refusing every goal beyond its map.
+//!
+//! Distances come from the exact Euclidean distance transform of Felzenszwalb and
+//! Huttenlocher, "Distance Transforms of Sampled Functions" (Theory of Computing 8, 2012).
+
+use realms_core::{Cell, Grid, GridGeometry, Point2};
+
+/// An obstacle or hazard cell.
+pub const LETHAL: u8 = 254;
+/// The rover's centre here puts its body on an obstacle.
+pub const INSCRIBED: u8 = 253;
+/// The highest cost of a cell the rover may drive through.
+pub const MAX_PASSABLE: u8 = 252;
+/// Map cells at or above this occupancy (percent) are obstacles (map_server's 0.65).
+pub const OCCUPIED_THRESHOLD: i8 = 65;
+
+/// How the map becomes costs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostmapConfig {
+    /// Radius of the circle the rover's footprint fits in, around its centre, metres.
+    pub inscribed_radius_m: f64,
+    /// Beyond this distance from every obstacle a cell costs nothing, metres.
+    pub inflation_radius_m: f64,
+    /// How fast the cost falls off beyond the inscribed radius, per metre (Nav2's
+    /// `cost_scaling_factor`).
+    pub cost_scaling_per_m: f64,
+    /// Cost of an unknown cell (0..=[`MAX_PASSABLE`]).
+    pub unknown_cost: u8,
+}
+
+impl Default for CostmapConfig {
+    /// The Leo Rover (0.45 x 0.43 m) with 10 cm to spare.
+    fn default() -> Self {
+        CostmapConfig {
+            inscribed_radius_m: 0.32,
+            inflation_radius_m: 0.9,
+            cost_scaling_per_m: 6.0,
+            unknown_cost: 40,
+        }
+    }
+}
+
+/// Traversal costs over a grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Costmap {
+    costs: Grid<u8>,
+    known: Vec<bool>,
+}
+
+impl Costmap {
+    /// The costmap of an occupancy map (-1 unknown, 0..=100 percent occupied).
+    pub fn from_map(map: &Grid<i8>, cfg: &CostmapConfig) -> Costmap {
+        let geometry = *map.geometry();
+        let lethal: Vec<bool> = map
+            .cells()
+            .iter()
+            .map(|&v| v >= OCCUPIED_THRESHOLD)
+            .collect();
+        let known: Vec<bool> = map.cells().iter().map(|&v| v >= 0).collect();
+        let dist2 = squared_distance_transform(&lethal, geometry.width, geometry.height);
+        let res = geometry.resolution_m;
+        let costs = map
+            .cells()
+            .iter()
+            .zip(&dist2)
+            .map(|(&v, &d2)| {
+                let d_m = (d2 as f64).sqrt() * res;
+                let inflated = inflation_cost(d_m, cfg);
+                if v < 0 {
+                    inflated.max(cfg.unknown_cost.min(MAX_PASSABLE))
+                } else {
+                    inflated
+                }
+            })
+            .collect();
+        Costmap {
+            costs: Grid::from_cells(geometry, costs).expect("one cost per map cell"),
+            known,
+        }
+    }
+
+    /// A costmap from costs directly (tests, benchmarks); every cell counts as known.
+    pub fn from_costs(costs: Grid<u8>) -> Costmap {
+        let known = vec![true; costs.cells().len()];
+        Costmap { costs, known }
+    }
+
+    /// Where the costmap lies.
+    pub fn geometry(&self) -> &GridGeometry {
+        self.costs.geometry()
+    }
+
+    /// The costs, row-major from the bottom row.
+    pub fn costs(&self) -> &[u8] {
+        self.costs.cells()
+    }
+
+    /// Whether the map said anything about each cell.
+    pub fn known(&self) -> &[bool] {
+        &self.known
+    }
+
+    /// Cost of a cell.
+    pub fn cost(&self, c: Cell) -> u8 {
+        self.costs.cells()[self.geometry().index(c)]
+    }
+
+    /// Cost at a world point; outside the map counts as unknown-but-passable at the
+    /// highest passable price, so a path may leave the map only as a last resort.
+    pub fn cost_at(&self, p: Point2) -> u8 {
+        match self.geometry().world_to_cell(p) {
+            Some(c) => self.cost(c),
+            None => MAX_PASSABLE,
+        }
+    }
+}
+
+/// Nav2's inflation law: lethal inside the inscribed radius, then
+/// `252 * exp(-k (d - r_inscribed))` out to the inflation radius.
+fn inflation_cost(d_m: f64, cfg: &CostmapConfig) -> u8 {
+    if d_m == 0.0 {
+        LETHAL
+    } else if d_m <= cfg.inscribed_radius_m {
+        INSCRIBED
+    } else if d_m > cfg.inflation_radius_m {
+        0
+    } else {
+        let c =
+            MAX_PASSABLE as f64 * (-cfg.cost_scaling_per_m * (d_m - cfg.inscribed_radius_m)).exp();
+        c.round().clamp(0.0, MAX_PASSABLE as f64) as u8
+    }
+}
+
+/// Squared Euclidean distance, in cells, from every cell to the nearest `true` one
+/// (`f32::INFINITY` when there is none): Felzenszwalb & Huttenlocher's lower-envelope
+/// algorithm, first down every column, then along every row.
+pub fn squared_distance_transform(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
+    let inf = f32::INFINITY;
+    let mut d: Vec<f32> = seeds.iter().map(|&s| if s { 0.0 } else { inf }).collect();
+    let n = width.max(height);
+    let mut f = vec![0.0f32; n];
+    let mut out = vec![0.0f32; n];
+    let mut v = vec![0usize; n];
+    let mut z = vec![0.0f32; n + 1];
+    for x in 0..width {
+        for y in 0..height {
+            f[y] = d[y * width + x];
+        }
+        transform_1d(&f[..height], &mut out[..height], &mut v, &mut z);
+        for y in 0..height {
+            d[y * width + x] = out[y];
+        }
+    }
+    for y in 0..height {
+        let row = &mut d[y * width..(y + 1) * width];
+        f[..width].copy_from_slice(row);
+        transform_1d(&f[..width], &mut out[..width], &mut v, &mut z);
+        row.copy_from_slice(&out[..width]);
+    }
+    d
+}
+
+/// One dimension of the squared distance transform of a sampled function `f`.
+fn transform_1d(f: &[f32], out: &mut [f32], v: &mut [usize], z: &mut [f32]) {
+    let n = f.len();
+    // Parabolas rooted at infinite samples never form part of the envelope.
+    let mut k: isize = -1;
+    for q in 0..n {
+        if !f[q].is_finite() {
+            continue;
+        }
+        loop {
+            if k < 0 {
+                k = 0;
+                v[0] = q;
+                z[0] = f32::NEG_INFINITY;
+                z[1] = f32::INFINITY;
+                break;
+            }
+            let p = v[k as usize];
+            let s = ((f[q] + (q * q) as f32) - (f[p] + (p * p) as f32)) / (2.0 * (q - p) as f32);
+            if s <= z[k as usize] {
+                k -= 1;
+                continue;
+            }
+            k += 1;
+            v[k as usize] = q;
+            z[k as usize] = s;
+            z[k as usize + 1] = f32::INFINITY;
+            break;
+        }
+    }
+    if k < 0 {
+        out.fill(f32::INFINITY);
+        return;
+    }
+    let mut j = 0usize;
+    for (q, o) in out.iter_mut().enumerate() {
+        while z[j + 1] < q as f32 {
+            j += 1;
+        }
+        let p = v[j];
+        let dq = q as f32 - p as f32;
+        *o = dq * dq + f[p];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn geometry(width: usize, height: usize) -> GridGeometry {
+        GridGeometry {
+            width,
+            height,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn the_distance_transform_is_exact(
+            width in 1usize..24,
+            height in 1usize..24,
+            seeds in proptest::collection::vec(proptest::bool::weighted(0.08), 24 * 24),
+        ) {
+            let seeds = &seeds[..width * height];
+            let d = squared_distance_transform(seeds, width, height);
+            for y in 0..height {
+                for x in 0..width {
+                    let brute = (0..height)
+                        .flat_map(|sy| (0..width).map(move |sx| (sx, sy)))
+                        .filter(|&(sx, sy)| seeds[sy * width + sx])
+                        .map(|(sx, sy)| {
+                            let (dx, dy) = (sx as f32 - x as f32, sy as f32 - y as f32);
+                            dx * dx + dy * dy
+                        })
+                        .fold(f32::INFINITY, f32::min);
+                    prop_assert_eq!(d[y * width + x], brute, "cell ({}, {})", x, y);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_rock_is_lethal_its_surroundings_inscribed_then_graded_then_free() {
+        let g = geometry(41, 41);
+        let mut map = Grid::new(g, 0i8);
+        *map.get_mut(20, 20).expect("inside") = 100;
+        let cfg = CostmapConfig::default();
+        let cm = Costmap::from_map(&map, &cfg);
+        let at = |x: usize| cm.cost(Cell { x, y: 20 });
+        assert_eq!(at(20), LETHAL);
+        // 0.3 m away: inside the 0.32 m inscribed radius.
+        assert_eq!(at(23), INSCRIBED);
+        // 0.4 m away: graded, 252 exp(-6 * 0.08) = 156.
+        assert_eq!(at(24), 156);
+        // Falling with distance, zero beyond 0.9 m.
+        assert!(at(25) < at(24) && at(26) < at(25));
+        assert_eq!(at(30), 0);
+    }
+
+    #[test]
+    fn hazards_are_obstacles_and_unknown_space_is_passable_at_a_price() {
+        let g = geometry(30, 10);
+        let mut cells = vec![-1i8; 30 * 10];
+        for y in 0..10 {
+            for x in 0..15 {
+                cells[y * 30 + x] = 0;
+            }
+        }
+        cells[5 * 30 + 2] = 90;
+        let map = Grid::from_cells(g, cells).expect("sized");
+        let cm = Costmap::from_map(&map, &CostmapConfig::default());
+        assert_eq!(cm.cost(Cell { x: 2, y: 5 }), LETHAL);
+        assert_eq!(cm.cost(Cell { x: 25, y: 5 }), 40);
+        assert!(!cm.known()[5 * 30 + 25]);
+        assert_eq!(cm.cost(Cell { x: 12, y: 5 }), 0);
+    }
+}

@@ -1,0 +1,200 @@
+//! Which frontier a rover should drive to next, decided by each rover alone from what it has
+//! heard of its peers.
+//!
+//! A frontier is worth its length (what the rover will see there) less the cost of driving
+//! to it. Coordination follows Burgard et al., "Coordinated Multi-Robot Exploration" (IEEE
+//! T-RO 21, 2005): a target a peer has claimed lowers the worth of every frontier near it, in
+//! proportion to how much of it the peer will see, so rovers spread out without a central
+//! allocator. Rovers that hear nothing from their peers still explore, only less well
+//! (they may duplicate work). Targets the rover failed to reach are blacklisted.
+
+use crate::costmap::Costmap;
+use crate::frontier::{Frontier, detect};
+use realms_core::{Cell, Grid, Point2};
+
+/// Exploration tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExploreConfig {
+    /// Frontiers shorter than this many cells are noise.
+    pub min_frontier_cells: usize,
+    /// A metre of frontier is worth this many metres of (cost-weighted) driving.
+    pub gain_per_m: f64,
+    /// A frontier is only worth it up to this length, metres: a rover sees about this much
+    /// of a long frontier from one spot.
+    pub max_gain_m: f64,
+    /// A peer's target discounts frontiers within this distance, metres (about what the
+    /// peer will map on arrival).
+    pub peer_radius_m: f64,
+    /// Frontiers within this distance of a blacklisted target are skipped, metres.
+    pub blacklist_radius_m: f64,
+}
+
+impl Default for ExploreConfig {
+    fn default() -> Self {
+        ExploreConfig {
+            min_frontier_cells: 8,
+            gain_per_m: 3.0,
+            max_gain_m: 4.0,
+            peer_radius_m: 6.0,
+            blacklist_radius_m: 1.0,
+        }
+    }
+}
+
+/// A candidate target, with how it was scored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// Where to drive: the reachable frontier cell nearest the frontier's centroid.
+    pub goal: Point2,
+    /// Its cell.
+    pub cell: Cell,
+    /// The frontier's worth, metres of driving.
+    pub gain: f64,
+    /// Cost of the drive there (metres stretched by costs).
+    pub travel: f64,
+    /// Worth less cost less the peers' discount.
+    pub utility: f64,
+}
+
+/// What the rover knows of the rest of the fleet.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeerClaim {
+    /// The target the peer said it is driving to.
+    pub target: Point2,
+}
+
+/// Candidate targets from the frontiers of `map`, best first, given the travel costs from the
+/// rover's position (the Dijkstra field of [`Planner::travel_costs`](crate::Planner::travel_costs)
+/// on `costmap`). Unreachable and blacklisted frontiers are left out.
+pub fn candidates(
+    map: &Grid<i8>,
+    costmap: &Costmap,
+    travel: &[f32],
+    peers: &[PeerClaim],
+    blacklist: &[Point2],
+    cfg: &ExploreConfig,
+) -> Vec<Candidate> {
+    let geo = *map.geometry();
+    let frontiers = detect(map, costmap, cfg.min_frontier_cells);
+    let mut out: Vec<Candidate> = frontiers
+        .iter()
+        .filter_map(|f| score(f, &geo, travel, peers, blacklist, cfg))
+        .collect();
+    out.sort_by(|a, b| b.utility.total_cmp(&a.utility).then(a.cell.cmp(&b.cell)));
+    out
+}
+
+fn score(
+    f: &Frontier,
+    geo: &realms_core::GridGeometry,
+    travel: &[f32],
+    peers: &[PeerClaim],
+    blacklist: &[Point2],
+    cfg: &ExploreConfig,
+) -> Option<Candidate> {
+    let cell = f
+        .cells
+        .iter()
+        .filter(|c| travel[geo.index(**c)].is_finite())
+        .min_by(|a, b| {
+            let da = geo.cell_center(**a).distance_m(f.centroid);
+            let db = geo.cell_center(**b).distance_m(f.centroid);
+            da.total_cmp(&db).then(a.cmp(b))
+        })
+        .copied()?;
+    let goal = geo.cell_center(cell);
+    if blacklist
+        .iter()
+        .any(|b| b.distance_m(goal) < cfg.blacklist_radius_m)
+    {
+        return None;
+    }
+    let gain = cfg.gain_per_m * f.length_m(geo.resolution_m).min(cfg.max_gain_m);
+    let discount: f64 = peers
+        .iter()
+        .map(|p| {
+            let d = p.target.distance_m(goal);
+            if d < cfg.peer_radius_m {
+                gain * (1.0 - d / cfg.peer_radius_m)
+            } else {
+                0.0
+            }
+        })
+        .sum::<f64>()
+        .min(gain);
+    let travel = travel[geo.index(cell)] as f64;
+    Some(Candidate {
+        goal,
+        cell,
+        gain,
+        travel,
+        utility: gain - discount - travel,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::CostmapConfig;
+    use crate::planner::{Planner, PlannerConfig};
+    use realms_core::GridGeometry;
+
+    /// A 20 x 4 m corridor known in its middle third, open to the unknown at both ends; the
+    /// rover stands left of centre.
+    fn corridor() -> (Grid<i8>, Costmap, Vec<f32>) {
+        let g = GridGeometry {
+            width: 200,
+            height: 40,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let mut map = Grid::new(g, -1i8);
+        for y in 0..40 {
+            for x in 70..130 {
+                *map.get_mut(x, y).expect("inside") = if y == 0 || y == 39 { 100 } else { 0 };
+            }
+        }
+        let cm = Costmap::from_map(&map, &CostmapConfig::default());
+        let mut planner = Planner::new(PlannerConfig::default());
+        let travel = planner
+            .travel_costs(&cm, Point2::new(9.0, 2.0))
+            .expect("inside");
+        (map, cm, travel)
+    }
+
+    #[test]
+    fn the_nearer_of_two_equal_frontiers_wins() {
+        let (map, cm, travel) = corridor();
+        let c = candidates(&map, &cm, &travel, &[], &[], &ExploreConfig::default());
+        assert_eq!(c.len(), 2);
+        assert!((c[0].goal.x_m - 7.05).abs() < 1e-9, "{c:?}");
+        assert!((c[1].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
+        assert!(c[0].utility > c[1].utility);
+    }
+
+    #[test]
+    fn a_peer_s_claim_sends_the_rover_the_other_way() {
+        let (map, cm, travel) = corridor();
+        let cfg = ExploreConfig::default();
+        let mine = candidates(&map, &cm, &travel, &[], &[], &cfg)[0];
+        let peer = PeerClaim { target: mine.goal };
+        let c = candidates(&map, &cm, &travel, &[peer], &[], &cfg);
+        assert!((c[0].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
+        assert_ne!(c[0].goal, peer.target);
+    }
+
+    #[test]
+    fn a_blacklisted_target_is_not_offered_again() {
+        let (map, cm, travel) = corridor();
+        let c = candidates(
+            &map,
+            &cm,
+            &travel,
+            &[],
+            &[Point2::new(7.05, 2.05)],
+            &ExploreConfig::default(),
+        );
+        assert_eq!(c.len(), 1);
+        assert!((c[0].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
+    }
+}

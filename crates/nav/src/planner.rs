@@ -1,0 +1,526 @@
+//! Global planning on a [`Costmap`]: A* over the 8-connected cell graph, where entering a cell
+//! costs the step's length stretched by the cell's cost, so the cheapest path trades length
+//! against clearance. The octile distance is an admissible and consistent heuristic for that
+//! graph (no step is cheaper than its length), so A* returns exactly Dijkstra's optimum; the
+//! Dijkstra field ([`Planner::travel_costs`]) is kept beside it for checking, for the benchmark
+//! baseline, and because exploration wants the cost to every frontier at once.
+//!
+//! A rover whose centre sits in an inscribed or lethal cell (a hazard marked under it, a rock
+//! it backed towards) may still leave: cells within [`PlannerConfig::escape_radius_m`] of the
+//! start are passable at the highest price. A goal in such a cell is refused at once rather
+//! than searched for.
+//!
+//! [`smooth`] turns the staircase of cells into a few straight legs a skid-steer rover can
+//! follow, shortcutting only where the straight leg is no closer to danger than the cells it
+//! replaces.
+
+use crate::costmap::{Costmap, MAX_PASSABLE};
+use realms_core::{Cell, GridGeometry, Point2};
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// Planner tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlannerConfig {
+    /// A cell of the highest passable cost makes a step through it `1 + cost_weight` times as
+    /// dear as through free ground.
+    pub cost_weight: f64,
+    /// Blocked cells this close to the start may be driven out of, metres.
+    pub escape_radius_m: f64,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        PlannerConfig {
+            cost_weight: 4.0,
+            escape_radius_m: 0.5,
+        }
+    }
+}
+
+/// Why there is no plan.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// The start is off the costmap.
+    #[error("start ({x_m:.2}, {y_m:.2}) is outside the map")]
+    StartOutside {
+        /// Where.
+        x_m: f64,
+        /// Where.
+        y_m: f64,
+    },
+    /// The goal is off the costmap.
+    #[error("goal ({x_m:.2}, {y_m:.2}) is outside the map")]
+    GoalOutside {
+        /// Where.
+        x_m: f64,
+        /// Where.
+        y_m: f64,
+    },
+    /// The goal is an obstacle, a hazard, or too close to one for the rover to stand there.
+    #[error("goal ({x_m:.2}, {y_m:.2}) is blocked (cost {cost})")]
+    GoalBlocked {
+        /// Where.
+        x_m: f64,
+        /// Where.
+        y_m: f64,
+        /// Its cost.
+        cost: u8,
+    },
+    /// Every way to the goal is blocked.
+    #[error("no path: the goal is cut off ({expanded} cells searched)")]
+    NoPath {
+        /// Cells expanded before giving up.
+        expanded: usize,
+    },
+}
+
+/// A planned path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// Cells from start to goal, each an 8-neighbour of the one before.
+    pub cells: Vec<Cell>,
+    /// The path's cost: metres stretched by the cells' costs.
+    pub cost: f64,
+    /// Cells expanded by the search.
+    pub expanded: usize,
+}
+
+/// A planner with its search buffers, kept between calls so a replan allocates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct Planner {
+    cfg: PlannerConfig,
+    g: Vec<f32>,
+    parent: Vec<u32>,
+    /// The search generation that last touched each cell (its `g` is stale otherwise).
+    seen: Vec<u32>,
+    closed: Vec<u32>,
+    generation: u32,
+    heap: BinaryHeap<Reverse<(u32, u32)>>,
+}
+
+const NEIGHBOURS: [(isize, isize, f32); 8] = [
+    (1, 0, 1.0),
+    (-1, 0, 1.0),
+    (0, 1, 1.0),
+    (0, -1, 1.0),
+    (1, 1, std::f32::consts::SQRT_2),
+    (1, -1, std::f32::consts::SQRT_2),
+    (-1, 1, std::f32::consts::SQRT_2),
+    (-1, -1, std::f32::consts::SQRT_2),
+];
+
+/// Orders non-negative floats by their bits (IEEE 754 keeps the order for positives).
+fn key(f: f32) -> u32 {
+    f.to_bits()
+}
+
+impl Planner {
+    /// A planner with `cfg`.
+    pub fn new(cfg: PlannerConfig) -> Self {
+        Planner {
+            cfg,
+            ..Planner::default()
+        }
+    }
+
+    /// Its tuning.
+    pub fn config(&self) -> &PlannerConfig {
+        &self.cfg
+    }
+
+    fn begin(&mut self, n: usize) {
+        if self.seen.len() != n {
+            self.g = vec![f32::INFINITY; n];
+            self.parent = vec![u32::MAX; n];
+            self.seen = vec![0; n];
+            self.closed = vec![0; n];
+            self.generation = 0;
+        }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.seen.fill(0);
+            self.closed.fill(0);
+            self.generation = 1;
+        }
+        self.heap.clear();
+    }
+
+    /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
+    fn search(&mut self, map: &Costmap, start: Cell, goal: Option<Cell>, heuristic: bool) -> usize {
+        let geo = *map.geometry();
+        let (w, h) = (geo.width, geo.height);
+        self.begin(geo.len());
+        let costs = map.costs();
+        let weight = self.cfg.cost_weight as f32 / MAX_PASSABLE as f32;
+        let escape_cells = (self.cfg.escape_radius_m / geo.resolution_m) as f32;
+        let escape2 = escape_cells * escape_cells;
+        let res = geo.resolution_m as f32;
+        let gen_ = self.generation;
+        let estimate = |x: usize, y: usize| -> f32 {
+            match goal {
+                Some(g) if heuristic => {
+                    let dx = x.abs_diff(g.x) as f32;
+                    let dy = y.abs_diff(g.y) as f32;
+                    res * (dx.max(dy) + (std::f32::consts::SQRT_2 - 1.0) * dx.min(dy))
+                }
+                _ => 0.0,
+            }
+        };
+        // Price per metre of entering a cell, or None where the rover may not go.
+        let factor = |x: usize, y: usize| -> Option<f32> {
+            let c = costs[y * w + x];
+            if c <= MAX_PASSABLE {
+                return Some(1.0 + weight * c as f32);
+            }
+            let (dx, dy) = (x as f32 - start.x as f32, y as f32 - start.y as f32);
+            (dx * dx + dy * dy <= escape2).then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
+        };
+        let s = geo.index(start);
+        self.g[s] = 0.0;
+        self.seen[s] = gen_;
+        self.parent[s] = u32::MAX;
+        self.heap
+            .push(Reverse((key(estimate(start.x, start.y)), s as u32)));
+        let goal_index = goal.map(|g| geo.index(g));
+        let mut expanded = 0usize;
+        while let Some(Reverse((_, i))) = self.heap.pop() {
+            let i = i as usize;
+            if self.closed[i] == gen_ {
+                continue;
+            }
+            self.closed[i] = gen_;
+            expanded += 1;
+            if Some(i) == goal_index {
+                break;
+            }
+            let (x, y) = (i % w, i / w);
+            let gi = self.g[i];
+            for &(dx, dy, len) in &NEIGHBOURS {
+                let nx = x as isize + dx;
+                let ny = y as isize + dy;
+                if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
+                    continue;
+                }
+                let (nx, ny) = (nx as usize, ny as usize);
+                let j = ny * w + nx;
+                if self.closed[j] == gen_ {
+                    continue;
+                }
+                let Some(f) = factor(nx, ny) else { continue };
+                let g = gi + len * res * f;
+                if self.seen[j] != gen_ || g < self.g[j] {
+                    self.seen[j] = gen_;
+                    self.g[j] = g;
+                    self.parent[j] = i as u32;
+                    self.heap
+                        .push(Reverse((key(g + estimate(nx, ny)), j as u32)));
+                }
+            }
+        }
+        expanded
+    }
+
+    fn cells(map: &Costmap, start: Point2, goal: Point2) -> Result<(Cell, Cell), PlanError> {
+        let geo = map.geometry();
+        let s = geo.world_to_cell(start).ok_or(PlanError::StartOutside {
+            x_m: start.x_m,
+            y_m: start.y_m,
+        })?;
+        let g = geo.world_to_cell(goal).ok_or(PlanError::GoalOutside {
+            x_m: goal.x_m,
+            y_m: goal.y_m,
+        })?;
+        let cost = map.cost(g);
+        if cost > MAX_PASSABLE && g != s {
+            return Err(PlanError::GoalBlocked {
+                x_m: goal.x_m,
+                y_m: goal.y_m,
+                cost,
+            });
+        }
+        Ok((s, g))
+    }
+
+    fn path_to(&self, geo: &GridGeometry, goal: Cell, expanded: usize) -> Result<Plan, PlanError> {
+        let gi = geo.index(goal);
+        if self.closed[gi] != self.generation {
+            return Err(PlanError::NoPath { expanded });
+        }
+        let mut cells = vec![goal];
+        let mut i = gi;
+        while self.parent[i] != u32::MAX {
+            i = self.parent[i] as usize;
+            cells.push(Cell {
+                x: i % geo.width,
+                y: i / geo.width,
+            });
+        }
+        cells.reverse();
+        Ok(Plan {
+            cells,
+            cost: self.g[gi] as f64,
+            expanded,
+        })
+    }
+
+    /// The cheapest path from `start` to `goal` (A*).
+    pub fn plan(&mut self, map: &Costmap, start: Point2, goal: Point2) -> Result<Plan, PlanError> {
+        let (s, g) = Self::cells(map, start, goal)?;
+        let expanded = self.search(map, s, Some(g), true);
+        self.path_to(map.geometry(), g, expanded)
+    }
+
+    /// The same path found by plain Dijkstra (the benchmark's baseline).
+    pub fn plan_dijkstra(
+        &mut self,
+        map: &Costmap,
+        start: Point2,
+        goal: Point2,
+    ) -> Result<Plan, PlanError> {
+        let (s, g) = Self::cells(map, start, goal)?;
+        let expanded = self.search(map, s, Some(g), false);
+        self.path_to(map.geometry(), g, expanded)
+    }
+
+    /// The cost of the cheapest path from `start` to every cell (`INFINITY` where none),
+    /// row-major like the costmap.
+    pub fn travel_costs(&mut self, map: &Costmap, start: Point2) -> Result<Vec<f32>, PlanError> {
+        let s = map
+            .geometry()
+            .world_to_cell(start)
+            .ok_or(PlanError::StartOutside {
+                x_m: start.x_m,
+                y_m: start.y_m,
+            })?;
+        self.search(map, s, None, false);
+        let gen_ = self.generation;
+        Ok(self
+            .g
+            .iter()
+            .zip(&self.closed)
+            .map(|(&g, &c)| if c == gen_ { g } else { f32::INFINITY })
+            .collect())
+    }
+
+    /// The path to `goal` from the start of the last [`travel_costs`](Self::travel_costs).
+    pub fn path_from_field(&self, map: &Costmap, goal: Cell) -> Result<Plan, PlanError> {
+        self.path_to(map.geometry(), goal, 0)
+    }
+}
+
+/// Whether the rover may drive the straight leg from `a` to `b` without going anywhere
+/// dearer than `worst`.
+fn leg_is_clear(map: &Costmap, a: Point2, b: Point2, worst: u8) -> bool {
+    let geo = map.geometry();
+    let len = a.distance_m(b);
+    let steps = (len / (0.5 * geo.resolution_m)).ceil().max(1.0) as usize;
+    (0..=steps).all(|k| {
+        let s = k as f64 / steps as f64;
+        let p = Point2::new(a.x_m + s * (b.x_m - a.x_m), a.y_m + s * (b.y_m - a.y_m));
+        match geo.world_to_cell(p) {
+            Some(c) => {
+                let cost = map.cost(c);
+                cost <= worst && cost <= MAX_PASSABLE
+            }
+            None => false,
+        }
+    })
+}
+
+/// The cells of a plan as a few straight legs (cell centres; the first and last are the
+/// plan's ends). A leg replaces the cells it spans only if nowhere along it costs more than
+/// the dearest of those cells, so smoothing never brings the path closer to an obstacle;
+/// legs are at most `max_leg_m` long so the follower's look-ahead stays on the plan.
+pub fn smooth(map: &Costmap, cells: &[Cell], max_leg_m: f64) -> Vec<Point2> {
+    let geo = map.geometry();
+    let points: Vec<Point2> = cells.iter().map(|&c| geo.cell_center(c)).collect();
+    let Some(&first) = points.first() else {
+        return Vec::new();
+    };
+    let mut out = vec![first];
+    let mut i = 0;
+    while i + 1 < points.len() {
+        // Blocked start cells (the escape zone) are kept as they are.
+        let mut worst = map.cost(cells[i]).max(map.cost(cells[i + 1]));
+        let mut j = i + 1;
+        while j + 1 < points.len() {
+            let next_worst = worst.max(map.cost(cells[j + 1]));
+            if next_worst > MAX_PASSABLE
+                || points[i].distance_m(points[j + 1]) > max_leg_m
+                || !leg_is_clear(map, points[i], points[j + 1], next_worst)
+            {
+                break;
+            }
+            worst = next_worst;
+            j += 1;
+        }
+        out.push(points[j]);
+        i = j;
+    }
+    out
+}
+
+/// The cost of driving `cells` in order, as the planner prices it (for checking plans).
+pub fn path_cost(map: &Costmap, cells: &[Cell], cfg: &PlannerConfig) -> f64 {
+    let res = map.geometry().resolution_m as f32;
+    let weight = cfg.cost_weight as f32 / MAX_PASSABLE as f32;
+    cells
+        .windows(2)
+        .map(|w| {
+            let diagonal = w[0].x != w[1].x && w[0].y != w[1].y;
+            let len = if diagonal {
+                std::f32::consts::SQRT_2
+            } else {
+                1.0
+            };
+            let c = map.cost(w[1]);
+            let f = if c <= MAX_PASSABLE {
+                1.0 + weight * c as f32
+            } else {
+                // Only the escape zone around the start holds such cells.
+                1.0 + weight * (MAX_PASSABLE as f32) * 2.0
+            };
+            (len * res * f) as f64
+        })
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::{INSCRIBED, LETHAL};
+    use proptest::prelude::*;
+    use realms_core::Grid;
+
+    fn costmap(width: usize, height: usize, costs: Vec<u8>) -> Costmap {
+        let g = GridGeometry {
+            width,
+            height,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        };
+        Costmap::from_costs(Grid::from_cells(g, costs).expect("sized"))
+    }
+
+    fn centre(map: &Costmap, x: usize, y: usize) -> Point2 {
+        map.geometry().cell_center(Cell { x, y })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        /// A* finds Dijkstra's optimum, never crosses a blocked cell, and agrees with it on
+        /// whether the goal can be reached at all.
+        #[test]
+        fn a_star_is_optimal_and_safe_on_random_grids(
+            width in 2usize..40,
+            height in 2usize..30,
+            raw in proptest::collection::vec(0u8..=255, 40 * 30),
+            start in (0usize..40, 0usize..30),
+            goal in (0usize..40, 0usize..30),
+        ) {
+            // A third of the cells blocked, the rest graded.
+            let costs: Vec<u8> = raw[..width * height]
+                .iter()
+                .map(|&r| if r < 70 { LETHAL } else if r < 85 { INSCRIBED } else { r - 85 })
+                .collect();
+            let (sx, sy) = (start.0 % width, start.1 % height);
+            let (gx, gy) = (goal.0 % width, goal.1 % height);
+            let mut costs = costs;
+            costs[sy * width + sx] = 0;
+            let map = costmap(width, height, costs);
+            let cfg = PlannerConfig { escape_radius_m: 0.0, ..PlannerConfig::default() };
+            let mut planner = Planner::new(cfg);
+            let (s, g) = (centre(&map, sx, sy), centre(&map, gx, gy));
+            let astar = planner.plan(&map, s, g);
+            let field = planner.travel_costs(&map, s).expect("start inside");
+            let optimum = field[gy * width + gx];
+            match astar {
+                Ok(plan) => {
+                    prop_assert!(optimum.is_finite());
+                    prop_assert!((plan.cost - optimum as f64).abs() <= 1e-4 * (1.0 + plan.cost),
+                        "A* {} against Dijkstra {}", plan.cost, optimum);
+                    prop_assert!((path_cost(&map, &plan.cells, &cfg) - plan.cost).abs() < 1e-3);
+                    prop_assert_eq!(plan.cells[0], Cell { x: sx, y: sy });
+                    prop_assert_eq!(*plan.cells.last().expect("non-empty"), Cell { x: gx, y: gy });
+                    for w in plan.cells.windows(2) {
+                        prop_assert!(w[0].x.abs_diff(w[1].x) <= 1 && w[0].y.abs_diff(w[1].y) <= 1);
+                        prop_assert!(w[0] != w[1]);
+                        let crossed = map.cost(w[1]);
+                        prop_assert!(crossed <= MAX_PASSABLE, "crossed {:?}", w[1]);
+                    }
+                    for p in smooth(&map, &plan.cells, 3.0).windows(2) {
+                        prop_assert!(leg_is_clear(&map, p[0], p[1], MAX_PASSABLE));
+                    }
+                }
+                Err(PlanError::GoalBlocked { .. }) => {
+                    let goal_cost = map.cost(Cell { x: gx, y: gy });
+                    prop_assert!(goal_cost > MAX_PASSABLE);
+                }
+                Err(e) => {
+                    prop_assert!(!optimum.is_finite(), "{} but Dijkstra reached it at {}", e, optimum);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_path_keeps_away_from_a_wall_when_room_allows() {
+        // A lethal wall along y = 0; the gradient near it makes the cheapest path run higher.
+        let (w, h) = (60, 20);
+        let mut grid = Grid::new(
+            GridGeometry {
+                width: w,
+                height: h,
+                resolution_m: 0.1,
+                origin: Point2::new(0.0, 0.0),
+            },
+            0i8,
+        );
+        for x in 0..w {
+            *grid.get_mut(x, 0).expect("inside") = 100;
+        }
+        let map = Costmap::from_map(&grid, &crate::CostmapConfig::default());
+        let mut planner = Planner::new(PlannerConfig::default());
+        let plan = planner
+            .plan(&map, centre(&map, 2, 5), centre(&map, 57, 5))
+            .expect("open ground");
+        let highest = plan.cells.iter().map(|c| c.y).max().expect("cells");
+        assert!(
+            highest >= 8,
+            "the path stayed at row {highest}, 0.8 m from the wall"
+        );
+    }
+
+    #[test]
+    fn a_rover_can_back_out_of_an_inscribed_cell_but_not_plan_into_one() {
+        let mut costs = vec![0u8; 20 * 5];
+        // The rover's cell and the two beside it are too close to something.
+        costs[..3].fill(INSCRIBED);
+        let map = costmap(20, 5, costs);
+        let mut planner = Planner::new(PlannerConfig::default());
+        assert!(
+            planner
+                .plan(&map, centre(&map, 0, 0), centre(&map, 15, 3))
+                .is_ok()
+        );
+        assert!(matches!(
+            planner.plan(&map, centre(&map, 15, 3), centre(&map, 1, 0)),
+            Err(PlanError::GoalBlocked { .. })
+        ));
+    }
+
+    #[test]
+    fn a_walled_in_goal_is_reported_without_a_path() {
+        let mut costs = vec![0u8; 30 * 30];
+        for i in 0..30 {
+            costs[15 * 30 + i] = LETHAL;
+        }
+        let map = costmap(30, 30, costs);
+        let mut planner = Planner::new(PlannerConfig::default());
+        let err = planner
+            .plan(&map, centre(&map, 5, 5), centre(&map, 5, 25))
+            .expect_err("the wall spans the map");
+        assert!(matches!(err, PlanError::NoPath { expanded } if expanded == 15 * 30));
+    }
+}
