@@ -392,8 +392,8 @@ impl Mapping {
     }
 
     /// The map now, as a ROS occupancy grid.
-    pub fn map(&self, stamp: Time) -> OccupancyGrid {
-        let states = self.mapper.render_map().states();
+    pub fn map(&mut self, stamp: Time) -> OccupancyGrid {
+        let states = self.mapper.map_states();
         let g = states.geometry();
         OccupancyGrid {
             header: self.header(stamp),

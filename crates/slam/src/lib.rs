@@ -13,7 +13,9 @@
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
+//! - [`assembly`]: the whole map from the submaps, kept current incrementally.
 
+pub mod assembly;
 pub mod bnb;
 pub mod carmen;
 pub mod eval;

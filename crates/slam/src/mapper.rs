@@ -15,6 +15,7 @@
 //!   same correction. Accepted closures enter the graph as robust edges and the graph is
 //!   re-optimised.
 
+use crate::assembly::Assembly;
 use crate::bnb::{self, PrecomputedMap, SearchWindow};
 use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
@@ -159,6 +160,8 @@ pub struct Mapper {
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
+    /// The finished submaps drawn together, for the map.
+    assembly: Assembly,
 }
 
 impl Mapper {
@@ -179,6 +182,7 @@ impl Mapper {
             lost_at: None,
             last_information: [[0.0; 3]; 3],
             closures: 0,
+            assembly: Assembly::new(cfg.frontend.resolution_m),
         }
     }
 
@@ -562,36 +566,43 @@ impl Mapper {
             .collect()
     }
 
-    /// The whole map: every kept submap at its optimised pose, their evidence added up (as
-    /// Cartographer assembles its global map from submaps). Costs the submaps' cells, not
-    /// the keyframes' beams, so a rover can publish it often.
-    pub fn render_map(&self) -> crate::occupancy::OccupancyGrid {
-        let mut grid = crate::occupancy::OccupancyGrid::new(self.cfg.frontend.resolution_m);
-        for sub in self
-            .submaps
-            .iter()
-            .filter(|s| s.keyframes > 0 && !s.trimmed)
-        {
-            let origin = self.graph.nodes[sub.origin_node];
-            let local = sub.map.finest();
-            let (lo, hi) = local.bounds();
-            let corners = [
-                lo,
-                Point2::new(hi.x_m, lo.y_m),
-                hi,
-                Point2::new(lo.x_m, hi.y_m),
-            ]
-            .map(|c| origin.transform_point(c));
-            let min = corners.iter().fold(corners[0], |m, c| {
-                Point2::new(m.x_m.min(c.x_m), m.y_m.min(c.y_m))
-            });
-            let max = corners.iter().fold(corners[0], |m, c| {
-                Point2::new(m.x_m.max(c.x_m), m.y_m.max(c.y_m))
-            });
-            let to_local = origin.inverse();
-            grid.accumulate(min, max, |p| local.log_odds_at(to_local.transform_point(p)));
+    /// The map now: every live submap drawn at its optimised pose (finished ones kept
+    /// assembled between calls, see [`Assembly`]).
+    pub fn render_map(&mut self) -> crate::occupancy::OccupancyGrid {
+        let active = self.sync_assembly();
+        let active: Vec<_> = active
+            .into_iter()
+            .map(|(s, pose)| (self.submaps[s].map.finest(), pose))
+            .collect();
+        self.assembly.render(&active)
+    }
+
+    /// The state of every cell of [`render_map`](Self::render_map), more cheaply.
+    pub fn map_states(&mut self) -> realms_core::Grid<crate::occupancy::CellState> {
+        let active = self.sync_assembly();
+        let active: Vec<_> = active
+            .into_iter()
+            .map(|(s, pose)| (self.submaps[s].map.finest(), pose))
+            .collect();
+        self.assembly.states(&active)
+    }
+
+    /// Places every finished submap in the assembly at its pose now; returns the submaps
+    /// still being built, with their poses.
+    fn sync_assembly(&mut self) -> Vec<(usize, Pose2)> {
+        let mut active = Vec::new();
+        for (s, sub) in self.submaps.iter().enumerate() {
+            if sub.keyframes == 0 || sub.trimmed {
+                continue;
+            }
+            let pose = self.graph.nodes[sub.origin_node];
+            if sub.finished {
+                self.assembly.place(s, sub.map.finest(), pose);
+            } else {
+                active.push((s, pose));
+            }
         }
-        grid
+        active
     }
 
     /// Drops the grids of finished submaps that the just-finished submap `newest` makes
@@ -607,6 +618,7 @@ impl Mapper {
             let origin = self.graph.nodes[self.submaps[s].origin_node].position();
             let sub = &mut self.submaps[s];
             if sub.finished && !sub.trimmed && origin.distance_m(at) <= radius {
+                self.assembly.remove(s, sub.map.finest());
                 sub.map.release();
                 sub.precomputed = None;
                 sub.trimmed = true;

@@ -24,6 +24,19 @@ pub enum CellState {
     Occupied,
 }
 
+impl CellState {
+    /// The state of a cell with log-odds `l` (beyond +-0.5 counts as known).
+    pub fn from_log_odds(l: f32) -> CellState {
+        if l > 0.5 {
+            CellState::Occupied
+        } else if l < -0.5 {
+            CellState::Free
+        } else {
+            CellState::Unknown
+        }
+    }
+}
+
 /// A growable log-odds occupancy grid.
 #[derive(Clone, Debug)]
 pub struct OccupancyGrid {
@@ -33,6 +46,8 @@ pub struct OccupancyGrid {
     height: usize,
     log_odds: Vec<f32>,
     prob: Vec<f32>,
+    /// The world box holding every cell ever updated (none yet: `None`).
+    content: Option<(Point2, Point2)>,
 }
 
 impl OccupancyGrid {
@@ -49,7 +64,54 @@ impl OccupancyGrid {
             height: side,
             log_odds: vec![0.0; side * side],
             prob: vec![0.5; side * side],
+            content: None,
         }
+    }
+
+    /// A grid holding `log_odds` (clamped) over `geometry`; `None` if the count is wrong.
+    pub fn from_log_odds(geometry: GridGeometry, log_odds: Vec<f32>) -> Option<Self> {
+        if log_odds.len() != geometry.len() || geometry.is_empty() {
+            return None;
+        }
+        let log_odds: Vec<f32> = log_odds.iter().map(|l| l.clamp(-CLAMP, CLAMP)).collect();
+        let prob = log_odds
+            .iter()
+            .map(|l| 1.0 - 1.0 / (1.0 + l.exp()))
+            .collect();
+        let max = Point2::new(
+            geometry.origin.x_m + geometry.width_m(),
+            geometry.origin.y_m + geometry.height_m(),
+        );
+        Some(OccupancyGrid {
+            resolution_m: geometry.resolution_m,
+            origin: geometry.origin,
+            width: geometry.width,
+            height: geometry.height,
+            log_odds,
+            prob,
+            content: Some((geometry.origin, max)),
+        })
+    }
+
+    /// The log-odds of every cell, row by row from the grid's origin.
+    pub fn log_odds(&self) -> &[f32] {
+        &self.log_odds
+    }
+
+    /// The world box holding every cell that was ever updated, if any was.
+    pub fn content_bounds(&self) -> Option<(Point2, Point2)> {
+        self.content
+    }
+
+    /// Widens the content box to `[min, max]`.
+    fn touch(&mut self, min: Point2, max: Point2) {
+        self.content = Some(match self.content {
+            None => (min, max),
+            Some((a, b)) => (
+                Point2::new(a.x_m.min(min.x_m), a.y_m.min(min.y_m)),
+                Point2::new(b.x_m.max(max.x_m), b.y_m.max(max.y_m)),
+            ),
+        });
     }
 
     /// Cell edge, metres.
@@ -137,6 +199,7 @@ impl OccupancyGrid {
             max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
         }
         self.ensure(min, max);
+        self.touch(min, max);
         let r = self.resolution_m;
         let origin = self.origin;
         let to_cell = |p: Point2| {
@@ -188,6 +251,7 @@ impl OccupancyGrid {
     /// cell's centre `p`; grows the grid to hold the box.
     pub fn accumulate(&mut self, min: Point2, max: Point2, evidence: impl Fn(Point2) -> f32) {
         self.ensure(min, max);
+        self.touch(min, max);
         let r = self.resolution_m;
         let x0 = ((min.x_m - self.origin.x_m) / r).floor().max(0.0) as usize;
         let y0 = ((min.y_m - self.origin.y_m) / r).floor().max(0.0) as usize;
@@ -226,6 +290,7 @@ impl OccupancyGrid {
         self.height = 1;
         self.log_odds = vec![0.0];
         self.prob = vec![0.5];
+        self.content = None;
     }
 
     /// Updates the cells under single observations, without tracing beams: `true` is
@@ -241,6 +306,7 @@ impl OccupancyGrid {
             max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
         }
         self.ensure(min, max);
+        self.touch(min, max);
         let r = self.resolution_m;
         for (p, yes) in observations {
             let x = ((p.x_m - self.origin.x_m) / r).floor() as usize;
@@ -287,15 +353,7 @@ impl OccupancyGrid {
         let cells = self
             .log_odds
             .iter()
-            .map(|l| {
-                if *l > 0.5 {
-                    CellState::Occupied
-                } else if *l < -0.5 {
-                    CellState::Free
-                } else {
-                    CellState::Unknown
-                }
-            })
+            .map(|l| CellState::from_log_odds(*l))
             .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
