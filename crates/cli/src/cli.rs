@@ -87,6 +87,20 @@ pub struct MissionArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Override the number of rovers.
+    #[arg(long)]
+    pub rovers: Option<u8>,
+    /// Drop the scenario's scheduled faults (slip bursts, sensor dropouts, power loss).
+    #[arg(long)]
+    pub no_faults: bool,
+    /// Deliver every message at once and intact. This is the only mode until the simulated
+    /// network lands; the flag is accepted now so scripts written against the targets keep
+    /// working when it does.
+    #[arg(long)]
+    pub ideal_comms: bool,
+    /// Keep running to the full duration even after exploration is complete.
+    #[arg(long)]
+    pub full_duration: bool,
 }
 
 /// `realms scenario`.

@@ -43,6 +43,12 @@ pub fn run(args: MissionArgs) -> Result<()> {
     if let Some(d) = &args.duration {
         scenario.duration_s = parse_duration_s(d)?;
     }
+    if let Some(n) = args.rovers {
+        scenario.rovers.count = n;
+    }
+    if args.no_faults {
+        scenario.faults.clear();
+    }
     scenario.validate(&source)?;
     let out = args
         .out
@@ -79,7 +85,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
         bar
     };
     let chunk = realms_core::Duration::from_secs(30);
-    while mission.now() < end {
+    while mission.now() < end && (args.full_duration || !mission.exploration_over()) {
         let next = (mission.now() + chunk).min(end);
         mission.run_until(next);
         let sim_s = mission.now().as_secs_f64();
@@ -126,9 +132,24 @@ pub fn run(args: MissionArgs) -> Result<()> {
             ))
         );
     }
+    println!(
+        "coverage {:.1} % of the explorable area{}{}{}",
+        100.0 * report.coverage,
+        report
+            .time_to_90_s
+            .map_or(String::new(), |t| format!(", 90 % at {:.0} min", t / 60.0)),
+        report
+            .time_to_95_s
+            .map_or(String::new(), |t| format!(", 95 % at {:.0} min", t / 60.0)),
+        if report.exploration_complete {
+            "; exploration complete, every rover home"
+        } else {
+            ""
+        }
+    );
     println!("results in {}/", out.display());
     println!(
-        "  mission.json  truth.png  trajectories.png  trajectories.csv  roverN_map.png/.pgm/.yaml"
+        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  roverN_map.png/.pgm/.yaml"
     );
     Ok(())
 }

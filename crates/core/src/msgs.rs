@@ -3,7 +3,7 @@
 //! mechanical mapping. Units are ROS's (metres, radians, seconds); names add the unit where
 //! ROS leaves it implicit. Stamps are mission [`Time`].
 
-use crate::geometry::{Quaternion, Vec3};
+use crate::geometry::{Point2, Quaternion, Vec3};
 use crate::time::Time;
 use serde::{Deserialize, Serialize};
 
@@ -190,6 +190,49 @@ pub struct LocalisationStatus {
     pub reason: String,
 }
 
+/// What a rover's navigation is doing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NavActivity {
+    /// No goal (waiting for a map, or standing still while lost).
+    #[default]
+    Idle,
+    /// Driving to a frontier it chose.
+    Exploring,
+    /// Driving to the operator's goal.
+    OperatorGoal,
+    /// Exploration is over; driving home.
+    ReturningHome,
+    /// Backing off after getting stuck.
+    Recovering,
+    /// Exploration is over and the rover is home.
+    Done,
+}
+
+/// A rover's navigation state and target (`nav/status`; no ROS counterpart). Sent when
+/// either changes and every few seconds; peers read the target to split the exploration.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NavStatus {
+    /// When, and the rover's map frame the target is in.
+    pub header: Header,
+    /// What it is doing.
+    pub activity: NavActivity,
+    /// Where it is heading, if anywhere.
+    pub target: Option<Point2>,
+    /// The latest thing that happened, in words for the operator (a goal set, reached or
+    /// given up and why).
+    pub reason: String,
+}
+
+/// An operator's goal for a rover (`nav/goal`, like Nav2's goal pose): drive to `target`
+/// (in the rover's map frame), or with `None` cancel the goal and resume exploring.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NavGoal {
+    /// When it was issued, and the frame.
+    pub header: Header,
+    /// Where to go; `None` cancels.
+    pub target: Option<Point2>,
+}
+
 /// nav_msgs/MapMetaData.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MapMetaData {
@@ -249,6 +292,10 @@ pub enum Message {
     Localisation(LocalisationStatus),
     /// `map`: a rover's map.
     Map(OccupancyGrid),
+    /// `nav/status`: what a rover's navigation is doing.
+    NavStatus(NavStatus),
+    /// `nav/goal`: an operator's goal for a rover.
+    NavGoal(NavGoal),
 }
 
 impl Message {
@@ -264,6 +311,8 @@ impl Message {
             Message::Pose(m) => m.header.stamp,
             Message::Localisation(m) => m.header.stamp,
             Message::Map(m) => m.header.stamp,
+            Message::NavStatus(m) => m.header.stamp,
+            Message::NavGoal(m) => m.header.stamp,
         }
     }
 }

@@ -6,27 +6,23 @@
 //! `trajectories.csv`). No clock is read here: the caller measures wall time.
 
 pub mod bus;
+pub mod chart;
+pub mod coverage;
 pub mod report;
 pub mod slam_record;
 
 use bus::Bus;
-use realms_core::msgs::Message;
+use coverage::Coverage;
+use realms_core::msgs::{Message, NavActivity, NavStatus};
 use realms_core::{Duration, Point2, RoverId, Time, Topic};
+use realms_node::guard::GuardConfig;
 use realms_node::mapping::{MappingConfig, rover_mapper_config};
-use realms_node::rover::RoverNode;
-use realms_node::wander::WanderConfig;
+use realms_node::navigation::NavigationConfig;
+use realms_node::rover::{RoverConfig, RoverNode};
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
 use realms_slam::traversability::TraversabilityConfig;
 use slam_record::RoverSlamRecord;
-
-/// A node's seed, drawn from the scenario seed's stream for that node.
-fn node_seed(seed: u64, rover: u8) -> u64 {
-    use rand::RngCore;
-    realms_sim::rng::Streams::new(seed)
-        .rng(realms_sim::rng::Purpose::Node(rover))
-        .next_u64()
-}
 
 /// Lidar returns lower than this above the ground under the rover are floor hits, metres:
 /// twice the default floor undulation, so the floor ahead rising does not count as a rock.
@@ -63,6 +59,11 @@ pub struct Mission {
     next_sample: Time,
     published: Vec<(Topic, Message)>,
     slam: Vec<RoverSlamRecord>,
+    coverage: Coverage,
+    /// Each rover's latest navigation activity.
+    activity: Vec<NavActivity>,
+    /// Every navigation status each rover published, with its arrival time.
+    nav_log: Vec<Vec<(Time, NavStatus)>>,
 }
 
 impl Mission {
@@ -75,21 +76,20 @@ impl Mission {
     pub fn with_world(world: World) -> Mission {
         let spec = &world.scenario().rovers;
         let base_from_optical = world.base_from_optical();
+        let fleet: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let nodes: Vec<Box<dyn Node>> = world
             .rovers()
             .map(|body| {
-                let cfg = WanderConfig {
-                    cruise_speed_m_s: 0.3_f64.min(spec.max_speed_m_s),
-                    turn_rate_rad_s: 0.8_f64.min(spec.max_yaw_rate_rad_s),
-                    clearance_m: 0.6,
+                let guard = GuardConfig {
                     half_length_m: spec.length_m / 2.0,
                     half_width_m: spec.width_m / 2.0,
                     lidar_x_m: spec.lidar.mount_x_m,
+                    lidar_clearance_m: 0.25,
+                    depth_reach_m: 0.6,
                     depth_rot: base_from_optical.rot,
                     depth_origin_m: base_from_optical.origin,
                     max_step_m: spec.max_step_m,
                     max_drop_m: 0.12,
-                    seed: node_seed(world.scenario().seed, body.id.0),
                 };
                 let mapping = MappingConfig {
                     lidar_x_m: spec.lidar.mount_x_m,
@@ -106,7 +106,16 @@ impl Mission {
                         ..TraversabilityConfig::default()
                     },
                 };
-                Box::new(RoverNode::new(body.id, cfg, mapping)) as Box<dyn Node>
+                let mut navigation = NavigationConfig::new(body.pose.position());
+                navigation.follower.max_speed_m_s = 0.3_f64.min(spec.max_speed_m_s);
+                navigation.follower.max_yaw_rate_rad_s = 0.8_f64.min(spec.max_yaw_rate_rad_s);
+                let cfg = RoverConfig {
+                    mapping,
+                    navigation,
+                    guard,
+                    fleet: fleet.clone(),
+                };
+                Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
             })
             .collect();
         let mut bus = Bus::default();
@@ -116,6 +125,7 @@ impl Mission {
             }
         }
         let trajectories = vec![Vec::new(); nodes.len()];
+        let coverage = Coverage::new(world.truth());
         let n_rovers = nodes.len();
         let mut mission = Mission {
             world,
@@ -125,6 +135,9 @@ impl Mission {
             next_sample: Time::ZERO,
             published: Vec::new(),
             slam: vec![RoverSlamRecord::default(); n_rovers],
+            coverage,
+            activity: vec![NavActivity::Idle; n_rovers],
+            nav_log: vec![Vec::new(); n_rovers],
         };
         mission.update_camera_wants();
         mission
@@ -186,6 +199,31 @@ impl Mission {
         self.deliver(end, rest);
     }
 
+    /// Publishes `message` on `topic` at the current time, as an operator would.
+    pub fn publish(&mut self, topic: Topic, message: Message) {
+        let t = self.now();
+        self.deliver(t, vec![(topic, message)]);
+    }
+
+    /// Every navigation status each rover published, in rover order, with arrival times.
+    pub fn nav_log(&self) -> &[Vec<(Time, NavStatus)>] {
+        &self.nav_log
+    }
+
+    /// How much of the explorable area the rovers' maps cover, over time.
+    pub fn coverage(&self) -> &Coverage {
+        &self.coverage
+    }
+
+    /// Whether every rover has finished exploring and is home (or has no power): the
+    /// mission has nothing left to do.
+    pub fn exploration_over(&self) -> bool {
+        self.world
+            .rovers()
+            .zip(&self.activity)
+            .all(|(body, a)| *a == NavActivity::Done || !body.powered)
+    }
+
     /// What each rover's SLAM reported, in rover order.
     pub fn slam_records(&self) -> &[RoverSlamRecord] {
         &self.slam
@@ -232,7 +270,14 @@ impl Mission {
                     reason: change.reason.clone(),
                 });
             }
-            Message::Map(map) => record.map = Some(map.clone()),
+            Message::Map(map) => {
+                self.coverage.map(t.as_secs_f64(), i, map);
+                record.map = Some(map.clone());
+            }
+            Message::NavStatus(status) => {
+                self.activity[i] = status.activity;
+                self.nav_log[i].push((t, status.clone()));
+            }
             _ => {}
         }
     }
@@ -247,7 +292,7 @@ impl Mission {
             let mut next = Vec::new();
             for (topic, message) in pending {
                 self.bus.count(&topic);
-                if matches!(topic.leaf(), "pose" | "localisation" | "map") {
+                if matches!(topic.leaf(), "pose" | "localisation" | "map" | "nav/status") {
                     self.record_slam(t, &topic, &message);
                 }
                 if let (Some(rover), Message::CmdVel(cmd)) = (topic.rover(), &message)

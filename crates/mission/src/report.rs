@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 /// Schema identifier written into every `mission.json`.
 pub const SCHEMA: &str = "realms.mission/1";
 
-/// The behaviour driving the rovers, named so nobody mistakes it for exploration.
-pub const BEHAVIOUR: &str = "wander (placeholder until autonomous exploration)";
+/// The behaviour driving the rovers.
+pub const BEHAVIOUR: &str = "autonomous frontier exploration (realms-nav)";
 
 /// `mission.json`.
 #[derive(Clone, Debug, Serialize)]
@@ -46,6 +46,16 @@ pub struct MissionReport {
     pub hazard_entries: u32,
     /// Stuck events, all rovers.
     pub stuck_events: u32,
+    /// Final fraction of the explorable area that some rover's map knows.
+    pub coverage: f64,
+    /// `[t_s, fraction]` each time a map arrived.
+    pub coverage_series: Vec<[f64; 2]>,
+    /// When coverage first reached 90 %, seconds (absent if it did not).
+    pub time_to_90_s: Option<f64>,
+    /// When coverage first reached 95 %, seconds (absent if it did not).
+    pub time_to_95_s: Option<f64>,
+    /// Whether every rover finished exploring and returned home before the time was up.
+    pub exploration_complete: bool,
     /// Everything notable, in time order.
     pub events: Vec<SimEvent>,
     /// Messages published per topic.
@@ -182,6 +192,16 @@ impl MissionReport {
             collisions: rovers.iter().map(|r| r.collisions).sum(),
             hazard_entries: rovers.iter().map(|r| r.hazard_entries).sum(),
             stuck_events: rovers.iter().map(|r| r.stuck_events).sum(),
+            coverage: mission.coverage().fraction(),
+            coverage_series: mission
+                .coverage()
+                .series()
+                .iter()
+                .map(|(t, f)| [*t, *f])
+                .collect(),
+            time_to_90_s: mission.coverage().time_to(0.9),
+            time_to_95_s: mission.coverage().time_to(0.95),
+            exploration_complete: mission.exploration_over(),
             rovers,
             events: world.events().to_vec(),
             messages: mission
@@ -194,6 +214,7 @@ impl MissionReport {
                 ("truth", "truth.png"),
                 ("trajectories", "trajectories.png"),
                 ("trajectories_csv", "trajectories.csv"),
+                ("coverage", "coverage.png"),
             ]),
         }
     }
@@ -224,6 +245,70 @@ fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportE
         _ => Trinary::Occupied,
     });
     map_server::write(&trinary, dir, &stem)?;
+    Ok(())
+}
+
+/// Writes `coverage.png`: the arena with every explorable cell in the colour of the rover
+/// that mapped it first, and in dark red where no rover's final map knows it,
+/// above the coverage-over-time curve.
+fn write_coverage(
+    mission: &Mission,
+    truth_img: &realms_core::Grid<[u8; 3]>,
+    path: &Path,
+) -> Result<(), ReportError> {
+    let cov = mission.coverage();
+    let known = cov.known_by().cells();
+    let first = cov.first_by();
+    let mut explorable = vec![false; known.len()];
+    for &i in cov.explorable() {
+        explorable[i] = true;
+    }
+    let mut map = truth_img.clone();
+    for (i, px) in map.cells_mut().iter_mut().enumerate() {
+        if !explorable[i] {
+            *px = [px[0] / 2 + 100, px[1] / 2 + 100, px[2] / 2 + 100];
+        } else if known[i] == 0 {
+            *px = [110, 20, 20];
+        } else {
+            let rover = first[i].saturating_sub(1) as usize;
+            let c = ROVER_COLORS[rover % ROVER_COLORS.len()];
+            *px = [c[0] / 2 + 120, c[1] / 2 + 120, c[2] / 2 + 120];
+        }
+    }
+    let chart = crate::chart::coverage_chart(
+        &[crate::chart::Series {
+            color: [30, 30, 30],
+            points: cov.series().to_vec(),
+        }],
+        mission.now().as_secs_f64(),
+    );
+    // The map on top, the chart below, both centred on the wider one.
+    let (mw, mh) = (map.width(), map.height());
+    let (cw, ch) = (chart.width(), chart.height());
+    let width = mw.max(cw);
+    let geo = realms_core::GridGeometry {
+        width,
+        height: mh + ch,
+        resolution_m: 1.0,
+        origin: realms_core::Point2::new(0.0, 0.0),
+    };
+    let mut out = realms_core::Grid::new(geo, [255u8, 255, 255]);
+    let (mx, cx) = ((width - mw) / 2, (width - cw) / 2);
+    for y in 0..mh {
+        for x in 0..mw {
+            if let (Some(d), Some(s)) = (out.get_mut(mx + x, ch + y), map.get(x, y)) {
+                *d = *s;
+            }
+        }
+    }
+    for y in 0..ch {
+        for x in 0..cw {
+            if let (Some(d), Some(s)) = (out.get_mut(cx + x, y), chart.get(x, y)) {
+                *d = *s;
+            }
+        }
+    }
+    out.write_png(path, |c| *c)?;
     Ok(())
 }
 
@@ -279,6 +364,8 @@ pub fn write_results(
             write_map(map, dir, &body.id.to_string())?;
         }
     }
+
+    write_coverage(mission, &truth_img, &dir.join("coverage.png"))?;
 
     let report = MissionReport::new(mission, scenario_source, wall_s);
     let json = serde_json::to_string_pretty(&report)

@@ -157,7 +157,7 @@ mod tests {
         let cm = Costmap::from_map(&map, &CostmapConfig::default());
         let mut planner = Planner::new(PlannerConfig::default());
         let travel = planner
-            .travel_costs(&cm, Point2::new(9.0, 2.0))
+            .travel_costs(&cm, Point2::new(9.0, 2.0), true)
             .expect("inside");
         (map, cm, travel)
     }

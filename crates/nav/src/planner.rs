@@ -147,11 +147,19 @@ impl Planner {
     }
 
     /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
-    fn search(&mut self, map: &Costmap, start: Cell, goal: Option<Cell>, heuristic: bool) -> usize {
+    fn search(
+        &mut self,
+        map: &Costmap,
+        start: Cell,
+        goal: Option<Cell>,
+        heuristic: bool,
+        known_only: bool,
+    ) -> usize {
         let geo = *map.geometry();
         let (w, h) = (geo.width, geo.height);
         self.begin(geo.len());
         let costs = map.costs();
+        let known = map.known();
         let weight = self.cfg.cost_weight as f32 / MAX_PASSABLE as f32;
         let escape_cells = (self.cfg.escape_radius_m / geo.resolution_m) as f32;
         let escape2 = escape_cells * escape_cells;
@@ -169,12 +177,17 @@ impl Planner {
         };
         // Price per metre of entering a cell, or None where the rover may not go.
         let factor = |x: usize, y: usize| -> Option<f32> {
-            let c = costs[y * w + x];
+            let i = y * w + x;
+            let c = costs[i];
+            let (dx, dy) = (x as f32 - start.x as f32, y as f32 - start.y as f32);
+            let near_start = dx * dx + dy * dy <= escape2;
+            if known_only && !known[i] && !near_start {
+                return None;
+            }
             if c <= MAX_PASSABLE {
                 return Some(1.0 + weight * c as f32);
             }
-            let (dx, dy) = (x as f32 - start.x as f32, y as f32 - start.y as f32);
-            (dx * dx + dy * dy <= escape2).then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
+            near_start.then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
         };
         let s = geo.index(start);
         self.g[s] = 0.0;
@@ -267,7 +280,7 @@ impl Planner {
     /// The cheapest path from `start` to `goal` (A*).
     pub fn plan(&mut self, map: &Costmap, start: Point2, goal: Point2) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), true);
+        let expanded = self.search(map, s, Some(g), true, false);
         self.path_to(map.geometry(), g, expanded)
     }
 
@@ -279,13 +292,20 @@ impl Planner {
         goal: Point2,
     ) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), false);
+        let expanded = self.search(map, s, Some(g), false, false);
         self.path_to(map.geometry(), g, expanded)
     }
 
     /// The cost of the cheapest path from `start` to every cell (`INFINITY` where none),
-    /// row-major like the costmap.
-    pub fn travel_costs(&mut self, map: &Costmap, start: Point2) -> Result<Vec<f32>, PlanError> {
+    /// row-major like the costmap; with `known_only` the paths keep to known cells (the
+    /// start's surroundings excepted), as exploration's do: every frontier lies on known
+    /// ground, and the search need not flood the unknown.
+    pub fn travel_costs(
+        &mut self,
+        map: &Costmap,
+        start: Point2,
+        known_only: bool,
+    ) -> Result<Vec<f32>, PlanError> {
         let s = map
             .geometry()
             .world_to_cell(start)
@@ -293,7 +313,7 @@ impl Planner {
                 x_m: start.x_m,
                 y_m: start.y_m,
             })?;
-        self.search(map, s, None, false);
+        self.search(map, s, None, false, known_only);
         let gen_ = self.generation;
         Ok(self
             .g
@@ -433,7 +453,7 @@ mod tests {
             let mut planner = Planner::new(cfg);
             let (s, g) = (centre(&map, sx, sy), centre(&map, gx, gy));
             let astar = planner.plan(&map, s, g);
-            let field = planner.travel_costs(&map, s).expect("start inside");
+            let field = planner.travel_costs(&map, s, false).expect("start inside");
             let optimum = field[gy * width + gx];
             match astar {
                 Ok(plan) => {

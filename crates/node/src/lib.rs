@@ -7,10 +7,13 @@
 //! - [`Node`]: the interface every node implements.
 //! - [`rover::RoverNode`]: a rover's on-board logic.
 //! - [`mapping::Mapping`]: the rover's SLAM on board, and what it publishes.
+//! - [`navigation::Navigator`]: exploration, planning, path following and recovery.
+//! - [`guard::Guard`]: the reactive check of the rover's own sensors.
 
+pub mod guard;
 pub mod mapping;
+pub mod navigation;
 pub mod rover;
-pub mod wander;
 
 use realms_core::msgs::Message;
 use realms_core::{Time, Topic};

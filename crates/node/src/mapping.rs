@@ -15,7 +15,7 @@ use realms_core::msgs::{
     Header, Imu, LaserScan, LocalisationStatus, MapMetaData, Message, OccupancyGrid, Odometry,
     PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
 };
-use realms_core::{Duration, Point2, Pose2, RoverId, Time};
+use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
@@ -389,6 +389,43 @@ impl Mapping {
         c[1][1] = var_xy;
         c[5][5] = var_yaw;
         c
+    }
+
+    /// The map at `factor` times the SLAM resolution, for navigation: a cell is an obstacle
+    /// if any of its SLAM cells is, else hazard if the hazard layer says so at its centre,
+    /// else free if any SLAM cell (or the depth camera) saw it free, else unknown.
+    pub fn nav_map(&mut self, factor: usize) -> Grid<i8> {
+        let factor = factor.max(1);
+        let states = self.mapper.map_states();
+        let g = *states.geometry();
+        let geo = GridGeometry {
+            width: g.width / factor,
+            height: g.height / factor,
+            resolution_m: g.resolution_m * factor as f64,
+            origin: g.origin,
+        };
+        let fine = states.cells();
+        let mut cells = Vec::with_capacity(geo.len());
+        for y in 0..geo.height {
+            for x in 0..geo.width {
+                let (mut occupied, mut free) = (false, false);
+                for dy in 0..factor {
+                    let row = (y * factor + dy) * g.width + x * factor;
+                    for c in &fine[row..row + factor] {
+                        occupied |= *c == CellState::Occupied;
+                        free |= *c == CellState::Free;
+                    }
+                }
+                let centre = geo.cell_center(realms_core::Cell { x, y });
+                cells.push(match (occupied, self.hazards.hazard_at(centre), free) {
+                    (true, _, _) => OccupancyGrid::OCCUPIED,
+                    (_, Some(true), _) => OccupancyGrid::HAZARD,
+                    (_, Some(false), _) | (_, None, true) => OccupancyGrid::FREE,
+                    _ => OccupancyGrid::UNKNOWN,
+                });
+            }
+        }
+        Grid::from_cells(geo, cells).expect("one value per cell")
     }
 
     /// The map now, as a ROS occupancy grid.

@@ -1,50 +1,92 @@
 //! The rover node: a rover's on-board logic. It runs SLAM on its own scans and odometry
-//! ([`Mapping`](crate::mapping::Mapping)), publishing its pose, its localisation state and its
-//! map. For now it drives with the placeholder [`Wander`](crate::wander::Wander) behaviour;
-//! navigation and exploration take its place as their issues land. It stops the rover if
-//! its lidar falls silent.
+//! ([`Mapping`]), publishing its pose, its localisation state and its map; it explores by
+//! itself ([`Navigator`]), telling its peers where it is heading (`nav/status`) and hearing
+//! where they are, and takes operator goals (`nav/goal`). Its own sensors guard it
+//! ([`Guard`]) against what the map does not show yet, and it stops if its lidar falls
+//! silent.
 
+use crate::guard::{Guard, GuardConfig};
 use crate::mapping::{Mapping, MappingConfig};
-use crate::wander::{Wander, WanderConfig};
+use crate::navigation::{Activity, GoalKind, NavigationConfig, Navigator};
 use crate::{Node, Outgoing};
 use realms_core::geometry::Vec3;
-use realms_core::msgs::{Message, Twist, TwistStamped};
+use realms_core::msgs::{Header, Message, NavActivity, NavStatus, Twist, TwistStamped};
 use realms_core::{Duration, RoverId, Time, Topic};
+use realms_slam::health::LocalisationState;
 
 /// How long without a scan before the node commands a stop.
 const SCAN_SILENCE: Duration = Duration::from_millis(500);
+/// The navigation status is repeated this often even when nothing changed, so a peer that
+/// missed it (or joined late) learns it.
+const STATUS_REPEAT: Duration = Duration::from_secs(10);
+/// Navigation plans on a map this many times coarser than SLAM's.
+const NAV_MAP_FACTOR: usize = 2;
+/// Yaw rate while lost: turning in place shows the relocaliser new views.
+const LOST_TURN_RAD_S: f64 = 0.3;
+
+/// Everything a rover node needs to know.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RoverConfig {
+    /// SLAM on board.
+    pub mapping: MappingConfig,
+    /// Navigation and exploration.
+    pub navigation: NavigationConfig,
+    /// The reactive guard.
+    pub guard: GuardConfig,
+    /// Every rover of the fleet (itself included): whose `nav/status` it listens to.
+    pub fleet: Vec<RoverId>,
+}
 
 /// A rover's on-board node.
 #[derive(Debug)]
 pub struct RoverNode {
     id: RoverId,
     name: String,
-    wander: Wander,
+    fleet: Vec<RoverId>,
     mapping: Mapping,
+    navigator: Navigator,
+    guard: Guard,
     last_scan: Option<Time>,
     stopped_for_silence: bool,
+    last_cmd_v: f64,
+    last_status: Option<(NavActivity, Option<realms_core::Point2>, Time)>,
+    /// The navigator's latest event, for the status.
+    reason: String,
     outbox: Vec<Outgoing>,
 }
 
 impl RoverNode {
     /// The node of rover `id`.
-    pub fn new(id: RoverId, wander: WanderConfig, mapping: MappingConfig) -> Self {
+    pub fn new(id: RoverId, cfg: RoverConfig) -> Self {
         RoverNode {
             id,
             name: id.namespace(),
-            wander: Wander::new(wander),
-            mapping: Mapping::new(id, mapping),
+            fleet: cfg.fleet,
+            mapping: Mapping::new(id, cfg.mapping),
+            navigator: Navigator::new(id, cfg.navigation),
+            guard: Guard::new(cfg.guard),
             last_scan: None,
             stopped_for_silence: false,
+            last_cmd_v: 0.0,
+            last_status: None,
+            reason: String::new(),
             outbox: Vec::new(),
         }
     }
 
+    fn header(&self, now: Time) -> Header {
+        Header {
+            stamp: now,
+            frame_id: format!("{}/map", self.name),
+        }
+    }
+
     fn send_cmd(&mut self, now: Time, v_m_s: f64, w_rad_s: f64) {
+        self.last_cmd_v = v_m_s;
         self.outbox.push(Outgoing {
             topic: self.id.topic("cmd_vel"),
             message: Message::CmdVel(TwistStamped {
-                header: realms_core::msgs::Header {
+                header: Header {
                     stamp: now,
                     frame_id: format!("{}/base_link", self.name),
                 },
@@ -55,6 +97,57 @@ impl RoverNode {
             }),
         });
     }
+
+    /// Publishes `nav/status` when it changed or is due again.
+    fn publish_status(&mut self, now: Time) {
+        let activity = match self.navigator.activity() {
+            Activity::Idle => NavActivity::Idle,
+            Activity::Driving(GoalKind::Frontier) => NavActivity::Exploring,
+            Activity::Driving(GoalKind::Operator) => NavActivity::OperatorGoal,
+            Activity::Driving(GoalKind::Home) => NavActivity::ReturningHome,
+            Activity::Recovering => NavActivity::Recovering,
+            Activity::Done => NavActivity::Done,
+        };
+        let target = self.navigator.goal().map(|(p, _)| p);
+        let events = self.navigator.take_events();
+        let news = !events.is_empty();
+        if let Some(e) = events.last() {
+            self.reason = e.what.clone();
+        }
+        let due = match self.last_status {
+            None => true,
+            Some((a, t, at)) => news || a != activity || t != target || now - at >= STATUS_REPEAT,
+        };
+        if due {
+            self.last_status = Some((activity, target, now));
+            self.outbox.push(Outgoing {
+                topic: self.id.topic("nav/status"),
+                message: Message::NavStatus(NavStatus {
+                    header: self.header(now),
+                    activity,
+                    target,
+                    reason: self.reason.clone(),
+                }),
+            });
+        }
+    }
+
+    /// Decides the velocity after a scan.
+    fn drive(&mut self, now: Time, scan: &realms_core::msgs::LaserScan) -> (f64, f64) {
+        if self.mapping.calibrating(now) {
+            return (0.0, 0.0);
+        }
+        let guarded = self.guard.on_scan(now, scan);
+        if self.mapping.state() == LocalisationState::Lost {
+            return (0.0, LOST_TURN_RAD_S);
+        }
+        let pose = self.mapping.pose();
+        if self.navigator.wants_map(now) {
+            let map = self.mapping.nav_map(NAV_MAP_FACTOR);
+            self.navigator.on_map(now, &map, pose);
+        }
+        self.navigator.steer(now, pose, self.last_cmd_v, guarded)
+    }
 }
 
 impl Node for RoverNode {
@@ -63,14 +156,29 @@ impl Node for RoverNode {
     }
 
     fn subscriptions(&self) -> Vec<Topic> {
-        ["scan", "depth/points", "odom", "imu"]
+        let mut topics: Vec<Topic> = ["scan", "depth/points", "odom", "imu", "nav/goal"]
             .iter()
             .map(|leaf| self.id.topic(leaf))
-            .collect()
+            .collect();
+        topics.extend(
+            self.fleet
+                .iter()
+                .filter(|peer| **peer != self.id)
+                .map(|peer| peer.topic("nav/status")),
+        );
+        topics
     }
 
     fn on_message(&mut self, now: Time, topic: &Topic, message: &Message) {
-        if topic.rover() != Some(self.id) {
+        let Some(from) = topic.rover() else { return };
+        if from != self.id {
+            if let Message::NavStatus(status) = message {
+                let target = match status.activity {
+                    NavActivity::Exploring => status.target,
+                    _ => None,
+                };
+                self.navigator.hear_peer(now, from, target);
+            }
             return;
         }
         match message {
@@ -78,19 +186,17 @@ impl Node for RoverNode {
                 self.last_scan = Some(now);
                 self.stopped_for_silence = false;
                 self.mapping.on_scan(scan, &mut self.outbox);
-                let (v, w) = if self.mapping.calibrating(now) {
-                    (0.0, 0.0)
-                } else {
-                    self.wander.on_scan(now, scan)
-                };
+                let (v, w) = self.drive(now, scan);
                 self.send_cmd(now, v, w);
+                self.publish_status(now);
             }
             Message::Odometry(odom) => self.mapping.on_odometry(odom),
             Message::Imu(imu) => self.mapping.on_imu(imu),
             Message::PointCloud(cloud) => {
                 self.mapping.on_depth(cloud);
-                self.wander.on_depth(now, cloud);
+                self.guard.on_depth(now, cloud);
             }
+            Message::NavGoal(goal) => self.navigator.set_operator_goal(now, goal.target),
             _ => {}
         }
     }

@@ -117,9 +117,13 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
                     floor = floor.min(cols[j].min_z);
                     // Far from the camera the points thin out to a few cells per row, so
                     // the slope is taken to any judged neighbour at least two cells away.
+                    // Only the upper cell of a steep pair is marked: the face of a rock or
+                    // a crater's wall is the hazard, not the flat floor at its foot (which
+                    // would otherwise grow every rock and wall by a band the width of the
+                    // baseline).
                     let dist = ((dx * dx + dy * dy) as f64).sqrt();
                     if dist >= baseline as f64
-                        && (mean(j) - mean(i)).abs() > slope * dist * r + SLOPE_NOISE_M
+                        && mean(i) - mean(j) > slope * dist * r + SLOPE_NOISE_M
                     {
                         steep = true;
                     }

@@ -1,0 +1,524 @@
+//! The rover's navigation: where to go, how to get there, and what to do when that fails.
+//!
+//! Every few seconds (and at once when something goes wrong) the rover's map becomes a
+//! [`Costmap`]; one Dijkstra field from the rover gives the cost to every frontier, the best
+//! frontier (discounted by the targets peers have claimed) becomes the goal, and the path to
+//! it comes from the same field. Between map updates the [`Follower`] steers along the path,
+//! and a reactive guard (lidar and depth camera, see [`crate::guard`]) stops the rover if
+//! something appears in front of it before the map shows it.
+//!
+//! A rover that stops making progress notices: it backs off, replans, and after a few tries
+//! (or when a goal takes far longer than its path should) gives the goal up and blacklists
+//! it. Operator goals pre-empt exploration until reached or cancelled. When no reachable
+//! frontier is left the rover drives home (its start, beside the lander) and stops there.
+
+use realms_core::{Duration, Grid, Point2, Pose2, RoverId, Time};
+use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
+use realms_nav::follower::{Follower, FollowerConfig, Steer};
+use realms_nav::planner::{PlannerConfig, smooth};
+use realms_nav::{Costmap, CostmapConfig, Planner};
+use std::collections::{BTreeMap, VecDeque};
+
+/// Navigation tuning.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NavigationConfig {
+    /// Costs from the map.
+    pub costmap: CostmapConfig,
+    /// Path search.
+    pub planner: PlannerConfig,
+    /// Path following.
+    pub follower: FollowerConfig,
+    /// Frontier choice.
+    pub explore: ExploreConfig,
+    /// How often the map is refreshed and the plan revised.
+    pub replan_period: Duration,
+    /// A rover that moved less than this, metres ...
+    pub stuck_distance_m: f64,
+    /// ... over this long while it should be driving, is stuck.
+    pub stuck_window: Duration,
+    /// Recoveries tried on one goal before it is given up.
+    pub max_attempts: u32,
+    /// A goal must be reached at this average speed along its first path, m/s ...
+    pub min_progress_speed_m_s: f64,
+    /// ... plus this much time.
+    pub goal_slack: Duration,
+    /// A peer's claim is forgotten after this long without news.
+    pub claim_lifetime: Duration,
+    /// Legs of a smoothed path are at most this long, metres.
+    pub max_leg_m: f64,
+    /// How far ahead the path is checked against each new costmap, metres.
+    pub check_ahead_m: f64,
+    /// Where the rover goes when exploration is over (beside the lander).
+    pub home: Point2,
+    /// Whether the rover explores by itself (otherwise it waits for operator goals).
+    pub autonomous: bool,
+}
+
+impl NavigationConfig {
+    /// Defaults for the Leo Rover, returning to `home`.
+    pub fn new(home: Point2) -> Self {
+        NavigationConfig {
+            costmap: CostmapConfig::default(),
+            planner: PlannerConfig::default(),
+            follower: FollowerConfig::default(),
+            explore: ExploreConfig::default(),
+            replan_period: Duration::from_secs(3),
+            stuck_distance_m: 0.3,
+            stuck_window: Duration::from_secs(20),
+            max_attempts: 3,
+            min_progress_speed_m_s: 0.1,
+            goal_slack: Duration::from_secs(60),
+            claim_lifetime: Duration::from_secs(120),
+            max_leg_m: 2.0,
+            check_ahead_m: 2.5,
+            home,
+            autonomous: true,
+        }
+    }
+}
+
+/// Why the rover is going where it is going.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum GoalKind {
+    /// A frontier it chose.
+    Frontier,
+    /// A goal the operator gave.
+    Operator,
+    /// Home, exploration being over.
+    Home,
+}
+
+/// What the navigator is doing, for status messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Activity {
+    /// Waiting for a map or a goal.
+    Idle,
+    /// Driving to a goal.
+    Driving(GoalKind),
+    /// Backing off after getting stuck.
+    Recovering,
+    /// Exploration is over and the rover is home.
+    Done,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Goal {
+    point: Point2,
+    kind: GoalKind,
+    set_at: Time,
+    deadline: Option<Time>,
+    attempts: u32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Recovery {
+    until: Time,
+    reverse: bool,
+}
+
+/// Something that happened, for the mission log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NavEvent {
+    /// When.
+    pub t: Time,
+    /// What.
+    pub what: String,
+}
+
+/// The rover's navigator.
+#[derive(Debug)]
+pub struct Navigator {
+    id: RoverId,
+    cfg: NavigationConfig,
+    planner: Planner,
+    follower: Follower,
+    costmap: Option<Costmap>,
+    goal: Option<Goal>,
+    operator_goal: Option<Point2>,
+    blacklist: Vec<Point2>,
+    peers: BTreeMap<RoverId, (Point2, Time)>,
+    history: VecDeque<(Time, Point2)>,
+    recovery: Option<Recovery>,
+    next_map: Time,
+    replan_now: bool,
+    done: bool,
+    events: Vec<NavEvent>,
+}
+
+/// Whether two points are the same target.
+fn same_target(a: Point2, b: Point2) -> bool {
+    a.distance_m(b) < 0.5
+}
+
+impl Navigator {
+    /// A navigator for rover `id`.
+    pub fn new(id: RoverId, cfg: NavigationConfig) -> Self {
+        Navigator {
+            id,
+            planner: Planner::new(cfg.planner),
+            follower: Follower::new(cfg.follower),
+            cfg,
+            costmap: None,
+            goal: None,
+            operator_goal: None,
+            blacklist: Vec::new(),
+            peers: BTreeMap::new(),
+            history: VecDeque::new(),
+            recovery: None,
+            next_map: Time::ZERO,
+            replan_now: true,
+            done: false,
+            events: Vec::new(),
+        }
+    }
+
+    /// What it is doing.
+    pub fn activity(&self) -> Activity {
+        if self.recovery.is_some() {
+            Activity::Recovering
+        } else if let Some(g) = self.goal {
+            Activity::Driving(g.kind)
+        } else if self.done {
+            Activity::Done
+        } else {
+            Activity::Idle
+        }
+    }
+
+    /// The goal it is driving to.
+    pub fn goal(&self) -> Option<(Point2, GoalKind)> {
+        self.goal.map(|g| (g.point, g.kind))
+    }
+
+    /// Targets given up on.
+    pub fn blacklist(&self) -> &[Point2] {
+        &self.blacklist
+    }
+
+    /// Takes what happened since the last call.
+    pub fn take_events(&mut self) -> Vec<NavEvent> {
+        std::mem::take(&mut self.events)
+    }
+
+    fn event(&mut self, t: Time, what: String) {
+        self.events.push(NavEvent { t, what });
+    }
+
+    /// Whether it wants a fresh map now.
+    pub fn wants_map(&self, now: Time) -> bool {
+        now >= self.next_map || self.replan_now
+    }
+
+    /// The operator's goal (pre-empts exploration), or `None` to cancel it.
+    pub fn set_operator_goal(&mut self, now: Time, goal: Option<Point2>) {
+        self.operator_goal = goal;
+        self.done = false;
+        if self.goal.is_some_and(|g| g.kind == GoalKind::Operator) || goal.is_some() {
+            self.drop_goal(now, "operator goal changed", false);
+        }
+        self.replan_now = true;
+    }
+
+    /// A peer said where it is going (`None`: nowhere).
+    pub fn hear_peer(&mut self, now: Time, peer: RoverId, target: Option<Point2>) {
+        if peer == self.id {
+            return;
+        }
+        match target {
+            Some(p) => {
+                self.peers.insert(peer, (p, now));
+            }
+            None => {
+                self.peers.remove(&peer);
+            }
+        }
+    }
+
+    fn drop_goal(&mut self, now: Time, why: &str, blacklist: bool) {
+        if let Some(g) = self.goal.take() {
+            if blacklist && g.kind == GoalKind::Frontier {
+                self.blacklist.push(g.point);
+            }
+            self.event(
+                now,
+                format!(
+                    "gave up {:?} goal ({:.1}, {:.1}): {why}",
+                    g.kind, g.point.x_m, g.point.y_m
+                ),
+            );
+            if g.kind == GoalKind::Operator && blacklist {
+                self.operator_goal = None;
+            }
+        }
+        self.follower.set_path(Vec::new());
+        self.replan_now = true;
+    }
+
+    /// Peers' live claims; a peer with a higher id than ours does not displace our current
+    /// target (so two rovers that picked the same frontier at once do not both leave it).
+    fn claims(&self, now: Time, current: Option<Point2>) -> Vec<PeerClaim> {
+        self.peers
+            .iter()
+            .filter(|(_, (_, heard))| now - *heard <= self.cfg.claim_lifetime)
+            .filter(|(peer, (target, _))| {
+                !(peer.0 > self.id.0 && current.is_some_and(|c| same_target(c, *target)))
+            })
+            .map(|(_, (target, _))| PeerClaim { target: *target })
+            .collect()
+    }
+
+    /// A fresh map (-1 unknown, 0 free, 90 hazard, 100 obstacle) with the rover at `pose`:
+    /// revises the goal and the path.
+    pub fn on_map(&mut self, now: Time, map: &Grid<i8>, pose: Pose2) {
+        self.next_map = now + self.cfg.replan_period;
+        self.replan_now = false;
+        let costmap = Costmap::from_map(map, &self.cfg.costmap);
+        let here = pose.position();
+        let Ok(field) = self.planner.travel_costs(&costmap, here, true) else {
+            self.event(now, "the rover is off its own map".into());
+            self.costmap = Some(costmap);
+            return;
+        };
+        let geo = *costmap.geometry();
+        let reachable = |p: Point2| {
+            geo.world_to_cell(p)
+                .is_some_and(|c| field[geo.index(c)].is_finite())
+        };
+        // Operator goals first.
+        if let Some(op) = self.operator_goal
+            && self.goal.is_none_or(|g| g.kind != GoalKind::Operator)
+        {
+            self.start_goal(now, op, GoalKind::Operator);
+        }
+        let current = self.goal.map(|g| g.point);
+        if self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous {
+            let claims = self.claims(now, current);
+            let options = candidates(
+                map,
+                &costmap,
+                &field,
+                &claims,
+                &self.blacklist,
+                &self.cfg.explore,
+            );
+            self.choose_frontier(now, &options);
+            if options.is_empty() && !self.done && self.goal.is_none() {
+                self.event(now, "no reachable frontier left: returning home".into());
+                self.start_goal(now, self.cfg.home, GoalKind::Home);
+            }
+        }
+        let Some(goal) = self.goal else {
+            self.costmap = Some(costmap);
+            return;
+        };
+        // Frontiers lie on known ground and the field already holds the way there; other
+        // goals may lie beyond the map's known part, and A* plans into the unknown for them.
+        let plan = if goal.kind == GoalKind::Frontier {
+            match geo.world_to_cell(goal.point) {
+                Some(cell) if reachable(goal.point) => self
+                    .planner
+                    .path_from_field(&costmap, cell)
+                    .map_err(|e| e.to_string()),
+                _ => Err("no path over known ground".to_string()),
+            }
+        } else {
+            self.planner
+                .plan(&costmap, here, goal.point)
+                .map_err(|e| e.to_string())
+        };
+        match plan {
+            Ok(plan) => {
+                let path = smooth(&costmap, &plan.cells, self.cfg.max_leg_m);
+                if let Some(g) = self.goal.as_mut()
+                    && g.deadline.is_none()
+                {
+                    let slack = self.cfg.goal_slack.as_secs_f64();
+                    g.deadline = Some(
+                        now + Duration::from_secs_f64(
+                            plan.cost / self.cfg.min_progress_speed_m_s + slack,
+                        ),
+                    );
+                }
+                self.follower.set_path(path);
+            }
+            Err(why) => {
+                self.drop_goal(now, &why, true);
+                if goal.kind == GoalKind::Home {
+                    // Home is cut off: stay where it is rather than search forever.
+                    self.done = true;
+                }
+            }
+        }
+        self.costmap = Some(costmap);
+    }
+
+    fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
+        self.goal = Some(Goal {
+            point,
+            kind,
+            set_at: now,
+            deadline: None,
+            attempts: 0,
+        });
+        self.history.clear();
+        self.event(
+            now,
+            format!("{kind:?} goal ({:.1}, {:.1})", point.x_m, point.y_m),
+        );
+    }
+
+    /// Keeps the current frontier while it is still among the options and not much worse
+    /// than the best; otherwise takes the best.
+    fn choose_frontier(&mut self, now: Time, options: &[Candidate]) {
+        let Some(best) = options.first() else {
+            if self.goal.is_some_and(|g| g.kind == GoalKind::Frontier) {
+                self.goal = None;
+            }
+            return;
+        };
+        if let Some(g) = self.goal {
+            let still = options.iter().find(|c| same_target(c.goal, g.point));
+            if let Some(c) = still
+                && c.utility >= best.utility - 2.0
+            {
+                return;
+            }
+        }
+        if self.goal.is_some_and(|g| same_target(g.point, best.goal)) {
+            return;
+        }
+        self.start_goal(now, best.goal, GoalKind::Frontier);
+    }
+
+    /// The velocity for the rover at `pose` (moving at `speed_m_s`) now; `guard` says what
+    /// the rover's own sensors see around it.
+    pub fn steer(&mut self, now: Time, pose: Pose2, speed_m_s: f64, guard: Guarded) -> (f64, f64) {
+        if let Some(r) = self.recovery {
+            if now < r.until {
+                if r.reverse && !guard.rear_blocked {
+                    return (-0.12, 0.0);
+                }
+                return (0.0, 0.0);
+            }
+            self.recovery = None;
+            self.replan_now = true;
+            self.history.clear();
+        }
+        let Some(goal) = self.goal else {
+            return (0.0, 0.0);
+        };
+        self.history.push_back((now, pose.position()));
+        while self
+            .history
+            .front()
+            .is_some_and(|(t, _)| now - *t > self.cfg.stuck_window)
+        {
+            self.history.pop_front();
+        }
+        if goal.deadline.is_some_and(|d| now > d) {
+            self.drop_goal(now, "it took too long", true);
+            return (0.0, 0.0);
+        }
+        let window_full = self.history.front().is_some_and(|(t, _)| {
+            (now - *t).as_secs_f64() >= self.cfg.stuck_window.as_secs_f64() - 1.0
+        });
+        if window_full {
+            let start = self
+                .history
+                .front()
+                .map(|(_, p)| *p)
+                .unwrap_or(pose.position());
+            let moved = self
+                .history
+                .iter()
+                .map(|(_, p)| p.distance_m(start))
+                .fold(0.0, f64::max);
+            if moved < self.cfg.stuck_distance_m {
+                return self.stuck(now);
+            }
+        }
+        match self.follower.steer(pose, speed_m_s, self.costmap.as_ref()) {
+            Steer::Arrived => {
+                self.event(
+                    now,
+                    format!(
+                        "reached {:?} goal ({:.1}, {:.1})",
+                        goal.kind, goal.point.x_m, goal.point.y_m
+                    ),
+                );
+                self.goal = None;
+                self.follower.set_path(Vec::new());
+                match goal.kind {
+                    GoalKind::Home => self.done = true,
+                    GoalKind::Operator => self.operator_goal = None,
+                    GoalKind::Frontier => {}
+                }
+                self.replan_now = true;
+                (0.0, 0.0)
+            }
+            Steer::Drive { v_m_s, w_rad_s } => {
+                if v_m_s > 0.0 && guard.front_blocked {
+                    // Something the map does not show yet: stop, look again, replan.
+                    self.replan_now = true;
+                    return (0.0, 0.0);
+                }
+                (v_m_s, w_rad_s)
+            }
+        }
+    }
+
+    fn stuck(&mut self, now: Time) -> (f64, f64) {
+        let Some(goal) = self.goal.as_mut() else {
+            return (0.0, 0.0);
+        };
+        goal.attempts += 1;
+        let attempts = goal.attempts;
+        self.history.clear();
+        if attempts > self.cfg.max_attempts {
+            self.drop_goal(now, "no progress after recoveries", true);
+            return (0.0, 0.0);
+        }
+        self.event(
+            now,
+            format!("no progress: backing off (attempt {attempts})"),
+        );
+        self.recovery = Some(Recovery {
+            until: now + Duration::from_secs(3),
+            reverse: true,
+        });
+        (0.0, 0.0)
+    }
+
+    /// The path being followed.
+    pub fn path(&self) -> &[Point2] {
+        self.follower.path()
+    }
+
+    /// Checks the path ahead against the last costmap; on a block, asks for a replan.
+    pub fn check_path(&mut self, pose: Pose2) -> bool {
+        let Some(map) = self.costmap.as_ref() else {
+            return false;
+        };
+        let blocked =
+            self.follower
+                .blocked_ahead(pose.position(), map, self.cfg.check_ahead_m, 0.4);
+        if blocked {
+            self.replan_now = true;
+        }
+        blocked
+    }
+
+    /// When the goal was set.
+    pub fn goal_age(&self, now: Time) -> Option<Duration> {
+        self.goal.map(|g| now - g.set_at)
+    }
+}
+
+/// What the rover's own sensors say about its immediate surroundings.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Guarded {
+    /// Something is right in front of the rover.
+    pub front_blocked: bool,
+    /// Something is right behind it.
+    pub rear_blocked: bool,
+}
