@@ -23,10 +23,12 @@ use std::time::Instant;
 pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
     match cmd {
         crate::cli::BenchCommand::Sim(args) => sim(args),
+        crate::cli::BenchCommand::Plan(args) => crate::bench_nav::plan(args),
+        crate::cli::BenchCommand::Explore(args) => crate::bench_nav::explore(args),
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     if v.is_empty() {
         return f64::NAN;
@@ -252,7 +254,7 @@ fn speed_trial(scenario: &realms_sim::Scenario, sim_s: f64, plain: bool, msgs: &
     sim_s / start.elapsed().as_secs_f64()
 }
 
-fn machine() -> String {
+pub(crate) fn machine() -> String {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| {

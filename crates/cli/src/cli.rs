@@ -119,6 +119,47 @@ pub struct ScenarioArgs {
 pub enum BenchCommand {
     /// Simulated seconds per wall second, and the cost of each sensor.
     Sim(BenchSimArgs),
+    /// Planning time for cross-arena paths, A* against Dijkstra.
+    Plan(BenchPlanArgs),
+    /// Coverage over time for several fleet sizes and seeds.
+    Explore(BenchExploreArgs),
+}
+
+/// `realms bench plan`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchPlanArgs {
+    /// Trials per path (the median is reported).
+    #[arg(long, default_value_t = 15)]
+    pub trials: usize,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+}
+
+/// `realms bench explore`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchExploreArgs {
+    /// Fleet sizes, comma-separated.
+    #[arg(long, default_value = "1,2,3")]
+    pub rovers: String,
+    /// Seeds per fleet size.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: u64,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub first_seed: u64,
+    /// Time limit per mission, e.g. `90m`.
+    #[arg(long, default_value = "90m")]
+    pub duration: String,
+    /// Missions run at once (default: one per core).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Write the median coverage curves here as a PNG.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
 }
 
 /// `realms bench sim`.

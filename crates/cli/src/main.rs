@@ -8,6 +8,7 @@
 #![allow(clippy::disallowed_methods)]
 
 mod bench;
+mod bench_nav;
 mod cli;
 mod mission;
 mod slam;

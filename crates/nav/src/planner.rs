@@ -16,8 +16,6 @@
 
 use crate::costmap::{Costmap, MAX_PASSABLE};
 use realms_core::{Cell, GridGeometry, Point2};
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 /// Planner tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,7 +94,7 @@ pub struct Planner {
     seen: Vec<u32>,
     closed: Vec<u32>,
     generation: u32,
-    heap: BinaryHeap<Reverse<(u32, u32)>>,
+    heap: RadixHeap,
 }
 
 const NEIGHBOURS: [(isize, isize, f32); 8] = [
@@ -110,9 +108,70 @@ const NEIGHBOURS: [(isize, isize, f32); 8] = [
     (-1, -1, std::f32::consts::SQRT_2),
 ];
 
-/// Orders non-negative floats by their bits (IEEE 754 keeps the order for positives).
-fn key(f: f32) -> u32 {
-    f.to_bits()
+/// A monotone priority queue (Ahuja, Mehlhorn, Orlin & Tarjan, "Faster Algorithms for the
+/// Shortest Path Problem", J. ACM 37, 1990): keys go into bucket `k` by the highest bit in
+/// which they differ from the last key taken out, so a push is O(1) and each item moves
+/// down at most 64 times. Dijkstra and A* with a consistent heuristic never push a key
+/// below the last one popped; float rounding may, by an ulp, and such keys are raised to it.
+#[derive(Clone, Debug, Default)]
+struct RadixHeap {
+    buckets: Vec<Vec<(u64, u32)>>,
+    last: u64,
+    len: usize,
+}
+
+impl RadixHeap {
+    fn clear(&mut self) {
+        if self.buckets.len() != 65 {
+            self.buckets = vec![Vec::new(); 65];
+        }
+        for b in &mut self.buckets {
+            b.clear();
+        }
+        self.last = 0;
+        self.len = 0;
+    }
+
+    fn bucket(&self, key: u64) -> usize {
+        (64 - (key ^ self.last).leading_zeros()) as usize
+    }
+
+    fn push(&mut self, key: u64, item: u32) {
+        let key = key.max(self.last);
+        let b = self.bucket(key);
+        self.buckets[b].push((key, item));
+        self.len += 1;
+    }
+
+    fn pop(&mut self) -> Option<u32> {
+        if self.len == 0 {
+            return None;
+        }
+        if self.buckets[0].is_empty() {
+            let i = (1..65).find(|&i| !self.buckets[i].is_empty())?;
+            let items = std::mem::take(&mut self.buckets[i]);
+            self.last = items.iter().map(|(k, _)| *k).min().unwrap_or(self.last);
+            for (k, item) in &items {
+                let b = self.bucket(*k);
+                self.buckets[b].push((*k, *item));
+            }
+            // Give the emptied bucket its allocation back for the next round.
+            let mut items = items;
+            items.clear();
+            if self.buckets[i].is_empty() {
+                self.buckets[i] = items;
+            }
+        }
+        self.len -= 1;
+        self.buckets[0].pop().map(|(_, item)| item)
+    }
+}
+
+/// The search order: lowest `f` first and, among equal `f`, highest `g` (nearest the goal,
+/// which saves expanding whole plateaus of equal estimates). Non-negative floats order as
+/// their bits do (IEEE 754).
+fn key(f: f32, g: f32) -> u64 {
+    ((f.to_bits() as u64) << 32) | (u32::MAX - g.to_bits()) as u64
 }
 
 impl Planner {
@@ -194,10 +253,10 @@ impl Planner {
         self.seen[s] = gen_;
         self.parent[s] = u32::MAX;
         self.heap
-            .push(Reverse((key(estimate(start.x, start.y)), s as u32)));
+            .push(key(estimate(start.x, start.y), 0.0), s as u32);
         let goal_index = goal.map(|g| geo.index(g));
         let mut expanded = 0usize;
-        while let Some(Reverse((_, i))) = self.heap.pop() {
+        while let Some(i) = self.heap.pop() {
             let i = i as usize;
             if self.closed[i] == gen_ {
                 continue;
@@ -226,8 +285,7 @@ impl Planner {
                     self.seen[j] = gen_;
                     self.g[j] = g;
                     self.parent[j] = i as u32;
-                    self.heap
-                        .push(Reverse((key(g + estimate(nx, ny)), j as u32)));
+                    self.heap.push(key(g + estimate(nx, ny), g), j as u32);
                 }
             }
         }
@@ -479,6 +537,36 @@ mod tests {
                 }
                 Err(e) => {
                     prop_assert!(!optimum.is_finite(), "{} but Dijkstra reached it at {}", e, optimum);
+                }
+            }
+        }
+    }
+
+    proptest! {
+        /// Interleaved pushes (never below the last key taken) and pops come out in key order.
+        #[test]
+        fn the_radix_heap_pops_in_key_order(
+            steps in proptest::collection::vec((0u64..1 << 40, 0u8..3), 1..300),
+        ) {
+            let mut heap = RadixHeap::default();
+            heap.clear();
+            let mut keys: Vec<u64> = Vec::new();
+            let mut waiting: Vec<u64> = Vec::new();
+            let mut last = 0u64;
+            for (offset, pops) in &steps {
+                let key = last + offset;
+                heap.push(key, keys.len() as u32);
+                keys.push(key);
+                waiting.push(key);
+                for _ in 0..*pops {
+                    let want = waiting.iter().copied().min();
+                    let got = heap.pop().map(|item| keys[item as usize]);
+                    prop_assert_eq!(got, want);
+                    if let Some(k) = want {
+                        let at = waiting.iter().position(|w| *w == k).expect("present");
+                        waiting.swap_remove(at);
+                        last = k;
+                    }
                 }
             }
         }

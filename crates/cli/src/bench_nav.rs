@@ -1,0 +1,333 @@
+//! `realms bench plan` and `realms bench explore`: what navigation costs and what exploration
+//! achieves.
+//!
+//! - plan: cross-arena paths on the costmap of the default arena's ground truth (1000 x 720
+//!   cells of 5 cm), A* against plain Dijkstra on the same graph in the same run (the
+//!   machine is shared and noisy, the ratio within a run much less so); medians.
+//! - explore: whole missions for several fleet sizes and seeds, ideal communication and no
+//!   faults (the setting of the exploration targets); coverage over time against the
+//!   simulator's explorable area, median over seeds, as a table and a PNG.
+
+use crate::cli::{BenchExploreArgs, BenchPlanArgs};
+use crate::mission::{load_scenario, parse_duration_s};
+use anyhow::{Context, Result, bail};
+use realms_core::{Cell, Grid, Point2, Time};
+use realms_mission::Mission;
+use realms_mission::chart::{Series, coverage_chart};
+use realms_mission::report::ROVER_COLORS;
+use realms_nav::costmap::{Costmap, CostmapConfig};
+use realms_nav::planner::{Planner, PlannerConfig, smooth};
+use realms_sim::{TruthCell, World};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// The nearest cell to `p` that costs nothing (free and clear of every obstacle's gradient).
+fn free_near(map: &Costmap, p: Point2) -> Option<Point2> {
+    let geo = map.geometry();
+    let c = geo.world_to_cell(p)?;
+    for r in 0..200i64 {
+        for dy in -r..=r {
+            for dx in -r..=r {
+                if dx.abs() != r && dy.abs() != r {
+                    continue;
+                }
+                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+                if x < 0 || y < 0 || x >= geo.width as i64 || y >= geo.height as i64 {
+                    continue;
+                }
+                let cell = Cell {
+                    x: x as usize,
+                    y: y as usize,
+                };
+                if map.cost(cell) == 0 {
+                    return Some(geo.cell_center(cell));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// `realms bench plan`.
+pub fn plan(args: BenchPlanArgs) -> Result<()> {
+    let (scenario, source) = load_scenario(args.scenario.as_deref())?;
+    let world = World::new(&scenario);
+    let truth = &world.truth().traversability;
+    let map: Grid<i8> = truth.map(|c| match c {
+        TruthCell::Free => 0,
+        TruthCell::Obstacle => 100,
+        TruthCell::Hazard => 90,
+    });
+    let t0 = Instant::now();
+    let costmap = Costmap::from_map(&map, &CostmapConfig::default());
+    let build_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let geo = *costmap.geometry();
+    println!("# realms bench plan");
+    println!();
+    println!(
+        "scenario: {source}, seed {}; costmap {} x {} cells of {} m from the ground truth (built in {build_ms:.1} ms); machine: {}",
+        scenario.seed,
+        geo.width,
+        geo.height,
+        geo.resolution_m,
+        crate::bench::machine()
+    );
+    println!();
+    let (w, h) = (geo.width_m(), geo.height_m());
+    let pairs = [
+        ("south-west to north-east", (1.0, 1.0), (w - 1.0, h - 1.0)),
+        ("north-west to south-east", (1.0, h - 1.0), (w - 1.0, 1.0)),
+        ("west to east", (1.0, h / 2.0), (w - 1.0, h / 2.0)),
+        (
+            "lander to the far wall",
+            (w / 2.0, 6.0),
+            (w / 2.0 - 3.0, h - 1.0),
+        ),
+    ];
+    println!(
+        "| path | length | A* median | expanded | Dijkstra median | expanded | Dijkstra / A* |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    let mut planner = Planner::new(PlannerConfig::default());
+    let (mut all_astar, mut all_ratio) = (Vec::new(), Vec::new());
+    for (name, s, g) in pairs {
+        let start = free_near(&costmap, Point2::new(s.0, s.1)).context("no free start")?;
+        let goal = free_near(&costmap, Point2::new(g.0, g.1)).context("no free goal")?;
+        let (mut astar, mut dijkstra) = (Vec::new(), Vec::new());
+        let (mut exp_a, mut exp_d, mut length) = (0, 0, 0.0);
+        for _ in 0..args.trials {
+            let t = Instant::now();
+            let a = planner.plan(&costmap, start, goal)?;
+            astar.push(t.elapsed().as_secs_f64() * 1e3);
+            let t = Instant::now();
+            let d = planner.plan_dijkstra(&costmap, start, goal)?;
+            dijkstra.push(t.elapsed().as_secs_f64() * 1e3);
+            if (a.cost - d.cost).abs() > 1e-3 * a.cost {
+                bail!(
+                    "A* and Dijkstra disagree on {name}: {} against {}",
+                    a.cost,
+                    d.cost
+                );
+            }
+            exp_a = a.expanded;
+            exp_d = d.expanded;
+            let path = smooth(&costmap, &a.cells, 2.0);
+            length = path.windows(2).map(|p| p[0].distance_m(p[1])).sum();
+        }
+        let (ma, md) = (crate::bench::median(astar), crate::bench::median(dijkstra));
+        all_astar.push(ma);
+        all_ratio.push(md / ma);
+        println!(
+            "| {name} | {length:.1} m | {ma:.2} ms | {exp_a} | {md:.2} ms | {exp_d} | {:.1}x |",
+            md / ma
+        );
+    }
+    println!();
+    println!(
+        "median over the paths: A* {:.2} ms, {:.1}x faster than Dijkstra ({} trials each)",
+        crate::bench::median(all_astar),
+        crate::bench::median(all_ratio),
+        args.trials
+    );
+    Ok(())
+}
+
+/// One mission's outcome.
+#[derive(Clone, Debug)]
+struct Run {
+    rovers: u8,
+    seed: u64,
+    series: Vec<(f64, f64)>,
+    end_s: f64,
+    complete: bool,
+    collisions: u32,
+    hazard_entries: u32,
+    stuck: u32,
+    wall_s: f64,
+}
+
+impl Run {
+    /// Coverage at `t_s` (the latest sample at or before it).
+    fn at(&self, t_s: f64) -> f64 {
+        self.series
+            .iter()
+            .take_while(|(t, _)| *t <= t_s)
+            .last()
+            .map_or(0.0, |(_, f)| *f)
+    }
+
+    fn time_to(&self, level: f64) -> Option<f64> {
+        self.series
+            .iter()
+            .find(|(_, f)| *f >= level)
+            .map(|(t, _)| *t)
+    }
+}
+
+/// `realms bench explore`.
+pub fn explore(args: BenchExploreArgs) -> Result<()> {
+    let (base, source) = load_scenario(args.scenario.as_deref())?;
+    let limit_s = parse_duration_s(&args.duration)?;
+    let fleets: Vec<u8> = args
+        .rovers
+        .split(',')
+        .map(|s| s.trim().parse::<u8>())
+        .collect::<Result<_, _>>()
+        .context("--rovers: a comma-separated list of fleet sizes, e.g. 1,2,3")?;
+    if fleets.iter().any(|n| *n == 0) {
+        bail!("--rovers: a fleet has at least one rover");
+    }
+    let jobs: Vec<(u8, u64)> = fleets
+        .iter()
+        .flat_map(|n| (0..args.seeds).map(move |k| (*n, args.first_seed + k)))
+        .collect();
+    let workers = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    println!("# realms bench explore");
+    println!();
+    println!(
+        "scenario: {source}; fleets {fleets:?}; seeds {}..{}; up to {:.0} min each; ideal communication, no faults; {workers} missions at a time; machine: {}",
+        args.first_seed,
+        args.first_seed + args.seeds,
+        limit_s / 60.0,
+        crate::bench::machine()
+    );
+    println!();
+    let next = AtomicUsize::new(0);
+    let runs = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..workers.max(1) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(&(n, seed)) = jobs.get(i) else { break };
+                    let mut s = base.clone();
+                    s.seed = seed;
+                    s.rovers.count = n;
+                    s.faults.clear();
+                    s.duration_s = limit_s;
+                    let t0 = Instant::now();
+                    let mut mission = Mission::new(&s);
+                    let end = Time::from_secs_f64(limit_s);
+                    while mission.now() < end && !mission.exploration_over() {
+                        let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);
+                        mission.run_until(step);
+                    }
+                    mission.finish();
+                    let bodies: Vec<_> = mission.world().rovers().collect();
+                    let run = Run {
+                        rovers: n,
+                        seed,
+                        series: mission.coverage().series().to_vec(),
+                        end_s: mission.now().as_secs_f64(),
+                        complete: mission.exploration_over(),
+                        collisions: bodies.iter().map(|b| b.stats.collisions).sum(),
+                        hazard_entries: bodies.iter().map(|b| b.stats.hazard_entries).sum(),
+                        stuck: bodies.iter().filter(|b| b.stuck).count() as u32,
+                        wall_s: t0.elapsed().as_secs_f64(),
+                    };
+                    eprintln!(
+                        "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, {:.0} s wall",
+                        run.rovers,
+                        run.seed,
+                        100.0 * run.series.last().map_or(0.0, |s| s.1),
+                        run.end_s / 60.0,
+                        if run.complete { " (complete)" } else { "" },
+                        run.collisions,
+                        run.hazard_entries,
+                        run.wall_s
+                    );
+                    runs.lock().expect("no worker panics holding it").push(run);
+                }
+            });
+        }
+    });
+    let mut runs = runs.into_inner().expect("workers are done");
+    runs.sort_by_key(|r| (r.rovers, r.seed));
+
+    println!(
+        "| seed | rovers | coverage | 90 % at | 95 % at | done at | complete | collisions | hazard entries | stuck | wall |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let minutes = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{:.1} min", t / 60.0));
+    for r in &runs {
+        println!(
+            "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.0} s |",
+            r.seed,
+            r.rovers,
+            100.0 * r.series.last().map_or(0.0, |s| s.1),
+            minutes(r.time_to(0.9)),
+            minutes(r.time_to(0.95)),
+            r.end_s / 60.0,
+            if r.complete { "yes" } else { "no" },
+            r.collisions,
+            r.hazard_entries,
+            r.stuck,
+            r.wall_s
+        );
+    }
+    println!();
+    println!("Median over seeds (a run that never got there counts as the time limit):");
+    println!();
+    println!(
+        "| rovers | 50 % at | 90 % at | 95 % at | coverage at 15 / 30 / 60 / 90 min | collisions | hazard entries |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    let median_time = |set: &[&Run], level: f64| {
+        crate::bench::median(
+            set.iter()
+                .map(|r| r.time_to(level).unwrap_or(limit_s))
+                .collect(),
+        )
+    };
+    let mut curves = Vec::new();
+    let mut t90 = Vec::new();
+    for (k, n) in fleets.iter().enumerate() {
+        let set: Vec<&Run> = runs.iter().filter(|r| r.rovers == *n).collect();
+        let at = |t: f64| crate::bench::median(set.iter().map(|r| r.at(t)).collect());
+        let m90 = median_time(&set, 0.9);
+        t90.push((*n, m90));
+        println!(
+            "| {n} | {:.1} min | {:.1} min | {:.1} min | {:.0} / {:.0} / {:.0} / {:.0} % | {} | {} |",
+            median_time(&set, 0.5) / 60.0,
+            m90 / 60.0,
+            median_time(&set, 0.95) / 60.0,
+            100.0 * at(900.0),
+            100.0 * at(1800.0),
+            100.0 * at(3600.0),
+            100.0 * at(5400.0),
+            set.iter().map(|r| r.collisions).sum::<u32>(),
+            set.iter().map(|r| r.hazard_entries).sum::<u32>(),
+        );
+        let points = (0..=(limit_s / 30.0) as usize)
+            .map(|i| {
+                let t = i as f64 * 30.0;
+                (t, at(t))
+            })
+            .collect();
+        curves.push(Series {
+            color: ROVER_COLORS[k % ROVER_COLORS.len()],
+            points,
+        });
+    }
+    if let (Some(&(1, one)), Some(&(n, many))) = (t90.first(), t90.last())
+        && n > 1
+    {
+        println!();
+        println!(
+            "time to 90 % with {n} rovers / with 1 rover: {:.2}",
+            many / one
+        );
+    }
+    if let Some(png) = &args.png {
+        coverage_chart(&curves, limit_s).write_png(png, |c| *c)?;
+        println!();
+        println!(
+            "curves (median per fleet size; colours in fleet order {fleets:?}: red, blue, green...) in {}",
+            png.display()
+        );
+    }
+    Ok(())
+}
