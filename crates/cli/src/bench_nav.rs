@@ -175,7 +175,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         .map(|s| s.trim().parse::<u8>())
         .collect::<Result<_, _>>()
         .context("--rovers: a comma-separated list of fleet sizes, e.g. 1,2,3")?;
-    if fleets.iter().any(|n| *n == 0) {
+    if fleets.contains(&0) {
         bail!("--rovers: a fleet has at least one rover");
     }
     let jobs: Vec<(u8, u64)> = fleets
