@@ -223,6 +223,45 @@ pub struct NavStatus {
     pub reason: String,
 }
 
+/// Which ground a rover's map knows, coarsely (`nav/explored`; no ROS counterpart): one bit
+/// per cell, set where most of the cell is known. Peers use it so they do not drive to
+/// frontiers another rover has already seen past. Sent every few seconds.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ExploredArea {
+    /// When, and the rover's map frame.
+    pub header: Header,
+    /// Lower-left corner of cell (0, 0).
+    pub origin: Point2,
+    /// Cell edge, metres.
+    pub resolution_m: f32,
+    /// Cells along x.
+    pub width: u32,
+    /// Cells along y.
+    pub height: u32,
+    /// Row-major from the origin's row, bit `i % 8` of byte `i / 8` for cell `i`.
+    pub known: Vec<u8>,
+}
+
+impl ExploredArea {
+    /// Whether the cell holding `p` is known; false outside the area or past the end of a
+    /// short bit array (the message came from outside and may be malformed).
+    pub fn is_known(&self, p: Point2) -> bool {
+        let r = self.resolution_m as f64;
+        if r.is_nan() || r <= 0.0 {
+            return false;
+        }
+        let fx = ((p.x_m - self.origin.x_m) / r).floor();
+        let fy = ((p.y_m - self.origin.y_m) / r).floor();
+        if !(fx >= 0.0 && fy >= 0.0 && fx < self.width as f64 && fy < self.height as f64) {
+            return false;
+        }
+        let i = fy as usize * self.width as usize + fx as usize;
+        self.known
+            .get(i / 8)
+            .is_some_and(|byte| byte & (1 << (i % 8)) != 0)
+    }
+}
+
 /// An operator's goal for a rover (`nav/goal`, like Nav2's goal pose): drive to `target`
 /// (in the rover's map frame), or with `None` cancel the goal and resume exploring.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -296,6 +335,8 @@ pub enum Message {
     NavStatus(NavStatus),
     /// `nav/goal`: an operator's goal for a rover.
     NavGoal(NavGoal),
+    /// `nav/explored`: the ground a rover's map knows, coarsely.
+    Explored(ExploredArea),
 }
 
 impl Message {
@@ -313,6 +354,7 @@ impl Message {
             Message::Map(m) => m.header.stamp,
             Message::NavStatus(m) => m.header.stamp,
             Message::NavGoal(m) => m.header.stamp,
+            Message::Explored(m) => m.header.stamp,
         }
     }
 }

@@ -29,6 +29,13 @@ pub struct ExploreConfig {
     pub blacklist_radius_m: f64,
 }
 
+impl Candidate {
+    /// Whether a peer's target is so close that the peer will map it on its way.
+    pub fn taken_by_peer(&self) -> bool {
+        self.discount >= 0.75 * self.gain
+    }
+}
+
 impl Default for ExploreConfig {
     fn default() -> Self {
         ExploreConfig {
@@ -50,6 +57,8 @@ pub struct Candidate {
     pub cell: Cell,
     /// The frontier's worth, metres of driving.
     pub gain: f64,
+    /// How much of that worth peers' targets take away (0..=gain).
+    pub discount: f64,
     /// Cost of the drive there (metres stretched by costs).
     pub travel: f64,
     /// Worth less cost less the peers' discount.
@@ -65,17 +74,19 @@ pub struct PeerClaim {
 
 /// Candidate targets from the frontiers of `map`, best first, given the travel costs from the
 /// rover's position (the Dijkstra field of [`Planner::travel_costs`](crate::Planner::travel_costs)
-/// on `costmap`). Unreachable and blacklisted frontiers are left out.
+/// on `costmap`). Unreachable and blacklisted frontiers are left out, and so is unknown
+/// ground `seen_by_others` marks (per map cell: peers have mapped it).
 pub fn candidates(
     map: &Grid<i8>,
     costmap: &Costmap,
     travel: &[f32],
     peers: &[PeerClaim],
+    seen_by_others: Option<&[bool]>,
     blacklist: &[Point2],
     cfg: &ExploreConfig,
 ) -> Vec<Candidate> {
     let geo = *map.geometry();
-    let frontiers = detect(map, costmap, cfg.min_frontier_cells);
+    let frontiers = detect(map, costmap, cfg.min_frontier_cells, seen_by_others);
     let mut out: Vec<Candidate> = frontiers
         .iter()
         .filter_map(|f| score(f, &geo, travel, peers, blacklist, cfg))
@@ -127,6 +138,7 @@ fn score(
         goal,
         cell,
         gain,
+        discount,
         travel,
         utility: gain - discount - travel,
     })
@@ -165,7 +177,15 @@ mod tests {
     #[test]
     fn the_nearer_of_two_equal_frontiers_wins() {
         let (map, cm, travel) = corridor();
-        let c = candidates(&map, &cm, &travel, &[], &[], &ExploreConfig::default());
+        let c = candidates(
+            &map,
+            &cm,
+            &travel,
+            &[],
+            None,
+            &[],
+            &ExploreConfig::default(),
+        );
         assert_eq!(c.len(), 2);
         assert!((c[0].goal.x_m - 7.05).abs() < 1e-9, "{c:?}");
         assert!((c[1].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
@@ -176,9 +196,9 @@ mod tests {
     fn a_peer_s_claim_sends_the_rover_the_other_way() {
         let (map, cm, travel) = corridor();
         let cfg = ExploreConfig::default();
-        let mine = candidates(&map, &cm, &travel, &[], &[], &cfg)[0];
+        let mine = candidates(&map, &cm, &travel, &[], None, &[], &cfg)[0];
         let peer = PeerClaim { target: mine.goal };
-        let c = candidates(&map, &cm, &travel, &[peer], &[], &cfg);
+        let c = candidates(&map, &cm, &travel, &[peer], None, &[], &cfg);
         assert!((c[0].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
         assert_ne!(c[0].goal, peer.target);
     }
@@ -191,6 +211,7 @@ mod tests {
             &cm,
             &travel,
             &[],
+            None,
             &[Point2::new(7.05, 2.05)],
             &ExploreConfig::default(),
         );

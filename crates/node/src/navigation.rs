@@ -12,6 +12,7 @@
 //! it. Operator goals pre-empt exploration until reached or cancelled. When no reachable
 //! frontier is left the rover drives home (its start, beside the lander) and stops there.
 
+use realms_core::msgs::ExploredArea;
 use realms_core::{Duration, Grid, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
@@ -105,7 +106,6 @@ pub enum Activity {
 struct Goal {
     point: Point2,
     kind: GoalKind,
-    set_at: Time,
     deadline: Option<Time>,
     attempts: u32,
 }
@@ -137,6 +137,8 @@ pub struct Navigator {
     operator_goal: Option<Point2>,
     blacklist: Vec<Point2>,
     peers: BTreeMap<RoverId, (Point2, Time)>,
+    /// What each peer last said its map knows, and when.
+    peer_areas: BTreeMap<RoverId, (ExploredArea, Time)>,
     history: VecDeque<(Time, Point2)>,
     recovery: Option<Recovery>,
     next_map: Time,
@@ -163,6 +165,7 @@ impl Navigator {
             operator_goal: None,
             blacklist: Vec::new(),
             peers: BTreeMap::new(),
+            peer_areas: BTreeMap::new(),
             history: VecDeque::new(),
             recovery: None,
             next_map: Time::ZERO,
@@ -226,6 +229,15 @@ impl Navigator {
         }
         match target {
             Some(p) => {
+                // A senior peer took our frontier: give way at once rather than at the next
+                // map update (both chose at the same moment, before hearing each other).
+                if peer.0 < self.id.0
+                    && self
+                        .goal
+                        .is_some_and(|g| g.kind == GoalKind::Frontier && same_target(g.point, p))
+                {
+                    self.replan_now = true;
+                }
                 self.peers.insert(peer, (p, now));
             }
             None => {
@@ -252,6 +264,37 @@ impl Navigator {
         }
         self.follower.set_path(Vec::new());
         self.replan_now = true;
+    }
+
+    /// A peer said which ground its map knows.
+    pub fn hear_explored(&mut self, now: Time, peer: RoverId, area: ExploredArea) {
+        if peer != self.id {
+            self.peer_areas.insert(peer, (area, now));
+        }
+    }
+
+    /// Per cell of `map`, whether a peer (heard from recently) has mapped it.
+    fn seen_by_peers(&self, now: Time, map: &Grid<i8>) -> Option<Vec<bool>> {
+        let live: Vec<&ExploredArea> = self
+            .peer_areas
+            .values()
+            .filter(|(_, heard)| now - *heard <= self.cfg.claim_lifetime)
+            .map(|(a, _)| a)
+            .collect();
+        if live.is_empty() {
+            return None;
+        }
+        let geo = *map.geometry();
+        Some(
+            map.iter()
+                .map(|(cell, v)| {
+                    *v < 0 && {
+                        let p = geo.cell_center(cell);
+                        live.iter().any(|a| a.is_known(p))
+                    }
+                })
+                .collect(),
+        )
     }
 
     /// Peers' live claims; a peer with a higher id than ours does not displace our current
@@ -293,15 +336,24 @@ impl Navigator {
         let current = self.goal.map(|g| g.point);
         if self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous {
             let claims = self.claims(now, current);
+            let seen = self.seen_by_peers(now, map);
             let options = candidates(
                 map,
                 &costmap,
                 &field,
                 &claims,
+                seen.as_deref(),
                 &self.blacklist,
                 &self.cfg.explore,
             );
-            self.choose_frontier(now, &options);
+            // Frontiers a peer is about to map are left to it; if those are all that is
+            // left, the rover waits rather than going home (the peer may yet fail).
+            let free: Vec<Candidate> = options
+                .iter()
+                .filter(|c| !c.taken_by_peer())
+                .copied()
+                .collect();
+            self.choose_frontier(now, &free);
             if options.is_empty() && !self.done && self.goal.is_none() {
                 self.event(now, "no reachable frontier left: returning home".into());
                 self.start_goal(now, self.cfg.home, GoalKind::Home);
@@ -311,6 +363,15 @@ impl Navigator {
             self.costmap = Some(costmap);
             return;
         };
+        if self
+            .follower
+            .blocked_ahead(here, &costmap, self.cfg.check_ahead_m, 0.4)
+        {
+            self.event(
+                now,
+                "new map data blocks the path ahead: replanning".to_string(),
+            );
+        }
         // Frontiers lie on known ground and the field already holds the way there; other
         // goals may lie beyond the map's known part, and A* plans into the unknown for them.
         let plan = if goal.kind == GoalKind::Frontier {
@@ -356,7 +417,6 @@ impl Navigator {
         self.goal = Some(Goal {
             point,
             kind,
-            set_at: now,
             deadline: None,
             attempts: 0,
         });
@@ -371,7 +431,16 @@ impl Navigator {
     /// than the best; otherwise takes the best.
     fn choose_frontier(&mut self, now: Time, options: &[Candidate]) {
         let Some(best) = options.first() else {
-            if self.goal.is_some_and(|g| g.kind == GoalKind::Frontier) {
+            if let Some(g) = self.goal
+                && g.kind == GoalKind::Frontier
+            {
+                self.event(
+                    now,
+                    format!(
+                        "dropped frontier ({:.1}, {:.1}): none left that no peer is mapping",
+                        g.point.x_m, g.point.y_m
+                    ),
+                );
                 self.goal = None;
             }
             return;
@@ -493,25 +562,6 @@ impl Navigator {
     pub fn path(&self) -> &[Point2] {
         self.follower.path()
     }
-
-    /// Checks the path ahead against the last costmap; on a block, asks for a replan.
-    pub fn check_path(&mut self, pose: Pose2) -> bool {
-        let Some(map) = self.costmap.as_ref() else {
-            return false;
-        };
-        let blocked =
-            self.follower
-                .blocked_ahead(pose.position(), map, self.cfg.check_ahead_m, 0.4);
-        if blocked {
-            self.replan_now = true;
-        }
-        blocked
-    }
-
-    /// When the goal was set.
-    pub fn goal_age(&self, now: Time) -> Option<Duration> {
-        self.goal.map(|g| now - g.set_at)
-    }
 }
 
 /// What the rover's own sensors say about its immediate surroundings.
@@ -521,4 +571,103 @@ pub struct Guarded {
     pub front_blocked: bool,
     /// Something is right behind it.
     pub rear_blocked: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realms_core::GridGeometry;
+
+    /// A 10 x 10 m room (walls round it), known in its west half, unknown in its east half;
+    /// `walled` adds a closed box of wall around (2.5, 8.5).
+    fn room(walled: bool) -> Grid<i8> {
+        let g = GridGeometry {
+            width: 100,
+            height: 100,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let mut map = Grid::new(g, -1i8);
+        for y in 0..100 {
+            for x in 0..100 {
+                let wall = x == 0 || y == 0 || x == 99 || y == 99;
+                let boxed = walled
+                    && (15..=35).contains(&x)
+                    && (75..=95).contains(&y)
+                    && (x == 15 || x == 35 || y == 75 || y == 95);
+                let v = if wall || boxed {
+                    100
+                } else if x < 50 {
+                    0
+                } else {
+                    -1
+                };
+                *map.get_mut(x, y).expect("inside") = v;
+            }
+        }
+        map
+    }
+
+    fn navigator() -> Navigator {
+        Navigator::new(RoverId(1), NavigationConfig::new(Point2::new(1.0, 1.0)))
+    }
+
+    #[test]
+    fn a_walled_in_operator_goal_is_refused_once_and_exploration_resumes() {
+        let mut nav = navigator();
+        let map = room(true);
+        let pose = Pose2::new(2.0, 2.0, 0.0);
+        nav.set_operator_goal(Time::ZERO, Some(Point2::new(2.5, 8.5)));
+        nav.on_map(Time::ZERO, &map, pose);
+        let events = nav.take_events();
+        assert!(
+            events
+                .iter()
+                .any(|e| e.what.starts_with("gave up Operator") && e.what.contains("no path")),
+            "{events:?}"
+        );
+        // The next map update goes back to the frontier, not to the goal.
+        nav.on_map(Time::from_secs_f64(3.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        assert!(
+            nav.take_events()
+                .iter()
+                .all(|e| !e.what.contains("Operator")),
+        );
+    }
+
+    #[test]
+    fn a_rover_that_makes_no_progress_backs_off_then_gives_the_goal_up() {
+        let mut nav = navigator();
+        let map = room(false);
+        // The rover's wheels turn but it goes nowhere: its pose never changes.
+        let pose = Pose2::new(2.0, 5.0, 0.0);
+        let mut recoveries = Vec::new();
+        let mut gave_up = None;
+        for k in 0..3000 {
+            let now = Time::from_secs_f64(k as f64 * 0.1);
+            if nav.wants_map(now) {
+                nav.on_map(now, &map, pose);
+            }
+            nav.steer(now, pose, 0.0, Guarded::default());
+            for e in nav.take_events() {
+                if e.what.starts_with("no progress") {
+                    recoveries.push(e.t.as_secs_f64());
+                }
+                if e.what.starts_with("gave up Frontier") && gave_up.is_none() {
+                    gave_up = Some((e.t.as_secs_f64(), e.what));
+                }
+            }
+            if gave_up.is_some() {
+                break;
+            }
+        }
+        assert_eq!(recoveries.len(), 3, "{recoveries:?}");
+        // Each attempt waits out the 20 s window (and the 3 s back-off after the first).
+        assert!((recoveries[0] - 19.0).abs() < 1.0, "{recoveries:?}");
+        let (t, why) = gave_up.expect("the goal was given up");
+        assert!(why.contains("no progress"), "{why}");
+        assert!(t < 100.0, "gave up at {t} s");
+        assert_eq!(nav.blacklist().len(), 1);
+    }
 }

@@ -10,7 +10,9 @@ use crate::mapping::{Mapping, MappingConfig};
 use crate::navigation::{Activity, GoalKind, NavigationConfig, Navigator};
 use crate::{Node, Outgoing};
 use realms_core::geometry::Vec3;
-use realms_core::msgs::{Header, Message, NavActivity, NavStatus, Twist, TwistStamped};
+use realms_core::msgs::{
+    ExploredArea, Header, Message, NavActivity, NavStatus, Twist, TwistStamped,
+};
 use realms_core::{Duration, RoverId, Time, Topic};
 use realms_slam::health::LocalisationState;
 
@@ -19,6 +21,10 @@ const SCAN_SILENCE: Duration = Duration::from_millis(500);
 /// The navigation status is repeated this often even when nothing changed, so a peer that
 /// missed it (or joined late) learns it.
 const STATUS_REPEAT: Duration = Duration::from_secs(10);
+/// How often the rover tells its peers which ground its map knows.
+const EXPLORED_PERIOD: Duration = Duration::from_secs(15);
+/// ... in cells this many times the navigation map's (0.5 m).
+const EXPLORED_FACTOR: usize = 5;
 /// Navigation plans on a map this many times coarser than SLAM's.
 const NAV_MAP_FACTOR: usize = 2;
 /// Yaw rate while lost: turning in place shows the relocaliser new views.
@@ -52,6 +58,7 @@ pub struct RoverNode {
     last_status: Option<(NavActivity, Option<realms_core::Point2>, Time)>,
     /// The navigator's latest event, for the status.
     reason: String,
+    next_explored: Time,
     outbox: Vec<Outgoing>,
 }
 
@@ -70,6 +77,7 @@ impl RoverNode {
             last_cmd_v: 0.0,
             last_status: None,
             reason: String::new(),
+            next_explored: Time::ZERO,
             outbox: Vec::new(),
         }
     }
@@ -132,6 +140,29 @@ impl RoverNode {
         }
     }
 
+    /// Tells the peers which ground the map knows, coarsely.
+    fn publish_explored(&mut self, now: Time, map: &realms_core::Grid<i8>) {
+        let coarse = realms_nav::frontier::coarse_known(map, EXPLORED_FACTOR);
+        let g = *coarse.geometry();
+        let mut known = vec![0u8; g.len().div_ceil(8)];
+        for (i, k) in coarse.cells().iter().enumerate() {
+            if *k {
+                known[i / 8] |= 1 << (i % 8);
+            }
+        }
+        self.outbox.push(Outgoing {
+            topic: self.id.topic("nav/explored"),
+            message: Message::Explored(ExploredArea {
+                header: self.header(now),
+                origin: g.origin,
+                resolution_m: g.resolution_m as f32,
+                width: g.width as u32,
+                height: g.height as u32,
+                known,
+            }),
+        });
+    }
+
     /// Decides the velocity after a scan.
     fn drive(&mut self, now: Time, scan: &realms_core::msgs::LaserScan) -> (f64, f64) {
         if self.mapping.calibrating(now) {
@@ -145,6 +176,10 @@ impl RoverNode {
         if self.navigator.wants_map(now) {
             let map = self.mapping.nav_map(NAV_MAP_FACTOR);
             self.navigator.on_map(now, &map, pose);
+            if now >= self.next_explored {
+                self.next_explored = now + EXPLORED_PERIOD;
+                self.publish_explored(now, &map);
+            }
         }
         self.navigator.steer(now, pose, self.last_cmd_v, guarded)
     }
@@ -160,24 +195,26 @@ impl Node for RoverNode {
             .iter()
             .map(|leaf| self.id.topic(leaf))
             .collect();
-        topics.extend(
-            self.fleet
-                .iter()
-                .filter(|peer| **peer != self.id)
-                .map(|peer| peer.topic("nav/status")),
-        );
+        for peer in self.fleet.iter().filter(|peer| **peer != self.id) {
+            topics.push(peer.topic("nav/status"));
+            topics.push(peer.topic("nav/explored"));
+        }
         topics
     }
 
     fn on_message(&mut self, now: Time, topic: &Topic, message: &Message) {
         let Some(from) = topic.rover() else { return };
         if from != self.id {
-            if let Message::NavStatus(status) = message {
-                let target = match status.activity {
-                    NavActivity::Exploring => status.target,
-                    _ => None,
-                };
-                self.navigator.hear_peer(now, from, target);
+            match message {
+                Message::NavStatus(status) => {
+                    let target = match status.activity {
+                        NavActivity::Exploring => status.target,
+                        _ => None,
+                    };
+                    self.navigator.hear_peer(now, from, target);
+                }
+                Message::Explored(area) => self.navigator.hear_explored(now, from, area.clone()),
+                _ => {}
             }
             return;
         }
