@@ -12,9 +12,9 @@ use crate::cli::{BenchExploreArgs, BenchPlanArgs};
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
 use realms_core::{Cell, Grid, Point2, Time};
-use realms_mission::Mission;
 use realms_mission::chart::{Series, coverage_chart};
 use realms_mission::report::ROVER_COLORS;
+use realms_mission::{Mission, MissionOptions};
 use realms_nav::costmap::{Costmap, CostmapConfig};
 use realms_nav::planner::{Planner, PlannerConfig, smooth};
 use realms_sim::{TruthCell, World};
@@ -188,10 +188,15 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     println!("# realms bench explore");
     println!();
     println!(
-        "scenario: {source}; fleets {fleets:?}; seeds {}..{}; up to {:.0} min each; ideal communication, no faults; {workers} missions at a time; machine: {}",
+        "scenario: {source}; fleets {fleets:?}; seeds {}..{}; up to {:.0} min each; ideal communication{}, no faults; {workers} missions at a time; machine: {}",
         args.first_seed,
         args.first_seed + args.seeds,
         limit_s / 60.0,
+        if args.no_peer_messages {
+            " but rovers do not hear each other"
+        } else {
+            ""
+        },
         crate::bench::machine()
     );
     println!();
@@ -209,7 +214,10 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                     s.faults.clear();
                     s.duration_s = limit_s;
                     let t0 = Instant::now();
-                    let mut mission = Mission::new(&s);
+                    let options = MissionOptions {
+                        rovers_hear_each_other: !args.no_peer_messages,
+                    };
+                    let mut mission = Mission::with_options(World::new(&s), options);
                     let end = Time::from_secs_f64(limit_s);
                     while mission.now() < end && !mission.exploration_over() {
                         let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);

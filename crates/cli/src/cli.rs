@@ -157,6 +157,10 @@ pub struct BenchExploreArgs {
     /// Write the median coverage curves here as a PNG.
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// Rovers do not hear each other's navigation messages (targets, explored ground):
+    /// exploration as it degrades when the radio is silent.
+    #[arg(long)]
+    pub no_peer_messages: bool,
     /// Scenario TOML (default: the built-in one).
     #[arg(long)]
     pub scenario: Option<PathBuf>,

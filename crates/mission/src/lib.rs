@@ -37,6 +37,22 @@ pub const MAP_PERIOD: Duration = Duration::from_secs(60);
 /// How often rover poses are sampled for trajectories.
 pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 
+/// How a mission is run, beyond its scenario.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MissionOptions {
+    /// Rovers hear each other's navigation messages (targets, explored ground). Off, each
+    /// explores as if alone: what allocation falls back to when the radio is silent.
+    pub rovers_hear_each_other: bool,
+}
+
+impl Default for MissionOptions {
+    fn default() -> Self {
+        MissionOptions {
+            rovers_hear_each_other: true,
+        }
+    }
+}
+
 /// One sampled true pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseSample {
@@ -74,6 +90,11 @@ impl Mission {
 
     /// A mission on a prepared world (hand-built terrain in tests).
     pub fn with_world(world: World) -> Mission {
+        Mission::with_options(world, MissionOptions::default())
+    }
+
+    /// A mission on a prepared world, run as `options` say.
+    pub fn with_options(world: World, options: MissionOptions) -> Mission {
         let spec = &world.scenario().rovers;
         let base_from_optical = world.base_from_optical();
         let fleet: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
@@ -113,7 +134,11 @@ impl Mission {
                     mapping,
                     navigation,
                     guard,
-                    fleet: fleet.clone(),
+                    fleet: if options.rovers_hear_each_other {
+                        fleet.clone()
+                    } else {
+                        vec![body.id]
+                    },
                 };
                 Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
             })

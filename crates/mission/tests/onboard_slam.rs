@@ -2,8 +2,8 @@
 //! where each rover thinks it is, what its map says, and whether it notices its wheels
 //! slipping.
 
-use realms_core::Time;
-use realms_core::msgs::LocalisationState;
+use realms_core::msgs::{Header, LocalisationState, Message, NavActivity, NavGoal};
+use realms_core::{Point2, RoverId, Time};
 use realms_mission::Mission;
 use realms_sim::Scenario;
 use std::path::Path;
@@ -19,7 +19,38 @@ fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
     // rover1's wheels slip at 40 s for 4 s.
     let s = small();
     let mut mission = Mission::new(&s);
-    mission.run_until(Time::from_secs_f64(120.0));
+    // The rovers have explored the small arena within a minute; the operator then sends them
+    // round it, so wheel odometry has two minutes of driving to drift over.
+    let patrol = [
+        Point2::new(3.0, 3.5),
+        Point2::new(11.0, 3.5),
+        Point2::new(11.0, 7.5),
+        Point2::new(3.0, 7.5),
+    ];
+    let mut next = [0usize, 2];
+    for k in 1..=180 {
+        mission.run_until(Time::from_secs_f64(k as f64));
+        for r in 0..2 {
+            let idle = mission.nav_log()[r]
+                .last()
+                .is_some_and(|(_, s)| matches!(s.activity, NavActivity::Done | NavActivity::Idle));
+            if idle && k > 10 {
+                let target = patrol[next[r] % patrol.len()];
+                next[r] += 1;
+                let now = mission.now();
+                mission.publish(
+                    RoverId(r as u8 + 1).topic("nav/goal"),
+                    Message::NavGoal(NavGoal {
+                        header: Header {
+                            stamp: now,
+                            frame_id: String::new(),
+                        },
+                        target: Some(target),
+                    }),
+                );
+            }
+        }
+    }
     mission.finish();
     let truth = mission.world().truth().clone();
     for (i, record) in mission.slam_records().iter().enumerate() {

@@ -3,7 +3,8 @@
 //! [`Mapper`](realms_slam::mapper::Mapper), and publishes what the rest of the mission needs
 //! to know: the pose with its covariance after every scan, every change of localisation state
 //! with its reason, and the map now and then. Depth frames feed a hazard layer
-//! ([`HazardMap`]) that marks what the lidar cannot see (crater bowls, low rocks) in the map.
+//! ([`SubmapHazards`]) that marks what the lidar cannot see (crater bowls, low rocks) in the
+//! map, kept per submap so loop closures move it with the rest.
 //!
 //! The map frame is the odometry frame at the first scan, so a rover that starts where its
 //! odometry says (as in the simulator, where odometry starts at the true pose) maps in the
@@ -19,7 +20,7 @@ use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
-use realms_slam::traversability::{HazardMap, TraversabilityConfig, judge_frame, shadow_gaps};
+use realms_slam::traversability::{SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps};
 
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
 const SHADOW_MIN_GAP_M: f64 = 0.5;
@@ -68,7 +69,7 @@ pub struct Mapping {
     id: RoverId,
     cfg: MappingConfig,
     mapper: Mapper,
-    hazards: HazardMap,
+    hazards: SubmapHazards,
     tracked_once: bool,
     /// The two latest odometry poses (wheel translation, gyro heading), oldest first, to
     /// interpolate at a scan's stamp.
@@ -93,7 +94,7 @@ impl Mapping {
         Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
-            hazards: HazardMap::new(cfg.traversability.resolution_m),
+            hazards: SubmapHazards::new(cfg.traversability.resolution_m),
             tracked_once: false,
             cfg,
             odometry: Vec::new(),
@@ -265,7 +266,10 @@ impl Mapping {
                 SHADOW_MIN_GAP_M,
             ));
         }
-        self.hazards.insert(self.mapper.pose(), &verdicts);
+        if let Some((submap, origin)) = self.mapper.newest_submap() {
+            let rover = origin.inverse() * self.mapper.pose();
+            self.hazards.insert(submap, rover, &verdicts);
+        }
     }
 
     /// Odometry at `t`, interpolated (or extrapolated a little) from the latest two readings.
@@ -391,6 +395,11 @@ impl Mapping {
         c
     }
 
+    /// The hazard layer drawn at the submaps' poses now.
+    fn hazard_states(&mut self) -> Grid<CellState> {
+        self.hazards.states(&self.mapper.submap_origins())
+    }
+
     /// The map at `factor` times the SLAM resolution, for navigation: a cell is an obstacle
     /// if any of its SLAM cells is, else hazard if the hazard layer says so at its centre,
     /// else free if any SLAM cell (or the depth camera) saw it free, else unknown.
@@ -405,6 +414,7 @@ impl Mapping {
             origin: g.origin,
         };
         let fine = states.cells();
+        let hazards = self.hazard_states();
         let mut cells = Vec::with_capacity(geo.len());
         for y in 0..geo.height {
             for x in 0..geo.width {
@@ -417,7 +427,7 @@ impl Mapping {
                     }
                 }
                 let centre = geo.cell_center(realms_core::Cell { x, y });
-                cells.push(match (occupied, self.hazards.hazard_at(centre), free) {
+                cells.push(match (occupied, hazard_at(&hazards, centre), free) {
                     (true, _, _) => OccupancyGrid::OCCUPIED,
                     (_, Some(true), _) => OccupancyGrid::HAZARD,
                     (_, Some(false), _) | (_, None, true) => OccupancyGrid::FREE,
@@ -431,6 +441,7 @@ impl Mapping {
     /// The map now, as a ROS occupancy grid.
     pub fn map(&mut self, stamp: Time) -> OccupancyGrid {
         let states = self.mapper.map_states();
+        let hazards = self.hazard_states();
         let g = states.geometry();
         OccupancyGrid {
             header: self.header(stamp),
@@ -451,7 +462,7 @@ impl Mapping {
                     if *c == CellState::Occupied {
                         return OccupancyGrid::OCCUPIED;
                     }
-                    match (self.hazards.hazard_at(g.cell_center(cell)), c) {
+                    match (hazard_at(&hazards, g.cell_center(cell)), c) {
                         (Some(true), _) => OccupancyGrid::HAZARD,
                         // Ground the depth camera saw and judged drivable is known free too.
                         (Some(false), _) | (None, CellState::Free) => OccupancyGrid::FREE,
@@ -460,6 +471,15 @@ impl Mapping {
                 })
                 .collect(),
         }
+    }
+}
+
+/// What the hazard layer says of the cell holding `p`: hazardous, safe, or unseen (`None`).
+fn hazard_at(hazards: &Grid<CellState>, p: Point2) -> Option<bool> {
+    match hazards.at_world(p) {
+        Some(CellState::Occupied) => Some(true),
+        Some(CellState::Free) => Some(false),
+        _ => None,
     }
 }
 

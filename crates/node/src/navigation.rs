@@ -7,10 +7,11 @@
 //! and a reactive guard (lidar and depth camera, see [`crate::guard`]) stops the rover if
 //! something appears in front of it before the map shows it.
 //!
-//! A rover that stops making progress notices: it backs off, replans, and after a few tries
-//! (or when a goal takes far longer than its path should) gives the goal up and blacklists
-//! it. Operator goals pre-empt exploration until reached or cancelled. When no reachable
-//! frontier is left the rover drives home (its start, beside the lander) and stops there.
+//! A rover that stops making progress notices: it backs off, turns to look around and
+//! replans, and after a few tries (or when a goal takes far longer than its path should)
+//! gives the goal up and blacklists it. Operator goals pre-empt exploration until reached
+//! or cancelled. When no reachable frontier is left the rover drives home (its start,
+//! beside the lander) and stops there.
 
 use realms_core::msgs::ExploredArea;
 use realms_core::{Duration, Grid, Point2, Pose2, RoverId, Time};
@@ -112,8 +113,12 @@ struct Goal {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Recovery {
-    until: Time,
-    reverse: bool,
+    /// Back up (while the rear is clear) until then ...
+    back_until: Time,
+    /// ... then turn in place until then, to look around with the depth camera ...
+    turn_until: Time,
+    /// ... this way (+1 counter-clockwise).
+    turn_dir: f64,
 }
 
 /// Something that happened, for the mission log.
@@ -463,11 +468,11 @@ impl Navigator {
     /// the rover's own sensors see around it.
     pub fn steer(&mut self, now: Time, pose: Pose2, speed_m_s: f64, guard: Guarded) -> (f64, f64) {
         if let Some(r) = self.recovery {
-            if now < r.until {
-                if r.reverse && !guard.rear_blocked {
-                    return (-0.12, 0.0);
-                }
-                return (0.0, 0.0);
+            if now < r.back_until {
+                return (if guard.rear_blocked { 0.0 } else { -0.12 }, 0.0);
+            }
+            if now < r.turn_until {
+                return (0.0, 0.6 * r.turn_dir);
             }
             self.recovery = None;
             self.replan_now = true;
@@ -549,11 +554,13 @@ impl Navigator {
         }
         self.event(
             now,
-            format!("no progress: backing off (attempt {attempts})"),
+            format!("no progress: backing off and looking around (attempt {attempts})"),
         );
+        let back_until = now + Duration::from_secs(2);
         self.recovery = Some(Recovery {
-            until: now + Duration::from_secs(3),
-            reverse: true,
+            back_until,
+            turn_until: back_until + Duration::from_millis(2500),
+            turn_dir: if attempts % 2 == 1 { 1.0 } else { -1.0 },
         });
         (0.0, 0.0)
     }
@@ -638,7 +645,10 @@ mod tests {
 
     #[test]
     fn a_rover_that_makes_no_progress_backs_off_then_gives_the_goal_up() {
-        let mut nav = navigator();
+        let mut cfg = NavigationConfig::new(Point2::new(1.0, 1.0));
+        // No deadline in the way: the recoveries are under test.
+        cfg.goal_slack = Duration::from_secs(3600);
+        let mut nav = Navigator::new(RoverId(1), cfg);
         let map = room(false);
         // The rover's wheels turn but it goes nowhere: its pose never changes.
         let pose = Pose2::new(2.0, 5.0, 0.0);
@@ -663,7 +673,7 @@ mod tests {
             }
         }
         assert_eq!(recoveries.len(), 3, "{recoveries:?}");
-        // Each attempt waits out the 20 s window (and the 3 s back-off after the first).
+        // The first attempt waits out the 20 s window.
         assert!((recoveries[0] - 19.0).abs() < 1.0, "{recoveries:?}");
         let (t, why) = gave_up.expect("the goal was given up");
         assert!(why.contains("no progress"), "{why}");

@@ -42,6 +42,11 @@ impl Assembly {
         }
     }
 
+    /// Cell edge, metres.
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution_m
+    }
+
     fn geometry(&self) -> GridGeometry {
         GridGeometry {
             width: self.width,
@@ -230,6 +235,10 @@ impl Assembly {
     pub fn states(&mut self, active: &[(&OccupancyGrid, Pose2)]) -> Grid<CellState> {
         for (grid, pose) in active {
             self.grow_for(grid, *pose);
+        }
+        if self.width == 0 {
+            // Nothing drawn yet: one unknown cell.
+            self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
         }
         let mut sum = self.sum.clone();
         for (grid, pose) in active {

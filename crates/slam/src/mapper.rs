@@ -587,6 +587,21 @@ impl Mapper {
         self.assembly.states(&active)
     }
 
+    /// The pose of every submap's origin now, by submap index (trimmed ones included: their
+    /// keyframes stay in the graph).
+    pub fn submap_origins(&self) -> Vec<Pose2> {
+        self.submaps
+            .iter()
+            .map(|s| self.graph.nodes[s.origin_node])
+            .collect()
+    }
+
+    /// The newest submap (the one new observations belong to longest) and its origin.
+    pub fn newest_submap(&self) -> Option<(usize, Pose2)> {
+        let i = self.submaps.len().checked_sub(1)?;
+        Some((i, self.graph.nodes[self.submaps[i].origin_node]))
+    }
+
     /// Places every finished submap in the assembly at its pose now; returns the submaps
     /// still being built, with their poses.
     fn sync_assembly(&mut self) -> Vec<(usize, Pose2)> {

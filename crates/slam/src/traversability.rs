@@ -12,6 +12,7 @@
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
 
+use crate::assembly::Assembly;
 use crate::occupancy::{CellState, OccupancyGrid};
 use realms_core::{Grid, Point2, Pose2};
 
@@ -221,6 +222,60 @@ impl HazardMap {
     /// Every cell: hazardous (`Occupied`), safe (`Free`) or unseen.
     pub fn states(&self) -> Grid<CellState> {
         self.grid.states()
+    }
+}
+
+/// The hazard layer kept per submap, like the occupancy map, so a loop closure that moves a
+/// stretch of the map moves the craters and rocks seen from it too. Frames go into the
+/// newest submap's layer in that submap's frame; layers are drawn together at their
+/// submaps' current poses through an [`Assembly`]. Layers are kept when the mapper drops a
+/// covered submap's grids: hazards are seen once, from close by, and not seen again.
+#[derive(Clone, Debug)]
+pub struct SubmapHazards {
+    layers: Vec<Option<HazardMap>>,
+    current: Option<usize>,
+    assembly: Assembly,
+}
+
+impl SubmapHazards {
+    /// No layers yet, `resolution_m` cells.
+    pub fn new(resolution_m: f64) -> Self {
+        SubmapHazards {
+            layers: Vec::new(),
+            current: None,
+            assembly: Assembly::new(resolution_m),
+        }
+    }
+
+    /// Fuses one frame's verdicts into submap `submap`'s layer, judged with the rover at
+    /// `rover_in_submap` (the submap's frame). Earlier layers are final from then on.
+    pub fn insert(&mut self, submap: usize, rover_in_submap: Pose2, verdicts: &[(Point2, bool)]) {
+        if self.layers.len() <= submap {
+            self.layers.resize(submap + 1, None);
+        }
+        let resolution = self.assembly.resolution_m();
+        self.layers[submap]
+            .get_or_insert_with(|| HazardMap::new(resolution))
+            .insert(rover_in_submap, verdicts);
+        self.current = Some(submap);
+    }
+
+    /// Every cell of the layers drawn at the submaps' poses (`origins[i]` for submap `i`):
+    /// hazardous (`Occupied`), safe (`Free`) or unseen.
+    pub fn states(&mut self, origins: &[Pose2]) -> Grid<CellState> {
+        let mut current = None;
+        for (i, layer) in self.layers.iter().enumerate() {
+            let (Some(layer), Some(pose)) = (layer, origins.get(i)) else {
+                continue;
+            };
+            if Some(i) == self.current {
+                current = Some((&layer.grid, *pose));
+            } else {
+                self.assembly.place(i, &layer.grid, *pose);
+            }
+        }
+        let active: Vec<(&OccupancyGrid, Pose2)> = current.into_iter().collect();
+        self.assembly.states(&active)
     }
 }
 
