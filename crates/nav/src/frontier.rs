@@ -133,10 +133,8 @@ mod tests {
     use super::*;
     use crate::CostmapConfig;
 
-    #[test]
-    fn the_open_edges_of_a_walled_room_are_frontiers_and_its_walls_are_not() {
-        // 60 x 40 cells: the left 30 columns known; a wall closes the bottom of the known
-        // part; a speck of unknown inside the known part is too small to count.
+    /// 60 x 40 cells of 10 cm, unknown but for the block `xs` x `ys`, which holds `value`.
+    fn map_with(xs: std::ops::Range<usize>, ys: std::ops::Range<usize>, value: i8) -> Grid<i8> {
         let g = GridGeometry {
             width: 60,
             height: 40,
@@ -144,10 +142,21 @@ mod tests {
             origin: Point2::new(0.0, 0.0),
         };
         let mut map = Grid::new(g, -1i8);
-        for y in 0..40 {
-            for x in 0..30 {
-                *map.get_mut(x, y).expect("inside") = if y == 0 { 100 } else { 0 };
+        for y in ys {
+            for x in xs.clone() {
+                *map.get_mut(x, y).expect("inside") = value;
             }
+        }
+        map
+    }
+
+    #[test]
+    fn the_open_edges_of_a_walled_room_are_frontiers_and_its_walls_are_not() {
+        // 60 x 40 cells: the left 30 columns known; a wall closes the bottom of the known
+        // part; a speck of unknown inside the known part is too small to count.
+        let mut map = map_with(0..30, 0..40, 0);
+        for x in 0..30 {
+            *map.get_mut(x, 0).expect("inside") = 100;
         }
         *map.get_mut(15, 20).expect("inside") = -1;
         let cm = Costmap::from_map(&map, &CostmapConfig::default());
@@ -163,26 +172,11 @@ mod tests {
 
     #[test]
     fn ground_a_peer_has_seen_is_no_frontier() {
-        let g = GridGeometry {
-            width: 60,
-            height: 40,
-            resolution_m: 0.1,
-            origin: Point2::new(0.0, 0.0),
-        };
-        let mut map = Grid::new(g, -1i8);
-        for y in 0..40 {
-            for x in 0..30 {
-                *map.get_mut(x, y).expect("inside") = 0;
-            }
-        }
+        let map = map_with(0..30, 0..40, 0);
+        let g = *map.geometry();
         let cm = Costmap::from_map(&map, &CostmapConfig::default());
         // A peer knows the lower half of the unknown side, coarsely.
-        let mut peer = Grid::new(g, -1i8);
-        for y in 0..20 {
-            for x in 0..60 {
-                *peer.get_mut(x, y).expect("inside") = 0;
-            }
-        }
+        let peer = map_with(0..60, 0..20, 0);
         let coarse = coarse_known(&peer, 5);
         let seen: Vec<bool> = map
             .iter()

@@ -7,7 +7,7 @@
 //! its old pose and putting it in at the new one; submaps still being built are drawn onto a
 //! copy when the map is asked for. Sums are kept unclamped so taking a submap out is exact.
 
-use crate::occupancy::{CellState, OccupancyGrid};
+use crate::occupancy::{CellState, OccupancyGrid, growth, regrow};
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
 /// A submap is redrawn when its pose moved more than this, metres ...
@@ -65,82 +65,37 @@ impl Assembly {
                 (min.y_m / r).floor() * r - GROW_MARGIN_CELLS as f64 * r,
             );
         }
-        let cx0 = ((min.x_m - self.origin.x_m) / r).floor();
-        let cy0 = ((min.y_m - self.origin.y_m) / r).floor();
-        let cx1 = ((max.x_m - self.origin.x_m) / r).floor();
-        let cy1 = ((max.y_m - self.origin.y_m) / r).floor();
-        if cx0 >= 0.0 && cy0 >= 0.0 && cx1 < self.width as f64 && cy1 < self.height as f64 {
+        let (w, h) = (self.width, self.height);
+        let Some(g) = growth(self.origin, r, w, h, min, max, GROW_MARGIN_CELLS) else {
             return;
-        }
-        let grow = |below: f64| {
-            if below < 0.0 {
-                (-below) as usize + GROW_MARGIN_CELLS
-            } else {
-                0
-            }
         };
-        let (left, bottom) = (grow(cx0), grow(cy0));
-        let right = if cx1 >= self.width as f64 {
-            cx1 as usize + 1 - self.width + GROW_MARGIN_CELLS
-        } else {
-            0
-        };
-        let top = if cy1 >= self.height as f64 {
-            cy1 as usize + 1 - self.height + GROW_MARGIN_CELLS
-        } else {
-            0
-        };
-        let (w2, h2) = (self.width + left + right, self.height + bottom + top);
-        let mut sum = vec![0.0f32; w2 * h2];
-        for y in 0..self.height {
-            let src = y * self.width;
-            let dst = (y + bottom) * w2 + left;
-            sum[dst..dst + self.width].copy_from_slice(&self.sum[src..src + self.width]);
-        }
+        self.sum = regrow(&self.sum, w, h, g, 0.0);
         self.origin = Point2::new(
-            self.origin.x_m - left as f64 * r,
-            self.origin.y_m - bottom as f64 * r,
+            self.origin.x_m - g[0] as f64 * r,
+            self.origin.y_m - g[1] as f64 * r,
         );
-        self.width = w2;
-        self.height = h2;
-        self.sum = sum;
+        self.width = w + g[0] + g[2];
+        self.height = h + g[1] + g[3];
     }
 
     /// Adds `sign` times the log-odds of `grid` placed at `pose` to `target` (a sum over this
     /// assembly's geometry), sampling the submap at each target cell's centre.
     fn draw(&self, target: &mut [f32], grid: &OccupancyGrid, pose: Pose2, sign: f32) {
-        let Some((lo, hi)) = grid.content_bounds() else {
+        let Some((min, max)) = placed_box(grid, pose) else {
             return;
         };
-        let corners = [
-            lo,
-            Point2::new(hi.x_m, lo.y_m),
-            hi,
-            Point2::new(lo.x_m, hi.y_m),
-        ]
-        .map(|c| pose.transform_point(c));
         let r = self.resolution_m;
         let cell = |v: f64, o: f64| ((v - o) / r).floor();
-        let min_x = corners.iter().map(|c| c.x_m).fold(f64::INFINITY, f64::min);
-        let max_x = corners
-            .iter()
-            .map(|c| c.x_m)
-            .fold(f64::NEG_INFINITY, f64::max);
-        let min_y = corners.iter().map(|c| c.y_m).fold(f64::INFINITY, f64::min);
-        let max_y = corners
-            .iter()
-            .map(|c| c.y_m)
-            .fold(f64::NEG_INFINITY, f64::max);
-        let x0 = cell(min_x, self.origin.x_m).max(0.0) as usize;
-        let y0 = cell(min_y, self.origin.y_m).max(0.0) as usize;
-        let x1 = (cell(max_x, self.origin.x_m) as usize).min(self.width.saturating_sub(1));
-        let y1 = (cell(max_y, self.origin.y_m) as usize).min(self.height.saturating_sub(1));
+        let x0 = cell(min.x_m, self.origin.x_m).max(0.0) as usize;
+        let y0 = cell(min.y_m, self.origin.y_m).max(0.0) as usize;
+        let x1 = (cell(max.x_m, self.origin.x_m) as usize).min(self.width.saturating_sub(1));
+        let y1 = (cell(max.y_m, self.origin.y_m) as usize).min(self.height.saturating_sub(1));
         let g = grid.geometry();
         let src = grid.log_odds();
         let inv = pose.inverse();
         let (c, s) = (inv.yaw_rad.cos(), inv.yaw_rad.sin());
         // Stepping one target cell along x moves the sample by (c, s) * r in the submap.
-        let (step_x, step_y) = (c * r, s * r);
+        let (dx, dy) = (c * r / g.resolution_m, s * r / g.resolution_m);
         for y in y0..=y1 {
             let row0 = Point2::new(
                 self.origin.x_m + (x0 as f64 + 0.5) * r,
@@ -151,7 +106,6 @@ impl Assembly {
                 (p.x_m - g.origin.x_m) / g.resolution_m,
                 (p.y_m - g.origin.y_m) / g.resolution_m,
             );
-            let (dx, dy) = (step_x / g.resolution_m, step_y / g.resolution_m);
             for x in x0..=x1 {
                 if lx >= 0.0 && ly >= 0.0 && lx < g.width as f64 && ly < g.height as f64 {
                     let v = src[ly as usize * g.width + lx as usize];
@@ -166,20 +120,7 @@ impl Assembly {
     }
 
     fn grow_for(&mut self, grid: &OccupancyGrid, pose: Pose2) {
-        if let Some((lo, hi)) = grid.content_bounds() {
-            let corners = [
-                lo,
-                Point2::new(hi.x_m, lo.y_m),
-                hi,
-                Point2::new(lo.x_m, hi.y_m),
-            ]
-            .map(|c| pose.transform_point(c));
-            let min = corners.iter().fold(corners[0], |m, c| {
-                Point2::new(m.x_m.min(c.x_m), m.y_m.min(c.y_m))
-            });
-            let max = corners.iter().fold(corners[0], |m, c| {
-                Point2::new(m.x_m.max(c.x_m), m.y_m.max(c.y_m))
-            });
+        if let Some((min, max)) = placed_box(grid, pose) {
             self.ensure(min, max);
         }
     }
@@ -247,6 +188,25 @@ impl Assembly {
         let cells = sum.iter().map(|&l| CellState::from_log_odds(l)).collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
+}
+
+/// The world box holding what `grid` has seen, once placed at `pose`.
+fn placed_box(grid: &OccupancyGrid, pose: Pose2) -> Option<(Point2, Point2)> {
+    let (lo, hi) = grid.content_bounds()?;
+    let corners = [
+        lo,
+        Point2::new(hi.x_m, lo.y_m),
+        hi,
+        Point2::new(lo.x_m, hi.y_m),
+    ]
+    .map(|c| pose.transform_point(c));
+    let min = corners.iter().fold(corners[0], |m, c| {
+        Point2::new(m.x_m.min(c.x_m), m.y_m.min(c.y_m))
+    });
+    let max = corners.iter().fold(corners[0], |m, c| {
+        Point2::new(m.x_m.max(c.x_m), m.y_m.max(c.y_m))
+    });
+    Some((min, max))
 }
 
 #[cfg(test)]

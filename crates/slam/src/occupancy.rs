@@ -131,54 +131,27 @@ impl OccupancyGrid {
 
     /// Grows the grid so the world box `[min, max]` lies inside it.
     fn ensure(&mut self, min: Point2, max: Point2) {
-        let r = self.resolution_m;
-        let cx0 = ((min.x_m - self.origin.x_m) / r).floor();
-        let cy0 = ((min.y_m - self.origin.y_m) / r).floor();
-        let cx1 = ((max.x_m - self.origin.x_m) / r).floor();
-        let cy1 = ((max.y_m - self.origin.y_m) / r).floor();
-        if cx0 >= 0.0 && cy0 >= 0.0 && cx1 < self.width as f64 && cy1 < self.height as f64 {
+        let (w, h) = (self.width, self.height);
+        let Some(g) = growth(
+            self.origin,
+            self.resolution_m,
+            w,
+            h,
+            min,
+            max,
+            GROW_MARGIN_CELLS,
+        ) else {
             return;
-        }
-        let add_left = if cx0 < 0.0 {
-            (-cx0) as usize + GROW_MARGIN_CELLS
-        } else {
-            0
         };
-        let add_bottom = if cy0 < 0.0 {
-            (-cy0) as usize + GROW_MARGIN_CELLS
-        } else {
-            0
-        };
-        let add_right = if cx1 >= self.width as f64 {
-            cx1 as usize + 1 - self.width + GROW_MARGIN_CELLS
-        } else {
-            0
-        };
-        let add_top = if cy1 >= self.height as f64 {
-            cy1 as usize + 1 - self.height + GROW_MARGIN_CELLS
-        } else {
-            0
-        };
-        let (w2, h2) = (
-            self.width + add_left + add_right,
-            self.height + add_bottom + add_top,
-        );
-        let mut lo = vec![0.0f32; w2 * h2];
-        let mut pr = vec![0.5f32; w2 * h2];
-        for y in 0..self.height {
-            let src = y * self.width;
-            let dst = (y + add_bottom) * w2 + add_left;
-            lo[dst..dst + self.width].copy_from_slice(&self.log_odds[src..src + self.width]);
-            pr[dst..dst + self.width].copy_from_slice(&self.prob[src..src + self.width]);
-        }
+        self.log_odds = regrow(&self.log_odds, w, h, g, 0.0);
+        self.prob = regrow(&self.prob, w, h, g, 0.5);
+        let r = self.resolution_m;
         self.origin = Point2::new(
-            self.origin.x_m - add_left as f64 * r,
-            self.origin.y_m - add_bottom as f64 * r,
+            self.origin.x_m - g[0] as f64 * r,
+            self.origin.y_m - g[1] as f64 * r,
         );
-        self.width = w2;
-        self.height = h2;
-        self.log_odds = lo;
-        self.prob = pr;
+        self.width = w + g[0] + g[2];
+        self.height = h + g[1] + g[3];
     }
 
     fn update(&mut self, i: usize, delta: f32) {
@@ -357,6 +330,60 @@ impl OccupancyGrid {
             .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
+}
+
+/// The cells a `width` x `height` grid of `r`-metre cells with its corner at `origin` must
+/// grow by, `[left, bottom, right, top]`, to hold the world box `[min, max]`, each side that
+/// grows getting `margin` cells more (so growing is rare); `None` if it holds it already.
+pub(crate) fn growth(
+    origin: Point2,
+    r: f64,
+    width: usize,
+    height: usize,
+    min: Point2,
+    max: Point2,
+    margin: usize,
+) -> Option<[usize; 4]> {
+    let cx0 = ((min.x_m - origin.x_m) / r).floor();
+    let cy0 = ((min.y_m - origin.y_m) / r).floor();
+    let cx1 = ((max.x_m - origin.x_m) / r).floor();
+    let cy1 = ((max.y_m - origin.y_m) / r).floor();
+    if cx0 >= 0.0 && cy0 >= 0.0 && cx1 < width as f64 && cy1 < height as f64 {
+        return None;
+    }
+    let below = |c: f64| if c < 0.0 { (-c) as usize + margin } else { 0 };
+    let beyond = |c: f64, n: usize| {
+        if c >= n as f64 {
+            c as usize + 1 - n + margin
+        } else {
+            0
+        }
+    };
+    Some([
+        below(cx0),
+        below(cy0),
+        beyond(cx1, width),
+        beyond(cy1, height),
+    ])
+}
+
+/// The row-major `cells` of a `width` x `height` grid, grown by `[left, bottom, right, top]`
+/// cells filled with `fill`.
+pub(crate) fn regrow<T: Copy>(
+    cells: &[T],
+    width: usize,
+    height: usize,
+    grow: [usize; 4],
+    fill: T,
+) -> Vec<T> {
+    let [left, bottom, right, top] = grow;
+    let w2 = width + left + right;
+    let mut out = vec![fill; w2 * (height + bottom + top)];
+    for y in 0..height {
+        let dst = (y + bottom) * w2 + left;
+        out[dst..dst + width].copy_from_slice(&cells[y * width..(y + 1) * width]);
+    }
+    out
 }
 
 #[cfg(test)]
