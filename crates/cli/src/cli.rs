@@ -123,6 +123,22 @@ pub enum BenchCommand {
     Plan(BenchPlanArgs),
     /// Coverage over time for several fleet sizes and seeds.
     Explore(BenchExploreArgs),
+    /// The field's relay experiment on the radio model: 220 m direct against a relay.
+    NetRelay(BenchNetRelayArgs),
+}
+
+/// `realms bench net-relay`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchNetRelayArgs {
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    pub json: bool,
+    /// Random shadowing draws for the medians.
+    #[arg(long, default_value_t = 1000)]
+    pub draws: usize,
+    /// Seed of the shadowing draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// `realms bench plan`.

@@ -9,6 +9,7 @@
 
 mod bench;
 mod bench_nav;
+mod bench_net;
 mod cli;
 mod mission;
 mod slam;

@@ -100,3 +100,20 @@ fn a_bad_scenario_fails_with_file_and_key() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("soon"));
 }
+
+#[test]
+fn net_relay_reproduces_the_field_experiment_as_json() {
+    let o = realms()
+        .args(["bench", "net-relay", "--json", "--draws", "200"])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let gain = v["relay_gain"].as_f64().expect("relay_gain");
+    assert!((2.0..=10.0).contains(&gain), "relay gain {gain}");
+    // At 220 m: pings and teleoperation, no images; through the relay, images too.
+    assert_eq!(v["direct"]["ping"], true);
+    assert_eq!(v["direct"]["teleop"], true);
+    assert_eq!(v["direct"]["images"], false);
+    assert_eq!(v["relay"]["images"], true);
+}

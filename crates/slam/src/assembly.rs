@@ -27,11 +27,19 @@ pub struct Assembly {
     sum: Vec<f32>,
     /// Where each submap (by index) was drawn into `sum`, if it was.
     placed: Vec<Option<Pose2>>,
+    /// What a submap cell's log-odds contribute to the sum.
+    weigh: fn(f32) -> f32,
 }
 
 impl Assembly {
     /// An empty assembly of `resolution_m` cells.
     pub fn new(resolution_m: f64) -> Self {
+        Assembly::weighing(resolution_m, |l| l)
+    }
+
+    /// An empty assembly whose submaps contribute `weigh(log_odds)` per cell instead of
+    /// their log-odds (a vote, say; see [`hazard_vote`]).
+    pub fn weighing(resolution_m: f64, weigh: fn(f32) -> f32) -> Self {
         Assembly {
             resolution_m,
             origin: Point2::new(0.0, 0.0),
@@ -39,6 +47,7 @@ impl Assembly {
             height: 0,
             sum: Vec::new(),
             placed: Vec::new(),
+            weigh,
         }
     }
 
@@ -110,7 +119,7 @@ impl Assembly {
                 if lx >= 0.0 && ly >= 0.0 && lx < g.width as f64 && ly < g.height as f64 {
                     let v = src[ly as usize * g.width + lx as usize];
                     if v != 0.0 {
-                        target[y * self.width + x] += sign * v;
+                        target[y * self.width + x] += sign * (self.weigh)(v);
                     }
                 }
                 lx += dx;
@@ -187,6 +196,20 @@ impl Assembly {
         }
         let cells = sum.iter().map(|&l| CellState::from_log_odds(l)).collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
+    }
+}
+
+/// Safety first, for hazard layers: a layer that holds a cell hazardous outvotes any number
+/// of layers that hold it safe (a low rock seen from afar and judged flat must not hide the
+/// rock seen close by later), and a cell is safe only when some layer says so and none
+/// says hazard. Undecided cells do not vote.
+pub fn hazard_vote(l: f32) -> f32 {
+    if l > 0.5 {
+        1000.0
+    } else if l < -0.5 {
+        -1.0
+    } else {
+        0.0
     }
 }
 

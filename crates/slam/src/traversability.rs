@@ -12,7 +12,7 @@
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
 
-use crate::assembly::Assembly;
+use crate::assembly::{Assembly, hazard_vote};
 use crate::occupancy::{CellState, OccupancyGrid};
 use realms_core::{Grid, Point2, Pose2};
 
@@ -228,7 +228,8 @@ impl HazardMap {
 /// The hazard layer kept per submap, like the occupancy map, so a loop closure that moves a
 /// stretch of the map moves the craters and rocks seen from it too. Frames go into the
 /// newest submap's layer in that submap's frame; layers are drawn together at their
-/// submaps' current poses through an [`Assembly`]. Layers are kept when the mapper drops a
+/// submaps' current poses through an [`Assembly`], where a layer that saw a hazard
+/// outvotes the layers that saw the cell safe ([`hazard_vote`]). Layers are kept when the mapper drops a
 /// covered submap's grids: hazards are seen once, from close by, and not seen again.
 #[derive(Clone, Debug)]
 pub struct SubmapHazards {
@@ -243,7 +244,7 @@ impl SubmapHazards {
         SubmapHazards {
             layers: Vec::new(),
             current: None,
-            assembly: Assembly::new(resolution_m),
+            assembly: Assembly::weighing(resolution_m, hazard_vote),
         }
     }
 
@@ -299,6 +300,34 @@ mod tests {
         v.iter()
             .find(|(c, _)| (c.x_m - x).abs() <= 0.05 && (c.y_m - y).abs() <= 0.05)
             .map(|(_, h)| *h)
+    }
+
+    #[test]
+    fn a_hazard_seen_once_close_by_outvotes_many_distant_safe_looks() {
+        let mut layers = SubmapHazards::new(0.1);
+        let rock = Point2::new(1.05, 0.05);
+        // Three submaps, their origins 1 m apart along x; the first two saw the cell safe
+        // over and over, the newest saw it hazardous once.
+        let origins = [
+            Pose2::new(0.0, 0.0, 0.0),
+            Pose2::new(1.0, 0.0, 0.0),
+            Pose2::new(2.0, 0.0, 0.0),
+        ];
+        for (s, origin) in origins.iter().enumerate() {
+            let local = origin.inverse().transform_point(rock);
+            let looks = if s < 2 { 10 } else { 1 };
+            for _ in 0..looks {
+                layers.insert(s, Pose2::IDENTITY, &[(local, s == 2)]);
+            }
+        }
+        let states = layers.states(&origins);
+        assert_eq!(states.at_world(rock), Some(&CellState::Occupied));
+        // Where only safe looks were taken (two: one alone is undecided), the cell is safe.
+        let mut safe = SubmapHazards::new(0.1);
+        safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
+        safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
+        let states = safe.states(&origins[..1]);
+        assert_eq!(states.at_world(rock), Some(&CellState::Free));
     }
 
     #[test]
