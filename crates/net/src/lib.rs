@@ -7,9 +7,12 @@
 //!   channel.
 //! - [`airtime`]: the IEEE 802.11s HWMP airtime link metric and the path switching rule
 //!   with hysteresis.
+//! - [`mapdelta`]: compact map updates (changed cells, run-length encoded, snapshots on
+//!   request) that rebuild the sender's map exactly.
 //!
 //! The simulated mesh (routing, queues, the delayed ground link, blackouts) and the
 //! transport interface build on these.
 
 pub mod airtime;
+pub mod mapdelta;
 pub mod radio;

@@ -1,0 +1,397 @@
+//! Compact map updates: a rover sends the cells of its map that changed since its last
+//! update, run-length encoded, instead of the whole grid; a snapshot (every cell) goes out
+//! first, on request, and whenever the receiver may have missed something. The receiver
+//! rebuilds exactly the sender's map, or knows it cannot and asks for a snapshot.
+//!
+//! Maps grow as rovers explore: an update carries the map's geometry, and the receiver
+//! re-lays what it has onto the new geometry (cells outside the old map unknown) before
+//! applying the changes. Origins stay on the same lattice of cells as the map grows, so
+//! re-laying is a shift by whole cells.
+
+use realms_core::{Grid, GridGeometry, Point2};
+use serde::{Deserialize, Serialize};
+
+/// The unknown cell value (ROS `nav_msgs/OccupancyGrid`).
+pub const UNKNOWN: i8 = -1;
+
+/// One map update on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapUpdate {
+    /// Increases by one per update sent.
+    pub seq: u64,
+    /// The update this one changes; `None`: a snapshot, which needs nothing before it.
+    pub base: Option<u64>,
+    /// Cells along x.
+    pub width: u32,
+    /// Cells along y.
+    pub height: u32,
+    /// Cell edge, metres.
+    pub resolution_m: f64,
+    /// Lower-left corner of cell (0, 0).
+    pub origin: Point2,
+    /// Changed stretches, in row-major order of the new geometry.
+    pub runs: Vec<Run>,
+}
+
+/// `len` cells of value `value` starting `skip` cells after the end of the previous run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Run {
+    /// Unchanged cells before this run.
+    pub skip: u32,
+    /// Cells in the run.
+    pub len: u32,
+    /// Their new value.
+    pub value: i8,
+}
+
+impl MapUpdate {
+    /// Whether this update is a snapshot.
+    pub fn is_snapshot(&self) -> bool {
+        self.base.is_none()
+    }
+
+    fn geometry(&self) -> GridGeometry {
+        GridGeometry {
+            width: self.width as usize,
+            height: self.height as usize,
+            resolution_m: self.resolution_m,
+            origin: self.origin,
+        }
+    }
+}
+
+/// Why an update could not be applied.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DeltaError {
+    /// An update in between was lost: a snapshot is needed.
+    #[error("update {got} changes update {base}, but the last one applied is {have:?}")]
+    Gap {
+        /// The update's base.
+        base: u64,
+        /// The update.
+        got: u64,
+        /// The last update applied.
+        have: Option<u64>,
+    },
+    /// The update contradicts itself or the map it changes.
+    #[error("malformed map update {seq}: {why}")]
+    Malformed {
+        /// The update.
+        seq: u64,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+/// The sending side: remembers what the receiver has.
+#[derive(Clone, Debug, Default)]
+pub struct Encoder {
+    sent: Option<Grid<i8>>,
+    seq: u64,
+}
+
+/// `old` laid onto `geometry` (unknown where it did not reach); `None` if the two grids are
+/// not on the same lattice of cells.
+fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
+    let g = old.geometry();
+    if (g.resolution_m - geometry.resolution_m).abs() > 1e-9 * g.resolution_m {
+        return None;
+    }
+    let shift = |a: f64, b: f64| {
+        let cells = (a - b) / g.resolution_m;
+        let whole = cells.round();
+        ((cells - whole).abs() < 1e-6).then_some(whole as i64)
+    };
+    let dx = shift(g.origin.x_m, geometry.origin.x_m)?;
+    let dy = shift(g.origin.y_m, geometry.origin.y_m)?;
+    let mut out = Grid::new(geometry, UNKNOWN);
+    for y in 0..g.height {
+        for x in 0..g.width {
+            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+            if nx >= 0
+                && ny >= 0
+                && let Some(cell) = out.get_mut(nx as usize, ny as usize)
+            {
+                *cell = old.cells()[y * g.width + x];
+            }
+        }
+    }
+    Some(out)
+}
+
+/// Run-length encodes the cells of `now` that differ from `before` (everything, without it).
+fn runs(before: Option<&Grid<i8>>, now: &Grid<i8>) -> Vec<Run> {
+    let mut out: Vec<Run> = Vec::new();
+    let mut gap = 0u32;
+    for (i, &v) in now.cells().iter().enumerate() {
+        let changed = before.is_none_or(|b| b.cells()[i] != v);
+        if !changed {
+            gap += 1;
+            continue;
+        }
+        match out.last_mut() {
+            Some(run) if gap == 0 && run.value == v => run.len += 1,
+            _ => {
+                out.push(Run {
+                    skip: gap,
+                    len: 1,
+                    value: v,
+                });
+                gap = 0;
+            }
+        }
+    }
+    out
+}
+
+impl Encoder {
+    /// A fresh encoder: its first update is a snapshot.
+    pub fn new() -> Self {
+        Encoder::default()
+    }
+
+    /// The update that brings the receiver from what it was last sent to `map`; a snapshot
+    /// when `snapshot` is asked for, when nothing was sent yet, or when the map moved off
+    /// its lattice.
+    pub fn update(&mut self, map: &Grid<i8>, snapshot: bool) -> MapUpdate {
+        let g = *map.geometry();
+        let base = if snapshot {
+            None
+        } else {
+            self.sent
+                .as_ref()
+                .and_then(|s| relay_onto(s, g))
+                .map(|before| (self.seq, before))
+        };
+        self.seq += 1;
+        let (base_seq, encoded) = match &base {
+            Some((seq, before)) => (Some(*seq), runs(Some(before), map)),
+            None => (None, runs(None, map)),
+        };
+        self.sent = Some(map.clone());
+        MapUpdate {
+            seq: self.seq,
+            base: base_seq,
+            width: g.width as u32,
+            height: g.height as u32,
+            resolution_m: g.resolution_m,
+            origin: g.origin,
+            runs: encoded,
+        }
+    }
+}
+
+/// The receiving side: the rebuilt map.
+#[derive(Clone, Debug, Default)]
+pub struct Decoder {
+    map: Option<Grid<i8>>,
+    applied: Option<u64>,
+}
+
+impl Decoder {
+    /// Nothing received yet.
+    pub fn new() -> Self {
+        Decoder::default()
+    }
+
+    /// The map as rebuilt so far.
+    pub fn map(&self) -> Option<&Grid<i8>> {
+        self.map.as_ref()
+    }
+
+    /// The last update applied.
+    pub fn applied(&self) -> Option<u64> {
+        self.applied
+    }
+
+    /// Applies `update`. On an error nothing changes: the map stays as it was (and a
+    /// snapshot should be asked for).
+    pub fn apply(&mut self, update: &MapUpdate) -> Result<(), DeltaError> {
+        let malformed = |why: &str| DeltaError::Malformed {
+            seq: update.seq,
+            why: why.to_string(),
+        };
+        let g = update.geometry();
+        let cells = g
+            .width
+            .checked_mul(g.height)
+            .ok_or_else(|| malformed("size overflows"))?;
+        let finite =
+            g.resolution_m.is_finite() && g.origin.x_m.is_finite() && g.origin.y_m.is_finite();
+        if !finite || g.resolution_m <= 0.0 {
+            return Err(malformed("bad resolution or origin"));
+        }
+        // Refuse absurd sizes before allocating: 100 million cells is a 500 km^2 map at 5 cm.
+        if cells > 100_000_000 {
+            return Err(malformed("more than 100 million cells"));
+        }
+        let mut map = match update.base {
+            None => Grid::new(g, UNKNOWN),
+            Some(base) => {
+                if self.applied != Some(base) {
+                    return Err(DeltaError::Gap {
+                        base,
+                        got: update.seq,
+                        have: self.applied,
+                    });
+                }
+                let old = self
+                    .map
+                    .as_ref()
+                    .ok_or_else(|| malformed("no map to change"))?;
+                relay_onto(old, g).ok_or_else(|| malformed("geometry off the old lattice"))?
+            }
+        };
+        let mut i = 0usize;
+        let out = map.cells_mut();
+        for run in &update.runs {
+            i = i
+                .checked_add(run.skip as usize)
+                .ok_or_else(|| malformed("run overflows"))?;
+            let end = i
+                .checked_add(run.len as usize)
+                .filter(|e| *e <= cells)
+                .ok_or_else(|| malformed("run past the end of the map"))?;
+            out[i..end].fill(run.value);
+            i = end;
+        }
+        self.map = Some(map);
+        self.applied = Some(update.seq);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn geometry(x0: i64, y0: i64, w: usize, h: usize) -> GridGeometry {
+        GridGeometry {
+            width: w,
+            height: h,
+            resolution_m: 0.1,
+            origin: Point2::new(x0 as f64 * 0.1, y0 as f64 * 0.1),
+        }
+    }
+
+    /// A step of the sender's life: its map grows and some cells change; an update may be
+    /// lost on the way; the receiver may ask for a snapshot.
+    #[derive(Clone, Debug)]
+    struct Step {
+        grow: (u8, u8, u8, u8),
+        edits: Vec<(u16, i8)>,
+        lost: bool,
+        ask_snapshot: bool,
+    }
+
+    fn step() -> impl Strategy<Value = Step> {
+        (
+            (0u8..3, 0u8..3, 0u8..3, 0u8..3),
+            proptest::collection::vec(
+                (
+                    0u16..2000,
+                    prop_oneof![Just(-1i8), Just(0), Just(90), Just(100)],
+                ),
+                0..40,
+            ),
+            proptest::bool::weighted(0.2),
+            proptest::bool::weighted(0.1),
+        )
+            .prop_map(|(grow, edits, lost, ask_snapshot)| Step {
+                grow,
+                edits,
+                lost,
+                ask_snapshot,
+            })
+    }
+
+    proptest! {
+        /// After any sequence of growth, edits, lost updates and snapshots, the receiver
+        /// either holds exactly the sender's map or knows it is behind (and a snapshot
+        /// brings it back).
+        #[test]
+        fn the_receiver_rebuilds_the_sender_s_map_exactly(steps in proptest::collection::vec(step(), 1..30)) {
+            let (mut x0, mut y0, mut w, mut h) = (0i64, 0i64, 10usize, 8usize);
+            let mut map = Grid::new(geometry(x0, y0, w, h), UNKNOWN);
+            let mut enc = Encoder::new();
+            let mut dec = Decoder::new();
+            let mut behind = false;
+            for s in steps {
+                let (l, b, r, t) = (s.grow.0 as i64, s.grow.1 as i64, s.grow.2 as usize, s.grow.3 as usize);
+                let g = geometry(x0 - l, y0 - b, w + l as usize + r, h + b as usize + t);
+                map = relay_onto(&map, g).expect("same lattice");
+                (x0, y0, w, h) = (x0 - l, y0 - b, g.width, g.height);
+                for (k, v) in &s.edits {
+                    let n = map.cells().len();
+                    map.cells_mut()[*k as usize % n] = *v;
+                }
+                let update = enc.update(&map, s.ask_snapshot || behind);
+                if s.lost {
+                    behind = true;
+                    continue;
+                }
+                match dec.apply(&update) {
+                    Ok(()) => {
+                        behind = false;
+                        prop_assert_eq!(dec.map(), Some(&map));
+                    }
+                    Err(DeltaError::Gap { .. }) => behind = true,
+                    Err(e) => prop_assert!(false, "{}", e),
+                }
+            }
+            // One snapshot always brings the receiver level.
+            let update = enc.update(&map, true);
+            dec.apply(&update).expect("a snapshot applies");
+            prop_assert_eq!(dec.map(), Some(&map));
+        }
+
+        /// Whatever arrives, applying it never panics, and a rejected update changes nothing.
+        #[test]
+        fn malformed_updates_are_refused_without_harm(
+            runs in proptest::collection::vec((any::<u32>(), any::<u32>(), any::<i8>()), 0..8),
+            width in 0u32..5000,
+            height in 0u32..5000,
+            base in proptest::option::of(0u64..3),
+        ) {
+            let mut enc = Encoder::new();
+            let mut dec = Decoder::new();
+            let map = Grid::new(geometry(0, 0, 6, 4), 0i8);
+            dec.apply(&enc.update(&map, true)).expect("a snapshot applies");
+            let before = dec.map().cloned();
+            let update = MapUpdate {
+                seq: 2,
+                base,
+                width,
+                height,
+                resolution_m: 0.1,
+                origin: Point2::new(0.0, 0.0),
+                runs: runs.into_iter().map(|(skip, len, value)| Run { skip, len, value }).collect(),
+            };
+            if dec.apply(&update).is_err() {
+                prop_assert_eq!(dec.map().cloned(), before);
+            }
+        }
+    }
+
+    #[test]
+    fn an_unchanged_map_costs_no_runs_and_one_change_one_run() {
+        let mut map = Grid::new(geometry(0, 0, 100, 100), 0i8);
+        let mut enc = Encoder::new();
+        let first = enc.update(&map, false);
+        assert!(first.is_snapshot());
+        assert_eq!(first.runs.len(), 1, "a uniform map is one run");
+        assert!(enc.update(&map, false).runs.is_empty());
+        *map.get_mut(50, 50).expect("inside") = 100;
+        let d = enc.update(&map, false);
+        assert_eq!(d.base, Some(2));
+        assert_eq!(
+            d.runs,
+            vec![Run {
+                skip: 5050,
+                len: 1,
+                value: 100
+            }]
+        );
+    }
+}
