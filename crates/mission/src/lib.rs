@@ -110,7 +110,9 @@ impl Mission {
                     depth_rot: base_from_optical.rot,
                     depth_origin_m: base_from_optical.origin,
                     max_step_m: spec.max_step_m,
-                    max_drop_m: 0.12,
+                    // The hazard layer's drop limit, so the guard does not stop the rover on
+                    // ground the map calls drivable.
+                    max_drop_m: TraversabilityConfig::default().max_drop_m,
                 };
                 let mapping = MappingConfig {
                     lidar_x_m: spec.lidar.mount_x_m,
@@ -240,8 +242,8 @@ impl Mission {
         &self.coverage
     }
 
-    /// Whether every rover has finished exploring and is home (or has no power): the
-    /// mission has nothing left to do.
+    /// Whether every rover has finished exploring (and is home, or gave up getting there
+    /// and stays put) or has no power: the mission has nothing left to do.
     pub fn exploration_over(&self) -> bool {
         self.world
             .rovers()

@@ -54,7 +54,8 @@ pub struct MissionReport {
     pub time_to_90_s: Option<f64>,
     /// When coverage first reached 95 %, seconds (absent if it did not).
     pub time_to_95_s: Option<f64>,
-    /// Whether every rover finished exploring and returned home before the time was up.
+    /// Whether every rover finished exploring (and returned home, or gave up getting there)
+    /// before the time was up.
     pub exploration_complete: bool,
     /// Everything notable, in time order.
     pub events: Vec<SimEvent>,

@@ -124,7 +124,7 @@ impl Costmap {
     }
 }
 
-/// Nav2's inflation law: lethal inside the inscribed radius, then
+/// Nav2's inflation law: lethal on the obstacle, inscribed within the inscribed radius, then
 /// `252 * exp(-k (d - r_inscribed))` out to the inflation radius.
 fn inflation_cost(d_m: f64, cfg: &CostmapConfig) -> u8 {
     if d_m == 0.0 {

@@ -29,10 +29,21 @@ pub struct ExploreConfig {
     pub blacklist_radius_m: f64,
 }
 
+/// A candidate whose worth peers' targets discount by this fraction or more is taken.
+pub const TAKEN_FRACTION: f64 = 0.75;
+
 impl Candidate {
     /// Whether a peer's target is so close that the peer will map it on its way.
     pub fn taken_by_peer(&self) -> bool {
-        self.discount >= 0.75 * self.gain
+        self.discount >= TAKEN_FRACTION * self.gain
+    }
+}
+
+impl ExploreConfig {
+    /// A single peer target this close to a frontier takes it (see
+    /// [`Candidate::taken_by_peer`]), metres.
+    pub fn taken_radius_m(&self) -> f64 {
+        self.peer_radius_m * (1.0 - TAKEN_FRACTION)
     }
 }
 

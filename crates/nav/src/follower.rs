@@ -161,6 +161,9 @@ impl Follower {
         for k in self.segment + 1..self.path.len() {
             let next = self.path[k];
             let d = at.distance_m(next);
+            if left <= 0.0 {
+                return at;
+            }
             if d >= left {
                 let s = left / d;
                 return Point2::new(

@@ -1,6 +1,6 @@
-//! Global planning on a [`Costmap`]: A* over the 8-connected cell graph, where entering a cell
-//! costs the step's length stretched by the cell's cost, so the cheapest path trades length
-//! against clearance. The octile distance is an admissible and consistent heuristic for that
+//! Global planning on a [`Costmap`]: A* over the 8-connected cell graph (no cutting
+//! corners), where entering a cell costs the step's length stretched by the cell's cost, so
+//! the cheapest path trades length against clearance. The octile distance is an admissible and consistent heuristic for that
 //! graph (no step is cheaper than its length), so A* returns exactly Dijkstra's optimum; the
 //! Dijkstra field ([`Planner::travel_costs`]) is kept beside it for checking, for the benchmark
 //! baseline, and because exploration wants the cost to every frontier at once.
@@ -111,8 +111,10 @@ const NEIGHBOURS: [(isize, isize, f32); 8] = [
 /// A monotone priority queue (Ahuja, Mehlhorn, Orlin & Tarjan, "Faster Algorithms for the
 /// Shortest Path Problem", J. ACM 37, 1990): keys go into bucket `k` by the highest bit in
 /// which they differ from the last key taken out, so a push is O(1) and each item moves
-/// down at most 64 times. Dijkstra and A* with a consistent heuristic never push a key
-/// below the last one popped; float rounding may, by an ulp, and such keys are raised to it.
+/// down at most 64 times. Dijkstra and A* with a consistent heuristic never push an `f`
+/// below the last one popped (float rounding aside, by an ulp); a key below the last one
+/// (the same `f` with a larger `g`, or an ulp's rounding) is raised to it, which keeps the
+/// order by `f` and only loses the tie-break.
 #[derive(Clone, Debug, Default)]
 struct RadixHeap {
     buckets: Vec<Vec<(u64, u32)>>,
@@ -222,6 +224,7 @@ impl Planner {
         let weight = self.cfg.cost_weight as f32 / MAX_PASSABLE as f32;
         let escape_cells = (self.cfg.escape_radius_m / geo.resolution_m) as f32;
         let escape2 = escape_cells * escape_cells;
+        let start_cost = costs[geo.index(start)];
         let res = geo.resolution_m as f32;
         let gen_ = self.generation;
         let estimate = |x: usize, y: usize| -> f32 {
@@ -246,7 +249,10 @@ impl Planner {
             if c <= MAX_PASSABLE {
                 return Some(1.0 + weight * c as f32);
             }
-            near_start.then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
+            // Only a rover already in a blocked cell may cross blocked cells, near where it
+            // stands and none dearer than its own (Nav2's rule), to get out.
+            (near_start && start_cost > MAX_PASSABLE && c <= start_cost)
+                .then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
         };
         let s = geo.index(start);
         self.g[s] = 0.0;
@@ -280,6 +286,10 @@ impl Planner {
                     continue;
                 }
                 let Some(f) = factor(nx, ny) else { continue };
+                // No cutting corners: a diagonal step needs both cells beside it open.
+                if dx != 0 && dy != 0 && (factor(nx, y).is_none() || factor(x, ny).is_none()) {
+                    continue;
+                }
                 let g = gi + len * res * f;
                 if self.seen[j] != gen_ || g < self.g[j] {
                     self.seen[j] = gen_;
@@ -388,11 +398,12 @@ impl Planner {
 }
 
 /// Whether the rover may drive the straight leg from `a` to `b` without going anywhere
-/// dearer than `worst`.
+/// dearer than `worst`, sampled every quarter cell (a leg may clip the corner of a dearer
+/// cell by less than that; the inflation's gradient is far wider).
 fn leg_is_clear(map: &Costmap, a: Point2, b: Point2, worst: u8) -> bool {
     let geo = map.geometry();
     let len = a.distance_m(b);
-    let steps = (len / (0.5 * geo.resolution_m)).ceil().max(1.0) as usize;
+    let steps = (len / (0.25 * geo.resolution_m)).ceil().max(1.0) as usize;
     (0..=steps).all(|k| {
         let s = k as f64 / steps as f64;
         let p = Point2::new(a.x_m + s * (b.x_m - a.x_m), a.y_m + s * (b.y_m - a.y_m));
@@ -408,7 +419,7 @@ fn leg_is_clear(map: &Costmap, a: Point2, b: Point2, worst: u8) -> bool {
 
 /// The cells of a plan as a few straight legs (cell centres; the first and last are the
 /// plan's ends). A leg replaces the cells it spans only if nowhere along it costs more than
-/// the dearest of those cells, so smoothing never brings the path closer to an obstacle;
+/// the dearest of those cells, so smoothing does not bring the path closer to an obstacle;
 /// legs are at most `max_leg_m` long so the follower's look-ahead stays on the plan.
 pub fn smooth(map: &Costmap, cells: &[Cell], max_leg_m: f64) -> Vec<Point2> {
     let geo = map.geometry();

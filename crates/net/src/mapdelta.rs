@@ -100,7 +100,8 @@ fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
     let shift = |a: f64, b: f64| {
         let cells = (a - b) / g.resolution_m;
         let whole = cells.round();
-        ((cells - whole).abs() < 1e-6).then_some(whole as i64)
+        // Beyond a billion cells the shift is nonsense (and would overflow below).
+        ((cells - whole).abs() < 1e-6 && whole.abs() < 1e9).then_some(whole as i64)
     };
     let dx = shift(g.origin.x_m, geometry.origin.x_m)?;
     let dy = shift(g.origin.y_m, geometry.origin.y_m)?;
@@ -353,6 +354,7 @@ mod tests {
             width in 0u32..5000,
             height in 0u32..5000,
             base in proptest::option::of(0u64..3),
+            origin in (prop_oneof![Just(0.0), Just(-1e300), Just(1e300), -1e6f64..1e6], -1e6f64..1e6),
         ) {
             let mut enc = Encoder::new();
             let mut dec = Decoder::new();
@@ -365,7 +367,7 @@ mod tests {
                 width,
                 height,
                 resolution_m: 0.1,
-                origin: Point2::new(0.0, 0.0),
+                origin: Point2::new(origin.0, origin.1),
                 runs: runs.into_iter().map(|(skip, len, value)| Run { skip, len, value }).collect(),
             };
             if dec.apply(&update).is_err() {

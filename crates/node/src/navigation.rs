@@ -40,7 +40,8 @@ pub struct NavigationConfig {
     pub stuck_window: Duration,
     /// Recoveries tried on one goal before it is given up.
     pub max_attempts: u32,
-    /// A goal must be reached at this average speed along its first path, m/s ...
+    /// A goal must be reached at this speed along its first path's cost (metres stretched
+    /// by the costmap, so at least its length), m/s ...
     pub min_progress_speed_m_s: f64,
     /// ... plus this much time.
     pub goal_slack: Duration,
@@ -149,8 +150,17 @@ pub struct Navigator {
     next_map: Time,
     replan_now: bool,
     done: bool,
+    /// Times the way home was given up.
+    home_failures: u32,
+    /// When the guard last forced a replan.
+    last_forced_replan: Option<Time>,
     events: Vec<NavEvent>,
 }
+
+/// Tries at the way home before the rover stays where it is.
+const MAX_HOME_TRIES: u32 = 3;
+/// The guard forces a replan at most this often.
+const FORCED_REPLAN_PERIOD: Duration = Duration::from_secs(1);
 
 /// Whether two points are the same target.
 fn same_target(a: Point2, b: Point2) -> bool {
@@ -176,6 +186,8 @@ impl Navigator {
             next_map: Time::ZERO,
             replan_now: true,
             done: false,
+            home_failures: 0,
+            last_forced_replan: None,
             events: Vec::new(),
         }
     }
@@ -236,10 +248,11 @@ impl Navigator {
             Some(p) => {
                 // A senior peer took our frontier: give way at once rather than at the next
                 // map update (both chose at the same moment, before hearing each other).
+                let taken = self.cfg.explore.taken_radius_m();
                 if peer.0 < self.id.0
-                    && self
-                        .goal
-                        .is_some_and(|g| g.kind == GoalKind::Frontier && same_target(g.point, p))
+                    && self.goal.is_some_and(|g| {
+                        g.kind == GoalKind::Frontier && g.point.distance_m(p) <= taken
+                    })
                 {
                     self.replan_now = true;
                 }
@@ -265,6 +278,14 @@ impl Navigator {
             );
             if g.kind == GoalKind::Operator && blacklist {
                 self.operator_goal = None;
+            }
+            if g.kind == GoalKind::Home && blacklist {
+                self.home_failures += 1;
+                if self.home_failures >= MAX_HOME_TRIES {
+                    // Stay where it is rather than try for ever.
+                    self.event(now, "cannot get home: staying here".to_string());
+                    self.done = true;
+                }
             }
         }
         self.follower.set_path(Vec::new());
@@ -303,13 +324,15 @@ impl Navigator {
     }
 
     /// Peers' live claims; a peer with a higher id than ours does not displace our current
-    /// target (so two rovers that picked the same frontier at once do not both leave it).
+    /// target (so two rovers that picked nearby frontiers at once do not both leave them).
     fn claims(&self, now: Time, current: Option<Point2>) -> Vec<PeerClaim> {
         self.peers
             .iter()
             .filter(|(_, (_, heard))| now - *heard <= self.cfg.claim_lifetime)
             .filter(|(peer, (target, _))| {
-                !(peer.0 > self.id.0 && current.is_some_and(|c| same_target(c, *target)))
+                let taking_ours = current
+                    .is_some_and(|c| c.distance_m(*target) <= self.cfg.explore.taken_radius_m());
+                !(peer.0 > self.id.0 && taking_ours)
             })
             .map(|(_, (target, _))| PeerClaim { target: *target })
             .collect()
@@ -419,6 +442,10 @@ impl Navigator {
     }
 
     fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
+        if kind == GoalKind::Frontier {
+            // Exploring again (new ground appeared): it must come home again after.
+            self.done = false;
+        }
         self.goal = Some(Goal {
             point,
             kind,
@@ -455,6 +482,10 @@ impl Navigator {
             if let Some(c) = still
                 && c.utility >= best.utility - 2.0
             {
+                // The frontier's reachable cell may have moved a little as the map filled in.
+                if let Some(goal) = self.goal.as_mut() {
+                    goal.point = c.goal;
+                }
                 return;
             }
         }
@@ -532,8 +563,15 @@ impl Navigator {
             }
             Steer::Drive { v_m_s, w_rad_s } => {
                 if v_m_s > 0.0 && guard.front_blocked {
-                    // Something the map does not show yet: stop, look again, replan.
-                    self.replan_now = true;
+                    // Something the map does not show yet: stop, look again, replan (not on
+                    // every scan: the map needs a moment to show it).
+                    if self
+                        .last_forced_replan
+                        .is_none_or(|t| now - t >= FORCED_REPLAN_PERIOD)
+                    {
+                        self.last_forced_replan = Some(now);
+                        self.replan_now = true;
+                    }
                     return (0.0, 0.0);
                 }
                 (v_m_s, w_rad_s)
