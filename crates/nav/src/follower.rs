@@ -9,7 +9,6 @@
 //! so the caller can replan before the rover reaches what the map now shows.
 
 use crate::costmap::{Costmap, MAX_PASSABLE};
-use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Point2, Pose2};
 
 /// Follower tuning.
@@ -88,11 +87,6 @@ impl Follower {
             path: Vec::new(),
             segment: 0,
         }
-    }
-
-    /// Its tuning.
-    pub fn config(&self) -> &FollowerConfig {
-        &self.cfg
     }
 
     /// Follow `path` (waypoints, start first) from now on.
@@ -268,21 +262,12 @@ impl Follower {
         }
         false
     }
-
-    /// Heading error between the rover and the path direction at its nearest point.
-    pub fn heading_error_rad(&mut self, pose: Pose2) -> f64 {
-        if self.path.len() < 2 {
-            return 0.0;
-        }
-        self.advance(pose.position());
-        let (a, b) = (self.path[self.segment], self.path[self.segment + 1]);
-        normalize_angle_rad((b.y_m - a.y_m).atan2(b.x_m - a.x_m) - pose.yaw_rad)
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realms_core::geometry::normalize_angle_rad;
 
     /// A skid-steer rover as the simulator moves it: unicycle kinematics with the Leo Rover's
     /// acceleration limits, integrated at 50 Hz, commanded at 10 Hz.

@@ -185,11 +185,6 @@ impl Planner {
         }
     }
 
-    /// Its tuning.
-    pub fn config(&self) -> &PlannerConfig {
-        &self.cfg
-    }
-
     fn begin(&mut self, n: usize) {
         if self.seen.len() != n {
             self.g = vec![f32::INFINITY; n];

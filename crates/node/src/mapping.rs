@@ -427,12 +427,7 @@ impl Mapping {
                     }
                 }
                 let centre = geo.cell_center(realms_core::Cell { x, y });
-                cells.push(match (occupied, hazard_at(&hazards, centre), free) {
-                    (true, _, _) => OccupancyGrid::OCCUPIED,
-                    (_, Some(true), _) => OccupancyGrid::HAZARD,
-                    (_, Some(false), _) | (_, None, true) => OccupancyGrid::FREE,
-                    _ => OccupancyGrid::UNKNOWN,
-                });
+                cells.push(cell_value(occupied, hazard_at(&hazards, centre), free));
             }
         }
         Grid::from_cells(geo, cells).expect("one value per cell")
@@ -459,18 +454,27 @@ impl Mapping {
             data: states
                 .iter()
                 .map(|(cell, c)| {
-                    if *c == CellState::Occupied {
-                        return OccupancyGrid::OCCUPIED;
-                    }
-                    match (hazard_at(&hazards, g.cell_center(cell)), c) {
-                        (Some(true), _) => OccupancyGrid::HAZARD,
-                        // Ground the depth camera saw and judged drivable is known free too.
-                        (Some(false), _) | (None, CellState::Free) => OccupancyGrid::FREE,
-                        (None, _) => OccupancyGrid::UNKNOWN,
-                    }
+                    cell_value(
+                        *c == CellState::Occupied,
+                        hazard_at(&hazards, g.cell_center(cell)),
+                        *c == CellState::Free,
+                    )
                 })
                 .collect(),
         }
+    }
+}
+
+/// A published map cell from what the lidar map and the hazard layer say: the lidar passes
+/// over crater bowls and low rocks and calls them free, so the hazard layer overrules it
+/// everywhere but on what the lidar sees as obstacles; ground the depth camera judged
+/// drivable is known free too.
+fn cell_value(occupied: bool, hazard: Option<bool>, free: bool) -> i8 {
+    match (occupied, hazard, free) {
+        (true, _, _) => OccupancyGrid::OCCUPIED,
+        (_, Some(true), _) => OccupancyGrid::HAZARD,
+        (_, Some(false), _) | (_, None, true) => OccupancyGrid::FREE,
+        _ => OccupancyGrid::UNKNOWN,
     }
 }
 

@@ -602,11 +602,6 @@ impl Navigator {
         });
         (0.0, 0.0)
     }
-
-    /// The path being followed.
-    pub fn path(&self) -> &[Point2] {
-        self.follower.path()
-    }
 }
 
 /// What the rover's own sensors say about its immediate surroundings.
