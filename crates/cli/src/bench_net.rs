@@ -6,12 +6,14 @@
 //! [`realms_net::radio`]: the mean link (no shadowing) and the median over random shadowing
 //! draws (each hop its own draw).
 
-use crate::cli::BenchNetRelayArgs;
+use crate::cli::{BenchNetRelayArgs, BenchNetSimArgs};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use realms_net::airtime::{airtime_of, path_airtime_us};
+use realms_net::experiment::{FleetTraffic, fleet_traffic, flood_throughput_mbps};
 use realms_net::radio::{LinkQuality, RadioConfig, relay_goodput_mbps};
 use serde::Serialize;
+use std::time::Instant;
 
 /// What an application needs from a path, Mb/s.
 const PING_MBPS: f64 = 0.001;
@@ -73,6 +75,9 @@ struct Report {
     direct_goodput_median_shadowed_mbps: f64,
     relay_goodput_median_shadowed_mbps: f64,
     sweep: Vec<Setup>,
+    simulated_direct_mbps: f64,
+    simulated_relay_mbps: f64,
+    simulated_relay_gain: f64,
 }
 
 /// `realms bench net-relay`.
@@ -98,7 +103,21 @@ pub fn run(args: BenchNetRelayArgs) -> Result<()> {
         .iter()
         .map(|d| setup(&radio, &format!("direct, {d:.0} m"), &[*d]))
         .collect();
+    // The same two setups on the simulated mesh: queues, retries and the shared channel.
+    let net = realms_net::NetworkConfig {
+        radio: RadioConfig {
+            shadowing_sigma_db: 0.0,
+            ..radio.clone()
+        },
+        ..realms_net::NetworkConfig::default()
+    };
+    let simulated_direct_mbps = flood_throughput_mbps(&net, 220.0, None, 10);
+    // The relay 130 m from the lander and 100 m from the rover, the rover 220 m out.
+    let simulated_relay_mbps = flood_throughput_mbps(&net, 220.0, Some(130.0), 10);
     let report = Report {
+        simulated_direct_mbps,
+        simulated_relay_mbps,
+        simulated_relay_gain: simulated_relay_mbps / simulated_direct_mbps,
         direct,
         relay,
         relay_gain,
@@ -169,5 +188,47 @@ pub fn run(args: BenchNetRelayArgs) -> Result<()> {
         report.relay_goodput_median_shadowed_mbps,
         100.0 * report.direct_dead_fraction_shadowed
     );
+    println!(
+        "on the simulated mesh (queues, retries, one shared channel, no shadowing): direct {:.2} Mb/s, relayed {:.2} Mb/s, gain {:.1}x",
+        report.simulated_direct_mbps, report.simulated_relay_mbps, report.simulated_relay_gain
+    );
+    Ok(())
+}
+
+/// `realms bench net-sim`: what the simulated network costs, in messages per wall second,
+/// beside the simulated seconds per wall second.
+pub fn net_sim(args: BenchNetSimArgs) -> Result<()> {
+    let cfg = realms_net::NetworkConfig::default();
+    println!("# realms bench net-sim");
+    println!();
+    println!(
+        "{} simulated s per trial, {} trials, median; per rover: pose 10 Hz, status 1 Hz, 2 kB map update 1 Hz, 20 kB image 0.5 Hz, to the lander and the ground; {}",
+        args.seconds,
+        args.trials,
+        crate::bench::machine()
+    );
+    println!();
+    println!(
+        "| rovers | messages | delivered | bytes on air | wall s | messages per wall s | simulated s per wall s |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    for &n in &args.rovers {
+        let mut walls = Vec::new();
+        let mut last = FleetTraffic::default();
+        for _ in 0..args.trials.max(1) {
+            let t0 = Instant::now();
+            last = fleet_traffic(&cfg, n, 50.0, args.seconds);
+            walls.push(t0.elapsed().as_secs_f64());
+        }
+        let wall = crate::bench::median(walls);
+        println!(
+            "| {n} | {} | {} | {:.1} MB | {wall:.3} | {:.0} | {:.0} |",
+            last.published,
+            last.delivered,
+            last.air_bytes as f64 / 1e6,
+            last.published as f64 / wall,
+            args.seconds as f64 / wall
+        );
+    }
     Ok(())
 }

@@ -125,6 +125,22 @@ pub enum BenchCommand {
     Explore(BenchExploreArgs),
     /// The field's relay experiment on the radio model: 220 m direct against a relay.
     NetRelay(BenchNetRelayArgs),
+    /// Cost of the simulated network: messages per wall second for fleets of several sizes.
+    NetSim(BenchNetSimArgs),
+}
+
+/// `realms bench net-sim`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchNetSimArgs {
+    /// Fleet sizes, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "3,20")]
+    pub rovers: Vec<u8>,
+    /// Simulated seconds per trial.
+    #[arg(long, default_value_t = 120)]
+    pub seconds: u32,
+    /// Trials per fleet size (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    pub trials: usize,
 }
 
 /// `realms bench net-relay`.

@@ -10,9 +10,24 @@
 //! - [`mapdelta`]: compact map updates (changed cells, run-length encoded, snapshots on
 //!   request) that rebuild the sender's map exactly.
 //!
-//! The simulated mesh (routing, queues, the delayed ground link, blackouts) and the
-//! transport interface build on these.
+//! - [`qos`], [`packet`], [`queue`]: per-topic service (reliable or best effort, priority,
+//!   time to live), packets, and the bounded store-and-forward queue with its drop policy.
+//! - [`simnet`]: the simulated mesh (one channel, HWMP+ paths on the airtime metric,
+//!   relaying) and the delayed ground link with blackouts; [`stats`] counts its traffic.
+//! - [`config`]: the scenario's `[network]` section.
 
 pub mod airtime;
+pub mod config;
+pub mod experiment;
 pub mod mapdelta;
+pub mod packet;
+pub mod qos;
+pub mod queue;
 pub mod radio;
+pub mod simnet;
+pub mod stats;
+
+pub use config::{GroundLinkConfig, NetworkConfig};
+pub use packet::{NodeAddr, Packet};
+pub use qos::{Priority, Qos, Reliability};
+pub use simnet::{Delivery, SimNetwork};
