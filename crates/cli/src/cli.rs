@@ -93,9 +93,8 @@ pub struct MissionArgs {
     /// Drop the scenario's scheduled faults (slip bursts, sensor dropouts, power loss).
     #[arg(long)]
     pub no_faults: bool,
-    /// Deliver every message at once and intact. This is the only mode until the simulated
-    /// network lands; the flag is accepted now so scripts written against the targets keep
-    /// working when it does.
+    /// Deliver every message between nodes at once and intact, instead of over the
+    /// scenario's simulated mesh radio and ground link (delay, bandwidth, blackouts).
     #[arg(long)]
     pub ideal_comms: bool,
     /// Keep running to the full duration even after exploration is complete.

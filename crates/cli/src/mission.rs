@@ -4,9 +4,9 @@
 use crate::cli::{MissionArgs, ScenarioArgs};
 use anyhow::{Context, Result, bail};
 use realms_core::Time;
-use realms_mission::Mission;
 use realms_mission::report::write_results;
-use realms_sim::Scenario;
+use realms_mission::{Mission, MissionOptions};
+use realms_sim::{Scenario, World};
 use std::path::{Path, PathBuf};
 
 /// Parses a duration such as `4h`, `90m`, `1h30m`, `45s` or a plain number of seconds.
@@ -69,7 +69,11 @@ pub fn run(args: MissionArgs) -> Result<()> {
         "realms mission: scenario {source}, seed {}, {} rovers, {:.0} s simulated",
         scenario.seed, scenario.rovers.count, scenario.duration_s
     );
-    let mut mission = Mission::new(&scenario);
+    let options = MissionOptions {
+        ideal_comms: args.ideal_comms,
+        ..MissionOptions::default()
+    };
+    let mut mission = Mission::with_options(World::new(&scenario), options);
     let end = Time::from_secs_f64(scenario.duration_s);
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
@@ -85,7 +89,16 @@ pub fn run(args: MissionArgs) -> Result<()> {
         bar
     };
     let chunk = realms_core::Duration::from_secs(30);
-    while mission.now() < end && (args.full_duration || !mission.exploration_over()) {
+    // Once exploration is over, the mission still waits for the ground to hold every
+    // rover's final map (after a blackout, the queues must drain first).
+    let mut explored_at = None;
+    while mission.now() < end {
+        if !args.full_duration && mission.exploration_over() {
+            let t = *explored_at.get_or_insert(mission.now());
+            if mission.ground_current_since(t) {
+                break;
+            }
+        }
         let next = (mission.now() + chunk).min(end);
         mission.run_until(next);
         let sim_s = mission.now().as_secs_f64();
@@ -147,9 +160,36 @@ pub fn run(args: MissionArgs) -> Result<()> {
             ""
         }
     );
+    let net = &report.network;
+    if net.simulated {
+        for r in &net.rovers {
+            println!(
+                "  {}: map updates {:.2} MB to the ground, {:.0}x less than a full grid a second; ground's copy {} s old at most outside blackouts (median {} s)",
+                r.name,
+                r.map_bytes as f64 / 1e6,
+                r.map_reduction,
+                r.map_lag_max_s.map_or("-".into(), |s| format!("{s:.1}")),
+                r.map_lag_median_s.map_or("-".into(), |s| format!("{s:.1}")),
+            );
+        }
+        println!(
+            "network: {} dropped ({}), {} malformed, {} path changes",
+            net.dropped.values().sum::<u64>(),
+            net.dropped
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            net.malformed,
+            net.route_changes
+        );
+    } else {
+        println!("network: ideal (every message instant and intact)");
+    }
     println!("results in {}/", out.display());
     println!(
-        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  roverN_map.png/.pgm/.yaml"
+        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  {}roverN_map.png/.pgm/.yaml",
+        if net.simulated { "network.png  " } else { "" }
     );
     Ok(())
 }

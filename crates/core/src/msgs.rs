@@ -309,6 +309,84 @@ impl OccupancyGrid {
     pub const OCCUPIED: i8 = 100;
 }
 
+/// One map update on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapUpdate {
+    /// Increases by one per update sent.
+    pub seq: u64,
+    /// The update this one changes; `None`: a snapshot, which needs nothing before it.
+    pub base: Option<u64>,
+    /// Cells along x.
+    pub width: u32,
+    /// Cells along y.
+    pub height: u32,
+    /// Cell edge, metres.
+    pub resolution_m: f64,
+    /// Lower-left corner of cell (0, 0).
+    pub origin: Point2,
+    /// Changed stretches, in row-major order of the new geometry.
+    pub runs: Vec<Run>,
+}
+
+/// `len` cells of value `value` starting `skip` cells after the end of the previous run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Run {
+    /// Unchanged cells before this run.
+    pub skip: u32,
+    /// Cells in the run.
+    pub len: u32,
+    /// Their new value.
+    pub value: i8,
+}
+
+impl MapUpdate {
+    /// Whether this update is a snapshot.
+    pub fn is_snapshot(&self) -> bool {
+        self.base.is_none()
+    }
+}
+
+/// One node's traffic, as the network statistics report it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NodeTrafficStats {
+    /// The node (`rover1`, `lander`, `ground`).
+    pub node: String,
+    /// Bytes it published, one copy per receiver, headers included.
+    pub sent_bytes: u64,
+    /// Bytes delivered to it.
+    pub received_bytes: u64,
+    /// Bytes it relayed for others.
+    pub relayed_bytes: u64,
+    /// Bytes waiting in its queues now.
+    pub queued_bytes: u64,
+}
+
+/// The network's traffic so far (`lander/network/stats`), for the operator's network
+/// monitor.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NetworkStats {
+    /// When.
+    pub header: Header,
+    /// Per node.
+    pub nodes: Vec<NodeTrafficStats>,
+    /// Packets dropped, all reasons.
+    pub dropped: u64,
+    /// Messages that did not decode.
+    pub malformed: u64,
+    /// Path changes.
+    pub route_changes: u64,
+}
+
+/// A compact map update from a rover (changed cells since its last update; see
+/// `realms_net::mapdelta`), stamped with the time of the map it brings the receiver to.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapDelta {
+    /// The time of the rover's map, and its map frame.
+    pub header: Header,
+    /// The cells.
+    pub update: MapUpdate,
+}
+
 /// Every message that can travel between nodes. New kinds are appended at the end so older
 /// encodings keep decoding.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -337,6 +415,13 @@ pub enum Message {
     NavGoal(NavGoal),
     /// `nav/explored`: the ground a rover's map knows, coarsely.
     Explored(ExploredArea),
+    /// A compact map update (`roverN/map/delta`).
+    MapDelta(Box<MapDelta>),
+    /// A request for a full map snapshot (`roverN/map/request`): the receiver missed an
+    /// update.
+    MapRequest(Header),
+    /// The network's traffic so far (`lander/network/stats`).
+    NetworkStats(Box<NetworkStats>),
 }
 
 impl Message {
@@ -355,6 +440,9 @@ impl Message {
             Message::NavStatus(m) => m.header.stamp,
             Message::NavGoal(m) => m.header.stamp,
             Message::Explored(m) => m.header.stamp,
+            Message::MapDelta(m) => m.header.stamp,
+            Message::MapRequest(h) => h.stamp,
+            Message::NetworkStats(m) => m.header.stamp,
         }
     }
 }

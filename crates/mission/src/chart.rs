@@ -1,6 +1,7 @@
-//! Small line charts as images, for coverage over time: axes, grid lines, tick labels in a
-//! built-in 3x5 pixel font (digits, `%` and `m` only: every label here is a number of
-//! minutes or a percentage), and one polyline per series.
+//! Small line charts as images, for coverage and network traffic over time: axes, grid
+//! lines, tick labels in a built-in 3x5 pixel font (digits, `%`, `m` and `kB/s` only: every
+//! label here is a number of minutes, a percentage or a data rate), and one polyline per
+//! series.
 
 use realms_core::{Grid, GridGeometry, Point2};
 
@@ -32,6 +33,10 @@ fn glyph(c: char) -> Option<[u8; 5]> {
         '9' => [7, 5, 7, 1, 7],
         '%' => [5, 1, 2, 4, 5],
         'm' => [0, 0, 6, 7, 5],
+        'k' => [4, 5, 6, 5, 5],
+        'B' => [6, 5, 6, 5, 6],
+        's' => [0, 3, 6, 1, 6],
+        '/' => [1, 1, 2, 4, 4],
         _ => return None,
     })
 }
@@ -100,24 +105,83 @@ impl Canvas {
 /// A chart of fractions (0..1, labelled in percent) against time in seconds (labelled in
 /// minutes) up to `t_max_s`.
 pub fn coverage_chart(series: &[Series], t_max_s: f64) -> Grid<[u8; 3]> {
+    time_chart(
+        series,
+        t_max_s,
+        YAxis {
+            max: 1.0,
+            label_scale: 100.0,
+            unit: "%",
+        },
+    )
+}
+
+/// A chart of data rates in bytes per second (labelled in kB/s) against time.
+pub fn rate_chart(series: &[Series], t_max_s: f64) -> Grid<[u8; 3]> {
+    let peak = series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1))
+        .fold(0.0f64, f64::max);
+    // A round top in kB/s: 1, 2 or 5 times a power of ten.
+    let kb = (peak / 1000.0).max(1.0);
+    let decade = 10f64.powf(kb.log10().floor());
+    let top = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * decade)
+        .find(|t| *t >= kb)
+        .unwrap_or(10.0 * decade);
+    time_chart(
+        series,
+        t_max_s,
+        YAxis {
+            max: top * 1000.0,
+            label_scale: 0.001,
+            unit: "kB/s",
+        },
+    )
+}
+
+/// The vertical axis of a chart.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YAxis {
+    /// The value at the top.
+    pub max: f64,
+    /// Labels show values times this.
+    pub label_scale: f64,
+    /// And this after the number.
+    pub unit: &'static str,
+}
+
+/// Lines of `series` against time in seconds (labelled in minutes) up to `t_max_s`.
+pub fn time_chart(series: &[Series], t_max_s: f64, axis: YAxis) -> Grid<[u8; 3]> {
     let (w, h) = (800i64, 420i64);
-    let (left, bottom, right, top) = (70i64, 50i64, 20i64, 20i64);
+    let widest_label = (0..=5)
+        .map(|k| {
+            let v = axis.max * k as f64 / 5.0;
+            format!("{}{}", (v * axis.label_scale).round(), axis.unit).len() as i64
+        })
+        .max()
+        .unwrap_or(4);
+    let left = (22 + 12 * widest_label).max(70);
+    let (bottom, right, top) = (50i64, 20i64, 20i64);
     let mut c = Canvas::new(w as usize, h as usize);
     let pw = (w - left - right) as f64;
     let ph = (h - bottom - top) as f64;
     let t_max = t_max_s.max(60.0);
-    let to_px = |t: f64, f: f64| {
+    let y_max = if axis.max > 0.0 { axis.max } else { 1.0 };
+    let to_px = |t: f64, v: f64| {
         (
             left + (t / t_max * pw).round() as i64,
-            bottom + (f.clamp(0.0, 1.0) * ph).round() as i64,
+            bottom + ((v / y_max).clamp(0.0, 1.0) * ph).round() as i64,
         )
     };
-    // Grid lines every 10 %, labels every 20 %.
+    // Grid lines every tenth, labels every fifth.
     for k in 0..=10 {
-        let (_, y) = to_px(0.0, k as f64 / 10.0);
+        let v = y_max * k as f64 / 10.0;
+        let (_, y) = to_px(0.0, v);
         c.line((left, y), (w - right, y), GRID, 1);
         if k % 2 == 0 {
-            let label = format!("{}%", k * 10);
+            let label = format!("{}{}", (v * axis.label_scale).round(), axis.unit);
             c.text(left - 10 - 12 * label.len() as i64, y - 7, &label, 3);
         }
     }

@@ -1,24 +1,28 @@
 //! realms-mission: runs a simulated mission end to end.
 //!
-//! [`Mission`] owns the [`World`](realms_sim::World), one node per rover and the message bus
-//! between them, and advances all of it on the world's clock. [`report`] turns a finished
+//! [`Mission`] owns the [`World`](realms_sim::World), one node per rover, the on-board bus and
+//! the simulated network between nodes ([`realms_net::SimNetwork`]; ideal delivery with
+//! [`MissionOptions::ideal_comms`]), and advances all of it on the world's clock. [`report`] turns a finished
 //! mission into its results folder (`mission.json`, `truth.png`, `trajectories.png`,
 //! `trajectories.csv`). No clock is read here: the caller measures wall time.
 
 pub mod bus;
 pub mod chart;
 pub mod coverage;
+pub mod netreport;
 pub mod report;
 pub mod slam_record;
 
 use bus::Bus;
 use coverage::Coverage;
-use realms_core::msgs::{Message, NavActivity, NavStatus};
+use realms_core::msgs::{Message, NavActivity, NavStatus, NetworkStats, NodeTrafficStats};
 use realms_core::{Duration, Point2, RoverId, Time, Topic};
+use realms_net::{NodeAddr, Qos, SimNetwork};
 use realms_node::guard::GuardConfig;
 use realms_node::mapping::{MappingConfig, rover_mapper_config};
 use realms_node::navigation::NavigationConfig;
 use realms_node::rover::{RoverConfig, RoverNode};
+use realms_node::station::{StationNode, StationRole};
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
 use realms_slam::traversability::TraversabilityConfig;
@@ -34,6 +38,13 @@ pub const GYRO_CALIBRATION: Duration = Duration::from_secs(5);
 /// How often each rover publishes its map.
 pub const MAP_PERIOD: Duration = Duration::from_secs(60);
 
+/// How often each rover sends its map's changes to the lander and the ground: often enough
+/// that the ground's copy lags by at most a few seconds plus the link's delay.
+pub const MAP_DELTA_PERIOD: Duration = Duration::from_secs(2);
+
+/// How often the lander reports the network's traffic to the ground.
+pub const NETWORK_STATS_PERIOD: Duration = Duration::from_secs(10);
+
 /// How often rover poses are sampled for trajectories.
 pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 
@@ -43,12 +54,16 @@ pub struct MissionOptions {
     /// Rovers hear each other's navigation messages (targets, explored ground). Off, each
     /// explores as if alone: what allocation falls back to when the radio is silent.
     pub rovers_hear_each_other: bool,
+    /// Messages between nodes arrive at once and intact, as on one computer; otherwise they
+    /// cross the simulated mesh and ground link of the scenario's `[network]`.
+    pub ideal_comms: bool,
 }
 
 impl Default for MissionOptions {
     fn default() -> Self {
         MissionOptions {
             rovers_hear_each_other: true,
+            ideal_comms: false,
         }
     }
 }
@@ -70,6 +85,10 @@ pub struct PoseSample {
 pub struct Mission {
     world: World,
     nodes: Vec<Box<dyn Node>>,
+    /// Where each node sits on the network.
+    addrs: Vec<NodeAddr>,
+    /// The network between nodes; `None` with ideal communication.
+    net: Option<SimNetwork>,
     bus: Bus,
     trajectories: Vec<Vec<PoseSample>>,
     next_sample: Time,
@@ -80,6 +99,21 @@ pub struct Mission {
     activity: Vec<NavActivity>,
     /// Every navigation status each rover published, with its arrival time.
     nav_log: Vec<Vec<(Time, NavStatus)>>,
+    /// Each rover's map updates to the ground.
+    downlink: Vec<MapDownlink>,
+    next_net_stats: Time,
+}
+
+/// A rover's map updates on their way to the ground, for the report.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapDownlink {
+    /// Bytes of map updates the rover sent towards the ground (payload and headers).
+    pub bytes: u64,
+    /// Bytes a full occupancy grid once a second would have taken over the same time (the
+    /// plain ROS 2 `nav_msgs/OccupancyGrid` topic).
+    pub full_grid_bytes: u64,
+    /// Each update's map time and when it reached the ground.
+    pub arrivals: Vec<(Time, Time)>,
 }
 
 impl Mission {
@@ -120,6 +154,7 @@ impl Mission {
                     ground_clearance_m: GROUND_CLEARANCE_M,
                     mapper: rover_mapper_config(),
                     map_period: MAP_PERIOD,
+                    delta_period: MAP_DELTA_PERIOD,
                     gyro_calibration: GYRO_CALIBRATION,
                     depth_rot: base_from_optical.rot,
                     depth_origin_m: base_from_optical.origin,
@@ -145,18 +180,43 @@ impl Mission {
                 Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
             })
             .collect();
+        let mut nodes = nodes;
+        let mut addrs: Vec<NodeAddr> = world.rovers().map(|b| NodeAddr::rover(b.id)).collect();
+        let n_rovers = nodes.len();
+        for (role, addr) in [
+            (StationRole::Lander, NodeAddr::Lander),
+            (StationRole::Ground, NodeAddr::Ground),
+        ] {
+            nodes.push(Box::new(StationNode::new(role, fleet.clone())));
+            addrs.push(addr);
+        }
+        let mut net = (!options.ideal_comms).then(|| {
+            let scenario = world.scenario();
+            let mut cfg = scenario.network.clone();
+            cfg.seed = scenario.seed ^ 0x006e_6574_776f_726b;
+            let lander = Point2::new(scenario.lander.x_m, scenario.lander.y_m);
+            let mut net = SimNetwork::new(cfg, lander);
+            for b in world.rovers() {
+                net.add_mesh_node(NodeAddr::rover(b.id), b.pose.position());
+            }
+            net
+        });
         let mut bus = Bus::default();
         for (i, node) in nodes.iter().enumerate() {
             for topic in node.subscriptions() {
+                if let Some(net) = &mut net {
+                    net.subscribe(addrs[i], topic.clone());
+                }
                 bus.subscribe(topic, i);
             }
         }
-        let trajectories = vec![Vec::new(); nodes.len()];
+        let trajectories = vec![Vec::new(); n_rovers];
         let coverage = Coverage::new(world.truth());
-        let n_rovers = nodes.len();
         let mut mission = Mission {
             world,
             nodes,
+            addrs,
+            net,
             bus,
             trajectories,
             next_sample: Time::ZERO,
@@ -164,6 +224,8 @@ impl Mission {
             slam: vec![RoverSlamRecord::default(); n_rovers],
             coverage,
             activity: vec![NavActivity::Idle; n_rovers],
+            downlink: vec![MapDownlink::default(); n_rovers],
+            next_net_stats: Time::ZERO,
             nav_log: vec![Vec::new(); n_rovers],
         };
         mission.update_camera_wants();
@@ -207,29 +269,184 @@ impl Mission {
             }
             self.sample_trajectories(t);
             self.world.advance_to(t, &mut self.published);
-            let mut pending: Vec<(Topic, Message)> = std::mem::take(&mut self.published);
+            let mut pending = self.take_world_messages();
             for i in 0..self.nodes.len() {
                 if self.nodes[i].next_wakeup().is_some_and(|w| w <= t) {
                     self.nodes[i].on_tick(t);
+                    let from = self.addrs[i];
                     pending.extend(
                         self.nodes[i]
                             .drain_outbox()
                             .into_iter()
-                            .map(|o| (o.topic, o.message)),
+                            .map(|o| (from, o.topic, o.message)),
                     );
                 }
             }
             self.deliver(t, pending);
+            self.run_network(t);
         }
-        let mut rest = Vec::new();
-        self.world.advance_to(end, &mut rest);
+        self.world.advance_to(end, &mut self.published);
+        let rest = self.take_world_messages();
         self.deliver(end, rest);
+        self.run_network(end);
+    }
+
+    /// What the world published, each message from the rover whose sensor made it.
+    fn take_world_messages(&mut self) -> Vec<(NodeAddr, Topic, Message)> {
+        std::mem::take(&mut self.published)
+            .into_iter()
+            .map(|(topic, message)| {
+                let from = topic.rover().map_or(NodeAddr::Lander, NodeAddr::rover);
+                (from, topic, message)
+            })
+            .collect()
+    }
+
+    /// The lander's report of the network's traffic, for the ground's network monitor.
+    fn network_stats(&self, t: Time) -> Option<Message> {
+        let net = self.net.as_ref()?;
+        let stats = net.stats();
+        let nodes = self
+            .addrs
+            .iter()
+            .map(|a| {
+                let n = stats.nodes.get(a);
+                NodeTrafficStats {
+                    node: a.to_string(),
+                    sent_bytes: n.map_or(0, |n| n.originated.bytes),
+                    received_bytes: n.map_or(0, |n| n.delivered.bytes),
+                    relayed_bytes: n.map_or(0, |n| n.forwarded.bytes),
+                    queued_bytes: net.queued_bytes(*a) as u64,
+                }
+            })
+            .collect();
+        Some(Message::NetworkStats(Box::new(NetworkStats {
+            header: realms_core::msgs::Header {
+                stamp: t,
+                frame_id: "lander".into(),
+            },
+            nodes,
+            dropped: stats.dropped.values().sum(),
+            malformed: stats.malformed,
+            route_changes: stats.route_changes,
+        })))
+    }
+
+    /// Sends raw bytes from `from` to `to` on `topic` over the simulated network, as if a
+    /// node had (what a corrupted or hostile packet looks like to the receiver); `false`
+    /// with ideal communication.
+    pub fn inject(
+        &mut self,
+        from: NodeAddr,
+        to: NodeAddr,
+        topic: &Topic,
+        payload: Vec<u8>,
+    ) -> bool {
+        let Some(net) = &mut self.net else {
+            return false;
+        };
+        net.advance_to(self.world.now());
+        net.send(from, to, topic, payload, Qos::for_topic(topic));
+        true
+    }
+
+    /// Moves the network to `t` (radios where their rovers are, dead rovers silent) and
+    /// hands what it delivered to the nodes.
+    fn run_network(&mut self, t: Time) {
+        if self.net.is_some() && t >= self.next_net_stats {
+            self.next_net_stats = t + NETWORK_STATS_PERIOD;
+            if let Some(stats) = self.network_stats(t) {
+                let topic = Topic::new(realms_node::station::NETWORK_STATS_TOPIC);
+                self.deliver(t, vec![(NodeAddr::Lander, topic, stats)]);
+            }
+        }
+        let Some(net) = &mut self.net else { return };
+        for body in self.world.rovers() {
+            let addr = NodeAddr::rover(body.id);
+            net.set_position(addr, body.pose.position());
+            net.set_up(addr, body.powered);
+        }
+        net.advance_to(t);
+        let deliveries = net.take_deliveries();
+        if deliveries.is_empty() {
+            return;
+        }
+        let mut pending = Vec::new();
+        for d in deliveries {
+            let message = match realms_core::codec::decode(&d.payload) {
+                Ok(m) => m,
+                Err(_) => {
+                    // A node drops what it cannot read, and the network counts it.
+                    if let Some(net) = &mut self.net {
+                        net.count_malformed();
+                    }
+                    continue;
+                }
+            };
+            if d.to == NodeAddr::Ground
+                && let Message::MapDelta(delta) = &message
+                && let Some(k) = self.rover_index(&d.topic)
+            {
+                self.downlink[k].arrivals.push((delta.header.stamp, d.at));
+            }
+            for i in self.bus.subscribers(&d.topic).to_vec() {
+                if self.addrs[i] != d.to {
+                    continue;
+                }
+                let node = &mut self.nodes[i];
+                node.on_message(t, &d.topic, &message);
+                let from = self.addrs[i];
+                pending.extend(
+                    node.drain_outbox()
+                        .into_iter()
+                        .map(|o| (from, o.topic, o.message)),
+                );
+            }
+        }
+        self.deliver(t, pending);
+    }
+
+    /// The index of the rover whose topic this is.
+    fn rover_index(&self, topic: &Topic) -> Option<usize> {
+        let rover = topic.rover()?;
+        self.world.rovers().position(|b| b.id == rover)
+    }
+
+    /// Whether the ground holds, for every powered rover, a map update made at or after `t`
+    /// (always, with ideal communication).
+    pub fn ground_current_since(&self, t: Time) -> bool {
+        self.net.is_none()
+            || self
+                .world
+                .rovers()
+                .zip(&self.downlink)
+                .filter(|(b, _)| b.powered)
+                .all(|(_, d)| d.arrivals.last().is_some_and(|(stamp, _)| *stamp >= t))
+    }
+
+    /// The lander's or the ground station's node.
+    pub fn station(&self, at: NodeAddr) -> Option<&StationNode> {
+        self.nodes
+            .iter()
+            .zip(&self.addrs)
+            .find(|(_, a)| **a == at)
+            .and_then(|(n, _)| n.as_station())
+    }
+
+    /// Each rover's map updates to the ground.
+    pub fn downlink(&self) -> &[MapDownlink] {
+        &self.downlink
+    }
+
+    /// The network's counters, unless communication is ideal.
+    pub fn network(&self) -> Option<&SimNetwork> {
+        self.net.as_ref()
     }
 
     /// Publishes `message` on `topic` at the current time, as an operator would.
     pub fn publish(&mut self, topic: Topic, message: Message) {
         let t = self.now();
-        self.deliver(t, vec![(topic, message)]);
+        self.deliver(t, vec![(NodeAddr::Ground, topic, message)]);
     }
 
     /// Every navigation status each rover published, in rover order, with arrival times.
@@ -260,12 +477,12 @@ impl Mission {
     pub fn finish(&mut self) {
         let t = self.now();
         let mut pending = Vec::new();
-        for node in &mut self.nodes {
+        for (node, from) in self.nodes.iter_mut().zip(&self.addrs) {
             node.on_shutdown(t);
             pending.extend(
                 node.drain_outbox()
                     .into_iter()
-                    .map(|o| (o.topic, o.message)),
+                    .map(|o| (*from, o.topic, o.message)),
             );
         }
         self.deliver(t, pending);
@@ -309,15 +526,16 @@ impl Mission {
         }
     }
 
-    /// Delivers messages (and whatever they cause) at time `t`, in order.
-    fn deliver(&mut self, t: Time, mut pending: Vec<(Topic, Message)>) {
+    /// Delivers messages (and whatever they cause) at time `t`, in order: to nodes on the
+    /// publisher's own computer at once, to the others through the network.
+    fn deliver(&mut self, t: Time, mut pending: Vec<(NodeAddr, Topic, Message)>) {
         // Nodes answer messages with messages; bounded so a chatty loop cannot hang a run.
         for _round in 0..16 {
             if pending.is_empty() {
                 return;
             }
             let mut next = Vec::new();
-            for (topic, message) in pending {
+            for (origin, topic, message) in pending {
                 self.bus.count(&topic);
                 if matches!(topic.leaf(), "pose" | "localisation" | "map" | "nav/status") {
                     self.record_slam(t, &topic, &message);
@@ -327,14 +545,40 @@ impl Mission {
                 {
                     self.world.command(rover, cmd.clone());
                 }
+                let mut remote = false;
                 for i in self.bus.subscribers(&topic).to_vec() {
+                    if self.net.is_some() && self.addrs[i] != origin {
+                        remote = true;
+                        continue;
+                    }
                     let node = &mut self.nodes[i];
                     node.on_message(t, &topic, &message);
+                    let from = self.addrs[i];
                     next.extend(
                         node.drain_outbox()
                             .into_iter()
-                            .map(|Outgoing { topic, message }| (topic, message)),
+                            .map(|Outgoing { topic, message }| (from, topic, message)),
                     );
+                }
+                if remote && let Some(net) = &mut self.net {
+                    net.advance_to(t);
+                    let qos = Qos::for_topic(&topic);
+                    let payload = realms_core::codec::encode(&message);
+                    if let Message::MapDelta(delta) = &message
+                        && let Some(k) = topic
+                            .rover()
+                            .and_then(|r| self.world.rovers().position(|b| b.id == r))
+                    {
+                        let u = &delta.update;
+                        let d = &mut self.downlink[k];
+                        d.bytes += (payload.len() + realms_net::packet::HEADER_BYTES) as u64;
+                        // One grid a second over the update period, with the message's own
+                        // header (about 60 bytes) and each packet's.
+                        let grid = u.width as u64 * u.height as u64 + 60;
+                        d.full_grid_bytes += (grid + realms_net::packet::HEADER_BYTES as u64)
+                            * MAP_DELTA_PERIOD.as_secs_f64().round() as u64;
+                    }
+                    net.publish(origin, &topic, payload, qos);
                 }
             }
             pending = next;

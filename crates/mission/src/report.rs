@@ -61,6 +61,9 @@ pub struct MissionReport {
     pub events: Vec<SimEvent>,
     /// Messages published per topic.
     pub messages: BTreeMap<String, u64>,
+    /// The network: traffic per rover and node, map updates against full grids, the
+    /// ground's map lag, drops.
+    pub network: crate::netreport::NetworkSummary,
     /// The other files in the folder.
     pub files: BTreeMap<&'static str, &'static str>,
 }
@@ -211,12 +214,19 @@ impl MissionReport {
                 .iter()
                 .map(|(k, v)| (k.to_string(), *v))
                 .collect(),
-            files: BTreeMap::from([
-                ("truth", "truth.png"),
-                ("trajectories", "trajectories.png"),
-                ("trajectories_csv", "trajectories.csv"),
-                ("coverage", "coverage.png"),
-            ]),
+            network: crate::netreport::NetworkSummary::new(mission),
+            files: {
+                let mut files = BTreeMap::from([
+                    ("truth", "truth.png"),
+                    ("trajectories", "trajectories.png"),
+                    ("trajectories_csv", "trajectories.csv"),
+                    ("coverage", "coverage.png"),
+                ]);
+                if mission.network().is_some() {
+                    files.insert("network", "network.png");
+                }
+                files
+            },
         }
     }
 }
@@ -367,6 +377,9 @@ pub fn write_results(
     }
 
     write_coverage(mission, &truth_img, &dir.join("coverage.png"))?;
+    if let Some(chart) = crate::netreport::network_chart(mission, &ROVER_COLORS) {
+        chart.write_png(&dir.join("network.png"), |c| *c)?;
+    }
 
     let report = MissionReport::new(mission, scenario_source, wall_s);
     let json = serde_json::to_string_pretty(&report)

@@ -79,6 +79,7 @@ fn rovers_that_hear_nothing_from_each_other_still_explore_it_all() {
     let s = small();
     let options = MissionOptions {
         rovers_hear_each_other: false,
+        ideal_comms: true,
     };
     let mut mission = Mission::with_options(World::new(&s), options);
     run_to_completion(&mut mission, 1800.0);

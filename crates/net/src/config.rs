@@ -67,7 +67,9 @@ pub struct NetworkConfig {
     pub route_interval_s: f64,
     /// Retries the radio makes for one frame before giving up on it.
     pub mac_retries: u32,
-    /// Seed of the link shadowing and packet-error draws.
+    /// Seed of the link shadowing and packet-error draws. Not in the scenario file: a
+    /// mission derives it from the scenario's one seed.
+    #[serde(skip)]
     pub seed: u64,
 }
 

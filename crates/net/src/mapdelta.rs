@@ -8,55 +8,20 @@
 //! applying the changes. Origins stay on the same lattice of cells as the map grows, so
 //! re-laying is a shift by whole cells.
 
-use realms_core::{Grid, GridGeometry, Point2};
-use serde::{Deserialize, Serialize};
+use realms_core::{Grid, GridGeometry};
 
 /// The unknown cell value (ROS `nav_msgs/OccupancyGrid`).
 pub const UNKNOWN: i8 = -1;
 
-/// One map update on the wire.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MapUpdate {
-    /// Increases by one per update sent.
-    pub seq: u64,
-    /// The update this one changes; `None`: a snapshot, which needs nothing before it.
-    pub base: Option<u64>,
-    /// Cells along x.
-    pub width: u32,
-    /// Cells along y.
-    pub height: u32,
-    /// Cell edge, metres.
-    pub resolution_m: f64,
-    /// Lower-left corner of cell (0, 0).
-    pub origin: Point2,
-    /// Changed stretches, in row-major order of the new geometry.
-    pub runs: Vec<Run>,
-}
+pub use realms_core::msgs::{MapUpdate, Run};
 
-/// `len` cells of value `value` starting `skip` cells after the end of the previous run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Run {
-    /// Unchanged cells before this run.
-    pub skip: u32,
-    /// Cells in the run.
-    pub len: u32,
-    /// Their new value.
-    pub value: i8,
-}
-
-impl MapUpdate {
-    /// Whether this update is a snapshot.
-    pub fn is_snapshot(&self) -> bool {
-        self.base.is_none()
-    }
-
-    fn geometry(&self) -> GridGeometry {
-        GridGeometry {
-            width: self.width as usize,
-            height: self.height as usize,
-            resolution_m: self.resolution_m,
-            origin: self.origin,
-        }
+/// The geometry an update lays its cells on.
+fn geometry_of(u: &MapUpdate) -> GridGeometry {
+    GridGeometry {
+        width: u.width as usize,
+        height: u.height as usize,
+        resolution_m: u.resolution_m,
+        origin: u.origin,
     }
 }
 
@@ -212,7 +177,7 @@ impl Decoder {
             seq: update.seq,
             why: why.to_string(),
         };
-        let g = update.geometry();
+        let g = geometry_of(update);
         let cells = g
             .width
             .checked_mul(g.height)
@@ -266,6 +231,7 @@ impl Decoder {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use realms_core::Point2;
 
     fn geometry(x0: i64, y0: i64, w: usize, h: usize) -> GridGeometry {
         GridGeometry {

@@ -175,6 +175,9 @@ impl SimNetwork {
             return;
         };
         let was_up = n.up;
+        if was_up == up {
+            return;
+        }
         n.up = up;
         if was_up && !up {
             let mut lost = Vec::new();

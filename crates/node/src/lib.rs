@@ -9,11 +9,14 @@
 //! - [`mapping::Mapping`]: the rover's SLAM on board, and what it publishes.
 //! - [`navigation::Navigator`]: exploration, planning, path following and recovery.
 //! - [`guard::Guard`]: the reactive check of the rover's own sensors.
+//! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
+//!   from its updates, its pose and its status.
 
 pub mod guard;
 pub mod mapping;
 pub mod navigation;
 pub mod rover;
+pub mod station;
 
 use realms_core::msgs::Message;
 use realms_core::{Time, Topic};
@@ -49,4 +52,9 @@ pub trait Node {
 
     /// The mission ends at `now`: the node may publish its final products (a rover its map).
     fn on_shutdown(&mut self, _now: Time) {}
+
+    /// The node as a station (lander or ground), for a driver that reports what it holds.
+    fn as_station(&self) -> Option<&station::StationNode> {
+        None
+    }
 }

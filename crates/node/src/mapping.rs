@@ -13,10 +13,11 @@
 use crate::Outgoing;
 use realms_core::geometry::{Quaternion, Vec3, normalize_angle_rad};
 use realms_core::msgs::{
-    Header, Imu, LaserScan, LocalisationStatus, MapMetaData, Message, OccupancyGrid, Odometry,
-    PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
+    Header, Imu, LaserScan, LocalisationStatus, MapDelta, MapMetaData, Message, OccupancyGrid,
+    Odometry, PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
 };
 use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
+use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
@@ -39,6 +40,8 @@ pub struct MappingConfig {
     pub mapper: MapperConfig,
     /// How often the map is published.
     pub map_period: Duration,
+    /// How often it sends the changes of its map (`map/delta`) to the lander and the ground.
+    pub delta_period: Duration,
     /// The rover stands still this long at the start while the gyro's bias is measured.
     pub gyro_calibration: Duration,
     /// `base_from_optical` of the depth camera: rotation (row-major) ...
@@ -86,6 +89,11 @@ pub struct Mapping {
     /// Returns dropped as floor hits, for the record.
     floor_hits: u64,
     next_map: Time,
+    next_delta: Time,
+    /// What the receivers of `map/delta` were last sent.
+    delta_encoder: Encoder,
+    /// A receiver missed an update: the next one is a snapshot.
+    snapshot_wanted: bool,
 }
 
 impl Mapping {
@@ -108,6 +116,9 @@ impl Mapping {
             gravity: [0.0, 0.0, 9.81],
             floor_hits: 0,
             next_map: Time::ZERO,
+            next_delta: Time::ZERO,
+            delta_encoder: Encoder::new(),
+            snapshot_wanted: false,
         }
     }
 
@@ -356,9 +367,41 @@ impl Mapping {
                 },
             })),
         });
+        if stamp >= self.next_delta {
+            self.publish_delta(stamp, out);
+        }
         if stamp >= self.next_map {
             self.publish_map(stamp, out);
         }
+    }
+
+    /// A receiver asked for a snapshot: the next update carries every cell.
+    pub fn request_snapshot(&mut self) {
+        self.snapshot_wanted = true;
+    }
+
+    /// Publishes the changes of the map since the last update (and restarts the period).
+    pub fn publish_delta(&mut self, now: Time, out: &mut Vec<Outgoing>) {
+        self.next_delta = now + self.cfg.delta_period;
+        let map = self.map(now);
+        let geo = GridGeometry {
+            width: map.info.width as usize,
+            height: map.info.height as usize,
+            resolution_m: map.info.resolution_m as f64,
+            origin: Point2::new(map.info.origin.position.x, map.info.origin.position.y),
+        };
+        let Some(grid) = Grid::from_cells(geo, map.data) else {
+            return;
+        };
+        let update = self.delta_encoder.update(&grid, self.snapshot_wanted);
+        self.snapshot_wanted = false;
+        out.push(Outgoing {
+            topic: self.id.topic("map/delta"),
+            message: Message::MapDelta(Box::new(MapDelta {
+                header: map.header,
+                update,
+            })),
+        });
     }
 
     /// Publishes the map now (and restarts the period).
@@ -501,6 +544,7 @@ mod tests {
                 ground_clearance_m: 0.12,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
+                delta_period: Duration::from_secs(2),
                 gyro_calibration: Duration::from_secs(5),
                 depth_rot: [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]],
                 depth_origin_m: [0.2, 0.0, 0.3],

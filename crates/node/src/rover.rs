@@ -191,10 +191,17 @@ impl Node for RoverNode {
     }
 
     fn subscriptions(&self) -> Vec<Topic> {
-        let mut topics: Vec<Topic> = ["scan", "depth/points", "odom", "imu", "nav/goal"]
-            .iter()
-            .map(|leaf| self.id.topic(leaf))
-            .collect();
+        let mut topics: Vec<Topic> = [
+            "scan",
+            "depth/points",
+            "odom",
+            "imu",
+            "nav/goal",
+            "map/request",
+        ]
+        .iter()
+        .map(|leaf| self.id.topic(leaf))
+        .collect();
         for peer in self.fleet.iter().filter(|peer| **peer != self.id) {
             topics.push(peer.topic("nav/status"));
             topics.push(peer.topic("nav/explored"));
@@ -234,6 +241,7 @@ impl Node for RoverNode {
                 self.guard.on_depth(now, cloud);
             }
             Message::NavGoal(goal) => self.navigator.set_operator_goal(now, goal.target),
+            Message::MapRequest(_) => self.mapping.request_snapshot(),
             _ => {}
         }
     }

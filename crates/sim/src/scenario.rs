@@ -31,6 +31,8 @@ pub struct Scenario {
     pub rovers: Rovers,
     /// Scheduled faults.
     pub faults: Vec<Fault>,
+    /// The mesh radio and the ground link (`realms-net`).
+    pub network: realms_net::NetworkConfig,
 }
 
 /// The hall: a flat-ish floor inside walls.
@@ -336,6 +338,15 @@ impl Default for Scenario {
                     sensor: None,
                 },
             ],
+            network: realms_net::NetworkConfig {
+                ground: realms_net::GroundLinkConfig {
+                    // Ten minutes without the ground while the fleet explores, and again
+                    // later in the mission.
+                    blackouts_s: vec![[600.0, 1200.0], [7200.0, 7800.0]],
+                    ..realms_net::GroundLinkConfig::default()
+                },
+                ..realms_net::NetworkConfig::default()
+            },
         }
     }
 }
@@ -583,6 +594,41 @@ impl Scenario {
         };
         let a = &self.arena;
         positive("duration_s", self.duration_s)?;
+        let net = &self.network;
+        non_negative("network.ground.delay_s", net.ground.delay_s)?;
+        positive("network.ground.bandwidth_bps", net.ground.bandwidth_bps)?;
+        if !(0.0..1.0).contains(&net.ground.loss) {
+            return Err(err(
+                "network.ground.loss",
+                "must be at least 0 and below 1",
+                net.ground.loss.to_string(),
+            ));
+        }
+        for (i, [from, to]) in net.ground.blackouts_s.iter().enumerate() {
+            if !(from.is_finite() && to.is_finite() && *from >= 0.0 && from < to) {
+                return Err(err(
+                    &format!("network.ground.blackouts_s[{i}]"),
+                    "[start_s, end_s] with 0 <= start < end",
+                    format!("[{from}, {to}]"),
+                ));
+            }
+        }
+        positive("network.route_interval_s", net.route_interval_s)?;
+        positive("network.radio.goodput_fraction", net.radio.goodput_fraction)?;
+        if net.radio.mcs.is_empty() {
+            return Err(err(
+                "network.radio.mcs",
+                "at least one [snr_db, rate_mbps] pair",
+                "[]".to_string(),
+            ));
+        }
+        if net.queue_bytes < 1500 {
+            return Err(err(
+                "network.queue_bytes",
+                "room for at least one full frame (1500)",
+                net.queue_bytes.to_string(),
+            ));
+        }
         positive("arena.width_m", a.width_m)?;
         positive("arena.length_m", a.length_m)?;
         positive("arena.resolution_m", a.resolution_m)?;
