@@ -17,7 +17,7 @@ use bus::Bus;
 use coverage::Coverage;
 use realms_core::msgs::{Message, NavActivity, NavStatus, NetworkStats, NodeTrafficStats};
 use realms_core::{Duration, Point2, RoverId, Time, Topic};
-use realms_net::{NodeAddr, Qos, SimNetwork};
+use realms_net::{NodeAddr, Qos, SimNetwork, Transport};
 use realms_node::guard::GuardConfig;
 use realms_node::mapping::{MappingConfig, rover_mapper_config};
 use realms_node::navigation::NavigationConfig;
@@ -345,8 +345,8 @@ impl Mission {
         let Some(net) = &mut self.net else {
             return false;
         };
-        net.advance_to(self.world.now());
-        net.send(from, to, topic, payload, Qos::for_topic(topic));
+        let now = self.world.now();
+        Transport::send(net, now, from, to, topic, payload, Qos::for_topic(topic));
         true
     }
 
@@ -366,8 +366,7 @@ impl Mission {
             net.set_position(addr, body.pose.position());
             net.set_up(addr, body.powered);
         }
-        net.advance_to(t);
-        let deliveries = net.take_deliveries();
+        let deliveries = net.poll(t);
         if deliveries.is_empty() {
             return;
         }
@@ -561,7 +560,6 @@ impl Mission {
                     );
                 }
                 if remote && let Some(net) = &mut self.net {
-                    net.advance_to(t);
                     let qos = Qos::for_topic(&topic);
                     let payload = realms_core::codec::encode(&message);
                     if let Message::MapDelta(delta) = &message
@@ -578,7 +576,7 @@ impl Mission {
                         d.full_grid_bytes += (grid + realms_net::packet::HEADER_BYTES as u64)
                             * MAP_DELTA_PERIOD.as_secs_f64().round() as u64;
                     }
-                    net.publish(origin, &topic, payload, qos);
+                    Transport::publish(net, t, origin, &topic, payload, qos);
                 }
             }
             pending = next;

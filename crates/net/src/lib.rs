@@ -14,6 +14,8 @@
 //!   time to live), packets, and the bounded store-and-forward queue with its drop policy.
 //! - [`simnet`]: the simulated mesh (one channel, HWMP+ paths on the airtime metric,
 //!   relaying) and the delayed ground link with blackouts; [`stats`] counts its traffic.
+//! - [`transport`]: the interface nodes' traffic goes through ([`Transport`]), which the
+//!   simulated network implements and a real transport will.
 //! - [`config`]: the scenario's `[network]` section.
 
 pub mod airtime;
@@ -26,8 +28,10 @@ pub mod queue;
 pub mod radio;
 pub mod simnet;
 pub mod stats;
+pub mod transport;
 
 pub use config::{GroundLinkConfig, NetworkConfig};
 pub use packet::{NodeAddr, Packet};
 pub use qos::{Priority, Qos, Reliability};
 pub use simnet::{Delivery, SimNetwork};
+pub use transport::Transport;
