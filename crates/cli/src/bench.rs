@@ -26,6 +26,7 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::Plan(args) => crate::bench_nav::plan(args),
         crate::cli::BenchCommand::Explore(args) => crate::bench_nav::explore(args),
         crate::cli::BenchCommand::NetRelay(args) => crate::bench_net::run(args),
+        crate::cli::BenchCommand::Merge(args) => crate::bench_merge::run(args),
     }
 }
 
