@@ -25,6 +25,11 @@ use std::time::Instant;
 const SUCCESS_CELLS: f64 = 3.0;
 /// ... and heading error below this.
 const SUCCESS_DEG: f64 = 2.0;
+/// A wrong merge farther off than this (or turned more than [`GROSS_DEG`]) is gross; the
+/// others are near misses (the right place, a few cells or a degree off).
+const GROSS_M: f64 = 1.0;
+/// See [`GROSS_M`].
+const GROSS_DEG: f64 = 5.0;
 
 /// One row of the table.
 #[derive(Clone, Debug, Serialize)]
@@ -34,6 +39,8 @@ struct Row {
     pairs: usize,
     success_pct: f64,
     wrong_pct: f64,
+    /// Wrong merges off by more than 1 m or 5 degrees (the rest are near misses).
+    gross_wrong_pct: f64,
     refused_pct: f64,
     median_ms: f64,
     max_ms: f64,
@@ -175,7 +182,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 overlap: f64::from(overlap_pct) / 100.0,
                 ..PairSpec::default()
             };
-            let (mut ok, mut wrong, mut refused) = (0usize, 0usize, 0usize);
+            let (mut ok, mut wrong, mut gross, mut refused) = (0usize, 0usize, 0usize, 0usize);
             let mut times_ms = Vec::new();
             for i in 0..args.pairs {
                 let source = &sources[i % sources.len()];
@@ -217,6 +224,9 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     }
                     (true, false) => {
                         wrong += 1;
+                        if err_m > GROSS_M || err_rad.to_degrees() > GROSS_DEG {
+                            gross += 1;
+                        }
                         "WRONG"
                     }
                     (false, _) => {
@@ -281,6 +291,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 pairs: args.pairs,
                 success_pct: 100.0 * ok as f64 / n,
                 wrong_pct: 100.0 * wrong as f64 / n,
+                gross_wrong_pct: 100.0 * gross as f64 / n,
                 refused_pct: 100.0 * refused as f64 / n,
                 max_ms: times_ms.iter().copied().fold(0.0, f64::max),
                 median_ms: median(times_ms),
@@ -308,12 +319,21 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
         machine()
     );
     println!();
-    println!("| source | overlap | success | wrong merge | refused | median ms | max ms |");
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | median ms | max ms |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for r in &rows {
         println!(
-            "| {} | {} % | {:.0} % | {:.1} % | {:.0} % | {:.0} | {:.0} |",
-            r.kind, r.overlap_pct, r.success_pct, r.wrong_pct, r.refused_pct, r.median_ms, r.max_ms
+            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {:.0} | {:.0} |",
+            r.kind,
+            r.overlap_pct,
+            r.success_pct,
+            r.wrong_pct,
+            r.gross_wrong_pct,
+            r.refused_pct,
+            r.median_ms,
+            r.max_ms
         );
     }
     Ok(())

@@ -208,18 +208,35 @@ fn run(
         max_nodes: 2_000_000,
     };
     let mut stats = SearchStats::default();
+    // Hypotheses with the heading group they came from.
     let mut hyps = Vec::new();
+    let mut groups_seen = 0usize;
+    let coarse = window.is_none() && a.extent_m > params.large_map_m;
     for yaws in groups {
-        let (found, group_stats) = search::search(
-            a.fields(),
-            a.search.cell_m,
-            &b.search_points,
-            b.centroid,
-            yaws,
-            window,
-            &search_params,
-        );
-        hyps.extend(found);
+        let (found, group_stats) = if coarse {
+            let yaws: Vec<f64> = yaws.iter().step_by(2).copied().collect();
+            search::search(
+                a.global_fields(),
+                a.global.cell_m,
+                &b.global_points,
+                b.centroid,
+                &yaws,
+                window,
+                &search_params,
+            )
+        } else {
+            search::search(
+                a.fields(),
+                a.search.cell_m,
+                &b.search_points,
+                b.centroid,
+                yaws,
+                window,
+                &search_params,
+            )
+        };
+        hyps.extend(found.into_iter().map(|h| (groups_seen, h)));
+        groups_seen += 1;
         stats.headings += group_stats.headings;
         stats.nodes += group_stats.nodes;
     }
@@ -232,9 +249,9 @@ fn run(
             .compose(p)
             .compose(&b.frame_from_grid.inverse())
     };
-    let mut screened: Vec<(Pose2, Evidence)> = hyps
+    let mut screened: Vec<(usize, Pose2, Evidence)> = hyps
         .iter()
-        .map(|h| {
+        .map(|(g, h)| {
             let e = verify::verify(
                 a,
                 b,
@@ -242,24 +259,44 @@ fn run(
                 params.conflict_weight,
                 On::Search,
             );
-            (h.fixed_from_moving, e)
+            (*g, h.fixed_from_moving, e)
         })
         .collect();
     let hypotheses = hyps
         .iter()
         .zip(&screened)
-        .map(|(h, (_, e))| (to_frames(&h.fixed_from_moving), h.score, e.score))
+        .map(|((_, h), (_, _, e))| (to_frames(&h.fixed_from_moving), h.score, e.score))
         .collect();
-    screened.sort_by(|x, y| y.1.score.total_cmp(&x.1.score));
-    let mut verified: Vec<(Pose2, Evidence)> = screened
+    screened.sort_by(|x, y| y.2.score.total_cmp(&x.2.score));
+    // The best of every heading group goes on (so that a true heading outscored by walls
+    // laid over walls at another heading is still verified, and seen as a rival), then the
+    // best of the rest.
+    let mut chosen: Vec<Pose2> = Vec::new();
+    for g in 0..groups_seen {
+        if let Some((_, p, e)) = screened.iter().find(|(hg, _, _)| *hg == g)
+            && e.score > 0.0
+        {
+            chosen.push(*p);
+        }
+    }
+    for (_, p, _) in &screened {
+        if chosen.len() >= params.refined_hypotheses.max(groups_seen) {
+            break;
+        }
+        if !chosen.contains(p) {
+            chosen.push(*p);
+        }
+    }
+    let mut verified: Vec<(Pose2, Evidence)> = chosen
         .iter()
-        .take(params.refined_hypotheses)
-        .map(|(start, _)| {
-            // Keep the refinement only if verification agrees it is better.
+        .map(|start| {
+            // Keep the refinement unless verification finds it clearly worse (verification
+            // tolerates a cell of slack, so within that it cannot tell which is more
+            // precise; refinement can).
             let pose = verify::refine(a, b, *start, params);
             let refined = verify::verify(a, b, &pose, params.conflict_weight, On::Refine);
             let unrefined = verify::verify(a, b, start, params.conflict_weight, On::Refine);
-            if refined.score >= unrefined.score {
+            if refined.score >= unrefined.score - 0.05 * unrefined.score.abs() {
                 (pose, refined)
             } else {
                 (*start, unrefined)
@@ -268,11 +305,20 @@ fn run(
         .collect();
     verified.sort_by(|x, y| y.1.score.total_cmp(&x.1.score));
     let (best_pose, evidence) = verified[0];
-    let runner_up_score = verified
+    let others: Vec<&(Pose2, Evidence)> = verified
         .iter()
         .skip(1)
-        .find(|(p, _)| !same_pose(p, &best_pose, b.centroid, params))
-        .map_or(0.0, |(_, e)| e.score.max(0.0));
+        .filter(|(p, _)| !same_pose(p, &best_pose, b.centroid, params))
+        .collect();
+    let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
+    // A clearly different pose that is as consistent (as little conflict) and explains a
+    // fair share of the structure is an alternative, however the totals compare: a larger
+    // overlap of walls buys a larger total without being any more likely.
+    let rival = others.iter().find(|(_, e)| {
+        e.agreement() >= params.min_agreement
+            && e.agree >= params.min_agree_cells
+            && e.agree as f64 >= params.rival_share * evidence.agree as f64
+    });
     let a_from_b = to_frames(&best_pose);
     let agreement = evidence.agreement();
     let ratio = if evidence.score > 0.0 {
@@ -313,6 +359,17 @@ fn run(
             "poorly constrained: moved {:.1} m (or turned as much) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
             params.sharpness_shift_m,
             100.0 * (1.0 - sharpness)
+        ))
+    } else if let Some((pose, e)) = rival {
+        Some(format!(
+            "ambiguous: a pose {:.1} m and {:.0} deg away is as consistent ({} agreeing, {} conflicting)",
+            pose.transform_point(b.centroid)
+                .distance_m(best_pose.transform_point(b.centroid)),
+            normalize_angle_rad(pose.yaw_rad - best_pose.yaw_rad)
+                .to_degrees()
+                .abs(),
+            e.agree,
+            e.conflict
         ))
     } else if ratio >= params.max_runner_up_ratio {
         Some(format!(

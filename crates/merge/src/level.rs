@@ -44,14 +44,19 @@ pub struct Level {
     pub cell_m: f64,
     /// Classes, row-major from the bottom row.
     pub class: Vec<Class>,
-    /// Distance to the nearest feature cell, tenths of a cell (3-4 chamfer), capped at
-    /// [`DIST_CAP`].
+    /// Distance to the nearest surface cell (a feature cell with a normal), tenths of a cell
+    /// (3-4 chamfer), capped at [`DIST_CAP`].
     pub dist: Vec<u16>,
     /// For feature cells touching free space (8-neighbours): the direction from the cell to
     /// the free space within two cells (the side a sensor saw the surface from), radians;
     /// NaN otherwise.
     pub normal: Vec<f32>,
+    /// `normal` as a direction bin, [`NO_BIN`] where there is none.
+    pub bin: Vec<u8>,
 }
+
+/// No normal, in [`Level::bin`].
+pub const NO_BIN: u8 = u8::MAX;
 
 /// A structure point: a feature cell's centre and the direction it was seen from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -144,8 +149,18 @@ impl Level {
                 };
             }
         }
-        let dist = chamfer(&class, width, height);
         let normal = normals(&class, width, height);
+        let dist = chamfer(&normal, width, height);
+        let bin = normal
+            .iter()
+            .map(|n| {
+                if n.is_nan() {
+                    NO_BIN
+                } else {
+                    crate::search::direction_bin(*n as f64) as u8
+                }
+            })
+            .collect();
         Level {
             width,
             height,
@@ -153,6 +168,7 @@ impl Level {
             class,
             dist,
             normal,
+            bin,
         }
     }
 
@@ -208,12 +224,14 @@ impl Level {
         thin(pts, max_points)
     }
 
-    /// Normal of the cell, NaN outside or where there is none.
-    pub fn normal_at(&self, x: i64, y: i64) -> f32 {
+    /// Direction bin ([`crate::search::direction_bin`]) of the cell's normal; `None`
+    /// outside or where there is none.
+    pub fn bin_at(&self, x: i64, y: i64) -> Option<usize> {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
-            return f32::NAN;
+            return None;
         }
-        self.normal[y as usize * self.width + x as usize]
+        let b = self.bin[y as usize * self.width + x as usize];
+        (b != NO_BIN).then_some(b as usize)
     }
 
     /// Centres of known cells in grid-local metres, at most `max_points` (evenly thinned).
@@ -307,11 +325,13 @@ fn despeckled(map: &Map) -> Vec<MapCell> {
 }
 
 /// 3-4 chamfer distance (in tenths of a cell, ~exact to 8 %) from every cell to the nearest
-/// feature cell (Borgefors 1986, "Distance transformations in digital images").
-fn chamfer(class: &[Class], w: usize, h: usize) -> Vec<u16> {
-    let mut d: Vec<u16> = class
+/// surface cell (a feature cell with a normal) (Borgefors 1986, "Distance transformations in
+/// digital images"). Surfaces, not all structure: deep inside a crater or a thick wall is
+/// far from anything a sensor saw, so a pose cannot gain by sinking points into it.
+fn chamfer(normal: &[f32], w: usize, h: usize) -> Vec<u16> {
+    let mut d: Vec<u16> = normal
         .iter()
-        .map(|c| if c.is_feature() { 0 } else { DIST_CAP })
+        .map(|n| if n.is_nan() { DIST_CAP } else { 0 })
         .collect();
     // Steps of 10 (straight) and 14 (diagonal) tenths.
     let relax = |d: &mut Vec<u16>, i: usize, j: usize, step: u16| {

@@ -64,6 +64,14 @@ pub struct Params {
     pub min_overlap_m2: f64,
     /// Refuse below this confidence.
     pub min_confidence: f64,
+    /// Refuse when a clearly different pose is as consistent (agreement at least
+    /// `min_agreement`) and explains at least this share of the best one's agreeing
+    /// structure.
+    pub rival_share: f64,
+    /// A fixed map larger than this (metres, its larger side) is searched globally on a
+    /// level twice as coarse, with heading steps twice as large: the search's cost grows
+    /// with the area of translations, and refinement recovers the precision.
+    pub large_map_m: f64,
 }
 
 impl Default for Params {
@@ -73,15 +81,15 @@ impl Default for Params {
             refine_cell_m: 0.1,
             free_penalty: 10,
             pyramid_depth: 6,
-            max_search_points: 1000,
+            max_search_points: 600,
             max_refine_points: 4000,
             max_local_points: 1500,
             min_share_of_best: 0.5,
             hypotheses: 5,
-            refined_hypotheses: 6,
+            refined_hypotheses: 8,
             yaw_step_rad: 0.5f64.to_radians(),
             direction_peaks: 3,
-            peak_halfwidth_rad: 4.0f64.to_radians(),
+            peak_halfwidth_rad: 3.0f64.to_radians(),
             min_direction_ratio: 1.5,
             distinct_m: 1.0,
             distinct_rad: 3.0f64.to_radians(),
@@ -89,10 +97,12 @@ impl Default for Params {
             min_agreement: 0.95,
             min_agree_cells: 60,
             max_runner_up_ratio: 0.7,
-            min_overlap_m2: 4.0,
+            min_overlap_m2: 8.0,
             sharpness_shift_m: 0.3,
             min_sharpness: 0.25,
             min_confidence: 0.3,
+            rival_share: 0.35,
+            large_map_m: 30.0,
         }
     }
 }
@@ -104,6 +114,16 @@ pub struct Prepared {
     pub search: Level,
     /// Its branch and bound fields, built the first time the map is the fixed one.
     fields: std::cell::OnceCell<Fields>,
+    /// A level twice as coarse, for the global search of large maps.
+    pub global: Level,
+    /// Its surface points.
+    pub global_points: Vec<Surface>,
+    /// Its branch and bound fields (built on first use).
+    global_fields: std::cell::OnceCell<Fields>,
+    /// The larger side of the map, metres.
+    pub extent_m: f64,
+    /// Fields of the search level without the pyramid, for refinement.
+    flat_fields: std::cell::OnceCell<Fields>,
     /// Fields of the refinement level (no pyramid), for refinement.
     local_fields: std::cell::OnceCell<Fields>,
     /// Surface points for refinement on the fine level.
@@ -129,6 +149,18 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// The coarse global level's fields (built on first use).
+    pub fn global_fields(&self) -> &Fields {
+        self.global_fields
+            .get_or_init(|| Fields::new(&self.global, self.free_penalty, self.pyramid_depth))
+    }
+
+    /// The search level's fields without the pyramid (built on first use).
+    pub fn flat_fields(&self) -> &Fields {
+        self.flat_fields
+            .get_or_init(|| Fields::new(&self.search, self.free_penalty, 0))
+    }
+
     /// The refinement level's fields (built on first use).
     pub fn local_fields(&self) -> &Fields {
         self.local_fields
@@ -144,6 +176,7 @@ impl Prepared {
     /// Prepares `map` with `params`.
     pub fn new(map: &Map, params: &Params) -> Prepared {
         let search = Level::build(map, params.search_cell_m);
+        let global = Level::build(map, 2.0 * params.search_cell_m);
         let refine = Level::build(map, params.refine_cell_m);
         let refine_points = refine.surfaces(params.max_refine_points);
         let step = refine_points
@@ -164,6 +197,10 @@ impl Prepared {
         };
         Prepared {
             search_points: search.surfaces(params.max_search_points),
+            global_points: global.surfaces(params.max_search_points),
+            global,
+            global_fields: std::cell::OnceCell::new(),
+            extent_m: map.geometry().width_m().max(map.geometry().height_m()),
             known_points,
             known_area_per_point_m2,
             refine_points,
@@ -172,6 +209,7 @@ impl Prepared {
             frame_from_grid: map.frame_from_grid(),
             fields: std::cell::OnceCell::new(),
             local_fields: std::cell::OnceCell::new(),
+            flat_fields: std::cell::OnceCell::new(),
             local_points,
             free_penalty: params.free_penalty,
             pyramid_depth: params.pyramid_depth,

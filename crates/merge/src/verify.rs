@@ -11,15 +11,13 @@
 
 use crate::level::{Class, Level, Surface};
 use crate::prepare::{Params, Prepared};
-use crate::search::{Fields, direction_bin};
+use crate::search::{DIRECTION_BINS, Fields, direction_bin};
 use realms_core::{Point2, Pose2};
 
 /// Agreeing: the other map has structure within this many fine cells.
 const AGREE_CELLS: f32 = 1.5;
 /// Conflicting: free there, and no structure within this many fine cells.
 const CONFLICT_CELLS: f32 = 2.5;
-/// Agreeing surfaces face within this many degrees of each other.
-const AGREE_NORMAL_DEG: f64 = 60.0;
 
 /// What verification found for one pose.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -108,9 +106,9 @@ fn field_score(
 fn symmetric_score(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> i64 {
     match on {
         On::Search => {
-            field_score(a.fields(), a.search.cell_m, &b.search_points, a_from_b)
+            field_score(a.flat_fields(), a.search.cell_m, &b.search_points, a_from_b)
                 + field_score(
-                    b.fields(),
+                    b.flat_fields(),
                     b.search.cell_m,
                     &a.search_points,
                     &a_from_b.inverse(),
@@ -129,28 +127,102 @@ fn symmetric_score(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> i64 
 }
 
 /// Refines a hypothesis (grid-local `a_from_b`) by coordinate ascent on the symmetric,
-/// direction-aware field score: first on the coarse level from two coarse cells and a
-/// degree, then on the fine level down to a quarter of a fine cell.
+/// direction-aware field score: first on the coarse level from two coarse cells and two
+/// heading steps, then on the fine level from two fine cells and half a degree down to a
+/// quarter of a fine cell.
 pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose2 {
     let coarse = a.search.cell_m;
     let fine = a.refine.cell_m;
     let yaw = params.yaw_step_rad;
+    let deg = 1f64.to_radians();
     let pose = climb(
         a,
         b,
         On::Search,
         start,
         (2.0 * coarse, 2.0 * yaw),
-        (coarse / 2.0, yaw / 2.0),
+        (coarse / 2.0, 0.25 * deg),
     );
-    climb(
+    let pose = climb(
         a,
         b,
         On::Refine,
         pose,
-        (fine, yaw / 2.0),
-        (fine / 4.0, yaw / 16.0),
-    )
+        (2.0 * fine, 0.5 * deg),
+        (fine / 4.0, 0.03 * deg),
+    );
+    // The field score is flat within a cell of slack; finish on distances, which are not,
+    // from close enough that the nearest structure is the right one.
+    polish(a, b, pose, fine, deg)
+}
+
+/// Distance (fine cells) from a grid-local point to `level`'s nearest structure,
+/// interpolated; `None` outside the grid.
+fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
+    let fx = p.x_m / level.cell_m - 0.5;
+    let fy = p.y_m / level.cell_m - 0.5;
+    let (x0, y0) = (fx.floor(), fy.floor());
+    let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let d00 = level.dist_at(x0, y0)?;
+    let d10 = level.dist_at(x0 + 1, y0).unwrap_or(d00);
+    let d01 = level.dist_at(x0, y0 + 1).unwrap_or(d00);
+    let d11 = level.dist_at(x0 + 1, y0 + 1).unwrap_or(d00);
+    Some((d00 * (1.0 - tx) + d10 * tx) * (1.0 - ty) + (d01 * (1.0 - tx) + d11 * tx) * ty)
+}
+
+/// Each point earns `1 - d / 2` for its distance `d` (fine cells) to the other map's
+/// nearest structure, both maps' points: smooth, for the last fraction of a cell.
+fn smooth_score(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f32 {
+    let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
+        let r = Rigid::new(t);
+        points
+            .iter()
+            .filter_map(|s| dist_interp(target, r.apply(s.p)))
+            .map(|d| (1.0 - d / 2.0).max(0.0))
+            .sum()
+    };
+    one(&b.local_points, &a.refine, a_from_b) + one(&a.local_points, &b.refine, &a_from_b.inverse())
+}
+
+/// Coordinate ascent on [`smooth_score`] from half a cell and a quarter degree down.
+fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
+    let c = b.centroid;
+    let (mut step_xy, mut step_yaw) = (fine / 2.0, 0.25 * deg);
+    let mut pose = start;
+    let mut best = smooth_score(a, b, &pose);
+    for _ in 0..60 {
+        if step_xy < fine / 8.0 && step_yaw < 0.02 * deg {
+            break;
+        }
+        let mut improved = false;
+        for m in [
+            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
+            turned_about(&pose, c, step_yaw),
+            turned_about(&pose, c, -step_yaw),
+        ] {
+            let s = smooth_score(a, b, &m);
+            if s > best {
+                (best, pose, improved) = (s, m, true);
+            }
+        }
+        if !improved {
+            step_xy /= 2.0;
+            step_yaw /= 2.0;
+        }
+    }
+    pose
+}
+
+/// `p` turned by `dyaw` about the point `c` of the moving map (grid-local metres).
+fn turned_about(p: &Pose2, c: Point2, dyaw: f64) -> Pose2 {
+    let pc = p.transform_point(c);
+    let q = Pose2::new(p.x_m, p.y_m, p.yaw_rad + dyaw);
+    let qc = q.transform_point(c);
+    Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
 }
 
 /// Coordinate ascent with halving steps from `steps` down to `min_steps` (metres, radians);
@@ -205,7 +277,6 @@ fn climb(
 
 fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> (usize, usize) {
     let (mut agree, mut conflict) = (0, 0);
-    let cos_tol = (AGREE_NORMAL_DEG.to_radians() as f32).cos();
     let t = Rigid::new(target_from_source);
     for s in points {
         let q = t.apply(s.p);
@@ -217,12 +288,14 @@ fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2)
             continue;
         };
         if d <= AGREE_CELLS {
-            // A surface facing the same way within a cell.
-            let n = (s.normal_rad + target_from_source.yaw_rad) as f32;
+            // A surface facing the same way (within a direction bin) within a cell.
+            let n = direction_bin(s.normal_rad + target_from_source.yaw_rad);
             let facing = (-1..=1).any(|dy| {
                 (-1..=1).any(|dx| {
-                    let m = target.normal_at(x + dx, y + dy);
-                    !m.is_nan() && (m - n).cos() >= cos_tol
+                    target.bin_at(x + dx, y + dy).is_some_and(|m| {
+                        let d = m.abs_diff(n);
+                        d.min(DIRECTION_BINS - d) <= 1
+                    })
                 })
             });
             if facing {

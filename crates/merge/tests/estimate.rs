@@ -103,3 +103,33 @@ fn swapping_the_maps_gives_the_inverse() {
         "{ab:?} vs inverse of {ba:?}"
     );
 }
+
+#[test]
+fn a_known_start_is_confirmed_or_found_drifted() {
+    use realms_core::Pose2;
+    use realms_merge::{PriorWindow, estimate_with_prior};
+    let params = Params::default();
+    let office = common::recorded("tb3_office_real").cells;
+    let pair = &pairs(&office, 0.4, 16, 1)[0];
+    let (a, b) = (
+        Prepared::new(&pair.a, &params),
+        Prepared::new(&pair.b, &params),
+    );
+    let window = PriorWindow::default();
+    // The rover started where the lander says: confirmed, no drift.
+    let same = estimate_with_prior(&a, &b, pair.a_from_b, &window, &params);
+    let found = same.estimate.accepted().expect("the prior is confirmed");
+    assert!(common::close(&found, &pair.a_from_b, &pair.b));
+    assert!(!same.drifted, "{same:?}");
+    // The map has drifted 1 m and 4 degrees from the prior: found, and reported.
+    let prior = pair
+        .a_from_b
+        .compose(&Pose2::new(0.8, -0.6, 4f64.to_radians()));
+    let drifted = estimate_with_prior(&a, &b, prior, &window, &params);
+    let found = drifted
+        .estimate
+        .accepted()
+        .expect("the drifted pose is found");
+    assert!(common::close(&found, &pair.a_from_b, &pair.b), "{found:?}");
+    assert!(drifted.drifted && drifted.drift_m > 0.5, "{drifted:?}");
+}
