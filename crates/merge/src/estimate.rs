@@ -205,7 +205,7 @@ fn run(
         distinct_rad: params.distinct_rad,
         min_score: 1,
         min_share_of_best: params.min_share_of_best,
-        max_nodes: 2_000_000,
+        max_nodes: params.max_search_nodes,
     };
     let mut stats = SearchStats::default();
     // Hypotheses with the heading group they came from.
