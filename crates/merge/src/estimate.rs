@@ -337,6 +337,19 @@ fn run(
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
+    // Only worth looking for when the merge would otherwise be accepted.
+    let nearby = || {
+        verify::nearby_alternative(
+            a,
+            b,
+            &best_pose,
+            &evidence,
+            params,
+            params.precision_probe_m,
+            params.precision_apart_m,
+            params.precision_share,
+        )
+    };
     let refusal = if evidence.overlap_m2 < params.min_overlap_m2 {
         Some(format!(
             "the maps overlap by only {:.1} m^2 at the best pose (at least {:.1} needed)",
@@ -378,6 +391,16 @@ fn run(
         ))
     } else if confidence < params.min_confidence {
         Some(format!("confidence {confidence:.2} is too low"))
+    } else if let Some((pose, e)) = nearby() {
+        Some(format!(
+            "imprecise: a pose {:.2} m and {:.1} deg away explains the maps as well ({:.0} % of the score)",
+            pose.transform_point(evidence.overlap_centre)
+                .distance_m(best_pose.transform_point(evidence.overlap_centre)),
+            normalize_angle_rad(pose.yaw_rad - best_pose.yaw_rad)
+                .to_degrees()
+                .abs(),
+            100.0 * e.score / evidence.score
+        ))
     } else {
         None
     };

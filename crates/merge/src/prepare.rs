@@ -65,6 +65,13 @@ pub struct Params {
     pub sharpness_shift_m: f64,
     /// Refuse below this sharpness ([`crate::verify::sharpness`]).
     pub min_sharpness: f64,
+    /// The precision check restarts refinement from the pose moved this far, metres...
+    pub precision_probe_m: f64,
+    /// ... and refuses if a restart settles farther than this away, metres (or turned as
+    /// much at the overlap's edge) ...
+    pub precision_apart_m: f64,
+    /// ... with at least this share of the best verified score.
+    pub precision_share: f64,
     /// Refuse below this overlap of known cells, square metres.
     pub min_overlap_m2: f64,
     /// Refuse below this confidence.
@@ -104,6 +111,9 @@ impl Default for Params {
             min_agree_cells: 60,
             max_runner_up_ratio: 0.7,
             min_overlap_m2: 8.0,
+            precision_probe_m: 0.4,
+            precision_apart_m: 0.15,
+            precision_share: 0.97,
             sharpness_shift_m: 0.3,
             min_sharpness: 0.25,
             min_confidence: 0.3,

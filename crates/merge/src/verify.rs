@@ -156,6 +156,67 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
     polish(a, b, pose, fine, deg)
 }
 
+/// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
+/// directions and turned as much either way (about the overlap's centre); the first
+/// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
+/// with a verified score at least `share` of `evidence`'s. In a narrow overlap of walls and
+/// a rock or two, poses a few cells or a degree apart can explain the maps equally well;
+/// then the merge is not precise, whatever its confidence.
+#[allow(clippy::too_many_arguments)]
+pub fn nearby_alternative(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    evidence: &Evidence,
+    params: &Params,
+    probe_m: f64,
+    apart_m: f64,
+    share: f64,
+) -> Option<(Pose2, Evidence)> {
+    if evidence.score <= 0.0 {
+        return None;
+    }
+    let fine = a.refine.cell_m;
+    let deg = 1f64.to_radians();
+    let c = evidence.overlap_centre;
+    let turn_rad = (probe_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let apart_rad = (apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let mut probes: Vec<Pose2> = (0..8)
+        .map(|k| {
+            let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
+            Pose2::new(
+                a_from_b.x_m + probe_m * co,
+                a_from_b.y_m + probe_m * s,
+                a_from_b.yaw_rad,
+            )
+        })
+        .collect();
+    probes.push(turned_about(a_from_b, c, turn_rad));
+    probes.push(turned_about(a_from_b, c, -turn_rad));
+    let here = a_from_b.transform_point(c);
+    for probe in probes {
+        let p = climb(
+            a,
+            b,
+            On::Refine,
+            probe,
+            (2.0 * fine, 0.5 * deg),
+            (fine / 4.0, 0.03 * deg),
+        );
+        let p = polish(a, b, p, fine, deg);
+        let moved = p.transform_point(c).distance_m(here);
+        let turned = realms_core::geometry::normalize_angle_rad(p.yaw_rad - a_from_b.yaw_rad).abs();
+        if moved <= apart_m && turned <= apart_rad {
+            continue;
+        }
+        let e = verify(a, b, &p, params.conflict_weight, On::Refine);
+        if e.score >= share * evidence.score {
+            return Some((p, e));
+        }
+    }
+    None
+}
+
 /// Distance (fine cells) from a grid-local point to `level`'s nearest structure,
 /// interpolated; `None` outside the grid.
 fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
