@@ -2,12 +2,15 @@
 //!
 //! Refinement climbs the search's direction-aware score made symmetric (each map's surface
 //! points on the other's fields), first on the coarse level, then on the fine one, with
-//! halving steps down to a quarter of a fine cell.
+//! halving steps down to a quarter of a fine cell, and finishes on distances to surfaces.
 //!
-//! Verification counts, both ways, structure cells that land on structure (agree), that land
-//! on the other map's free space far from any structure (conflict), and the overlap of known
-//! cells. A true alignment agrees almost everywhere the maps overlap; a wrong one that lays
-//! walls over walls must also put the rest of its structure on the other map's free space.
+//! Verification counts, both ways, structure cells that land on structure facing the same
+//! way (agree), that land on the other map's free space far from any structure (conflict),
+//! and the overlap of known cells. A true alignment agrees almost everywhere the maps
+//! overlap; a wrong one that lays walls over walls must also put the rest of its structure
+//! on the other map's free space. Two more checks judge how well the pose is pinned down:
+//! [`sharpness`] (does the score fall when the pose moves?) and [`nearby_alternative`] (is
+//! there a second optimum close by that explains the maps as well?).
 
 use crate::level::{Class, Level, Surface};
 use crate::prepare::{Params, Prepared};
