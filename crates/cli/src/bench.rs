@@ -27,6 +27,7 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::Explore(args) => crate::bench_nav::explore(args),
         crate::cli::BenchCommand::NetRelay(args) => crate::bench_net::run(args),
         crate::cli::BenchCommand::NetSim(args) => crate::bench_net::net_sim(args),
+        crate::cli::BenchCommand::Merge(args) => crate::bench_merge::run(args),
     }
 }
 

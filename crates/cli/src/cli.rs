@@ -26,6 +26,22 @@ pub enum Command {
     Slam(SlamArgs),
     /// Relative pose error of a trajectory against benchmark relations (Kümmerle et al. 2009).
     SlamEval(SlamEvalArgs),
+    /// Merge ROS map_server maps (PGM + YAML) taken from unknown relative poses.
+    Merge(MergeArgs),
+}
+
+/// `realms merge`.
+#[derive(Debug, ClapArgs)]
+pub struct MergeArgs {
+    /// Map YAML files; the first is the reference whose frame the others are placed in.
+    #[arg(required = true, num_args = 2..)]
+    pub maps: Vec<PathBuf>,
+    /// The merged map's YAML (its PGM is written beside it, with the same stem).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `realms slam`.
@@ -126,6 +142,8 @@ pub enum BenchCommand {
     NetRelay(BenchNetRelayArgs),
     /// Cost of the simulated network: messages per wall second for fleets of several sizes.
     NetSim(BenchNetSimArgs),
+    /// Map merging on generated pairs with a known answer: success, wrong merges, refusals, time.
+    Merge(BenchMergeArgs),
 }
 
 /// `realms bench net-sim`.
@@ -140,6 +158,38 @@ pub struct BenchNetSimArgs {
     /// Trials per fleet size (the median is reported).
     #[arg(long, default_value_t = 3)]
     pub trials: usize,
+}
+
+/// `realms bench merge`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchMergeArgs {
+    /// Pairs per source kind and overlap.
+    #[arg(long, default_value_t = 20)]
+    pub pairs: usize,
+    /// Seed of the generated pairs.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Overlaps to test, percent, comma-separated.
+    #[arg(long, default_value = "5,10,20,40")]
+    pub overlaps: String,
+    /// Source kinds, comma-separated: real, sim-building, lunar-sparse, lunar-very-sparse.
+    #[arg(
+        long,
+        default_value = "real,sim-building,lunar-sparse,lunar-very-sparse"
+    )]
+    pub kinds: String,
+    /// Folder of the recorded maps (default: `../shared/data/maps` from the working folder).
+    #[arg(long)]
+    pub maps: Option<PathBuf>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// One line per pair on stderr (errors, evidence, verdict).
+    #[arg(long)]
+    pub verbose: bool,
+    /// Write every generated pair here as PNG images (for looking at the cases).
+    #[arg(long)]
+    pub dump: Option<PathBuf>,
 }
 
 /// `realms bench net-relay`.

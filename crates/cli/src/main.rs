@@ -8,9 +8,11 @@
 #![allow(clippy::disallowed_methods)]
 
 mod bench;
+mod bench_merge;
 mod bench_nav;
 mod bench_net;
 mod cli;
+mod merge;
 mod mission;
 mod slam;
 
@@ -31,6 +33,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Bench(b) => bench::run(b),
         cli::Command::Slam(a) => slam::run(a),
         cli::Command::SlamEval(a) => slam::eval(a),
+        cli::Command::Merge(a) => merge::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -117,3 +117,113 @@ fn net_relay_reproduces_the_field_experiment_as_json() {
     assert_eq!(v["direct"]["images"], false);
     assert_eq!(v["relay"]["images"], true);
 }
+
+/// Writes a generated pair (A, B) from a recorded map into `dir`; returns the YAML paths
+/// and the answer.
+fn merge_case(
+    dir: &Path,
+    overlap: f64,
+    seed: u64,
+) -> (std::path::PathBuf, std::path::PathBuf, realms_core::Pose2) {
+    use rand::SeedableRng;
+    let source = realms_merge::io::read(Path::new(&repo("../shared/data/maps/aws_bookstore.yaml")))
+        .expect("the recorded map (../shared/data present?)");
+    let spec = realms_merge::synth::PairSpec {
+        overlap,
+        ..Default::default()
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let pair = realms_merge::synth::make_pair(&source.cells, &spec, &mut rng).expect("pair");
+    std::fs::create_dir_all(dir).expect("dir");
+    let a = realms_merge::io::write(&pair.a.cells, &dir.join("a.yaml")).expect("write a");
+    let b = realms_merge::io::write(&pair.b.cells, &dir.join("b.yaml")).expect("write b");
+    (a, b, pair.a_from_b)
+}
+
+#[test]
+fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
+    let dir = std::env::temp_dir().join(format!("realms-cli-merge-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (a, b, truth) = merge_case(&dir, 0.5, 31);
+    let out = dir.join("out/merged.yaml");
+    let o = realms()
+        .arg("merge")
+        .arg(&a)
+        .arg(&b)
+        .arg("--out")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let maps = json["maps"].as_array().expect("maps");
+    assert_eq!(maps.len(), 1);
+    let m = &maps[0];
+    assert_eq!(m["map"], b.display().to_string());
+    let (x, y, yaw) = (
+        m["x_m"].as_f64().expect("x_m"),
+        m["y_m"].as_f64().expect("y_m"),
+        m["yaw_rad"].as_f64().expect("yaw_rad"),
+    );
+    let c = m["confidence"].as_f64().expect("confidence");
+    assert!((0.0..=1.0).contains(&c));
+    let found = realms_core::Pose2::new(x, y, yaw);
+    let err = found.relative_to(&truth);
+    assert!(
+        err.yaw_rad.abs() < 2f64.to_radians(),
+        "{found:?} vs {truth:?}"
+    );
+    assert!(out.is_file() && dir.join("out/merged.pgm").is_file());
+    let merged = realms_merge::io::read(&out).expect("the merged map reads back");
+    assert!(merged.known_cells() > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn merge_refuses_maps_that_share_nothing_and_reports_bad_files() {
+    let dir = std::env::temp_dir().join(format!("realms-cli-merge-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (a, b, _) = merge_case(&dir, 0.0, 32);
+    let o = realms()
+        .arg("merge")
+        .arg(&a)
+        .arg(&b)
+        .arg("--out")
+        .arg(dir.join("m.yaml"))
+        .arg("--json")
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{stdout}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert!(
+        json["maps"][0]["refused"]
+            .as_str()
+            .is_some_and(|r| !r.is_empty()),
+        "{json}"
+    );
+
+    let bad = dir.join("bad.yaml");
+    std::fs::write(&bad, "image: a.pgm\nresolution: 0.05\n").expect("write");
+    let o = realms()
+        .arg("merge")
+        .arg(&a)
+        .arg(&bad)
+        .arg("--out")
+        .arg(dir.join("m2.yaml"))
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("bad.yaml") && stderr.contains("`origin`"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

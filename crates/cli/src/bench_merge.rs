@@ -1,0 +1,340 @@
+//! `realms bench merge`: map merging on generated pairs with a known answer.
+//!
+//! Sources: the recorded maps in `../shared/data/maps` (real: Willow Garage, the TurtleBot3
+//! office; sim-building: the two AWS Gazebo worlds) and lunar arenas from the simulator's
+//! ground truth (sparse and very sparse: few boulders, few craters). Each pair is cut by
+//! [`realms_merge::synth`] with the chosen overlap; the second map is turned by a random
+//! heading and shifted, both get unknown patches and speckle. Success: the centre of the
+//! overlap placed within 3 cells and the heading within 2 degrees. A wrong merge is an
+//! accepted estimate that is not a success; refusals are counted apart. Time is per pair on
+//! one thread: preparing both maps and estimating.
+
+use crate::bench::{machine, median};
+use crate::cli::BenchMergeArgs;
+use anyhow::{Context, Result};
+use rand::SeedableRng;
+use realms_core::Grid;
+use realms_merge::synth::{self, PairSpec};
+use realms_merge::{MapCell, Params, Prepared};
+use realms_sim::{GroundTruth, Scenario, Terrain, TruthCell};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Success: translation error below this many cells...
+const SUCCESS_CELLS: f64 = 3.0;
+/// ... and heading error below this.
+const SUCCESS_DEG: f64 = 2.0;
+/// A wrong merge farther off than this (or turned more than [`GROSS_DEG`]) is gross; the
+/// others are near misses (the right place, a few cells or a degree off).
+const GROSS_M: f64 = 1.0;
+/// See [`GROSS_M`].
+const GROSS_DEG: f64 = 5.0;
+
+/// One row of the table.
+#[derive(Clone, Debug, Serialize)]
+struct Row {
+    kind: String,
+    overlap_pct: u32,
+    pairs: usize,
+    success_pct: f64,
+    wrong_pct: f64,
+    /// Wrong merges off by more than 1 m or 5 degrees (the rest are near misses).
+    gross_wrong_pct: f64,
+    refused_pct: f64,
+    median_ms: f64,
+    max_ms: f64,
+}
+
+/// A lunar arena's ground truth as the map a perfect sensor suite would build: lidar
+/// obstacles occupied; craters, steep slopes and rocks the lidar passes over as hazards;
+/// explorable ground free; the rest unknown.
+pub fn lunar_map(truth: &GroundTruth) -> Grid<MapCell> {
+    let trav = truth.traversability.cells();
+    let lidar = truth.lidar_obstacles.cells();
+    let explorable = truth.explorable.cells();
+    let cells = (0..trav.len())
+        .map(|i| {
+            if lidar[i] {
+                MapCell::Occupied
+            } else if trav[i] != TruthCell::Free {
+                MapCell::Hazard
+            } else if explorable[i] {
+                MapCell::Free
+            } else {
+                MapCell::Unknown
+            }
+        })
+        .collect();
+    Grid::from_cells(*truth.traversability.geometry(), cells)
+        .expect("same geometry as the truth grids")
+}
+
+/// The default arena with fewer rocks and craters.
+fn lunar_source(very_sparse: bool, seed: u64) -> Grid<MapCell> {
+    let mut sc = Scenario {
+        seed,
+        ..Scenario::default()
+    };
+    if very_sparse {
+        sc.boulders.large_count = 2;
+        sc.boulders.small_count = 30;
+        sc.craters.small_count = 1;
+        sc.craters.large_count = 1;
+    } else {
+        sc.boulders.large_count = 5;
+        sc.boulders.small_count = 120;
+    }
+    let terrain = Terrain::generate(&sc);
+    lunar_map(&GroundTruth::derive(&terrain, &sc))
+}
+
+fn real_sources(dir: &std::path::Path, names: &[&str]) -> Result<Vec<Grid<MapCell>>> {
+    names
+        .iter()
+        .map(|n| {
+            let path = dir.join(format!("{n}.yaml"));
+            let map = realms_merge::io::read(&path)
+                .with_context(|| format!("reading the source map {}", path.display()))?;
+            Ok(map.cells)
+        })
+        .collect()
+}
+
+/// Where the error is measured: the centre of the second map's known cells that the first
+/// map also knows, in the second map's frame (its whole centre if they share none). The
+/// maps constrain the pose where they overlap; a heading error moves points away from
+/// there, and that is judged by the heading criterion.
+fn overlap_centre(pair: &synth::Pair) -> realms_core::Point2 {
+    let (ga, gb) = (pair.a.geometry(), pair.b.geometry());
+    let frame_b_from_grid = pair.b.frame_from_grid();
+    let a_grid_from_b_grid = pair
+        .a
+        .frame_from_grid()
+        .inverse()
+        .compose(&pair.a_from_b)
+        .compose(&frame_b_from_grid);
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for (cell, v) in pair.b.cells.iter().step_by(3) {
+        if !v.is_known() {
+            continue;
+        }
+        let local = realms_core::Point2::new(
+            (cell.x as f64 + 0.5) * gb.resolution_m,
+            (cell.y as f64 + 0.5) * gb.resolution_m,
+        );
+        let q = a_grid_from_b_grid.transform_point(local);
+        let (x, y) = (q.x_m / ga.resolution_m, q.y_m / ga.resolution_m);
+        if x >= 0.0
+            && y >= 0.0
+            && pair
+                .a
+                .cells
+                .get(x as usize, y as usize)
+                .is_some_and(|c| c.is_known())
+        {
+            sx += local.x_m;
+            sy += local.y_m;
+            n += 1;
+        }
+    }
+    let local = if n == 0 {
+        pair.b.known_centroid_in_grid()
+    } else {
+        realms_core::Point2::new(sx / n as f64, sy / n as f64)
+    };
+    frame_b_from_grid.transform_point(local)
+}
+
+/// `realms bench merge`.
+pub fn run(args: BenchMergeArgs) -> Result<()> {
+    let overlaps: Vec<u32> = args
+        .overlaps
+        .split(',')
+        .map(|s| s.trim().parse::<u32>())
+        .collect::<Result<_, _>>()
+        .context("--overlaps: expected percentages like 5,10,20")?;
+    anyhow::ensure!(
+        overlaps.iter().all(|o| (1..=90).contains(o)),
+        "--overlaps must be between 1 and 90 percent"
+    );
+    let maps_dir = args
+        .maps
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("../shared/data/maps"));
+    let params = Params::default();
+    let mut rows = Vec::new();
+    for kind in args.kinds.split(',').map(str::trim) {
+        let sources = match kind {
+            "real" => real_sources(&maps_dir, &["willow_garage", "tb3_office_real"])?,
+            "sim-building" => real_sources(&maps_dir, &["aws_bookstore", "aws_small_warehouse"])?,
+            "lunar-sparse" => (0..3).map(|s| lunar_source(false, args.seed + s)).collect(),
+            "lunar-very-sparse" => (0..3).map(|s| lunar_source(true, args.seed + s)).collect(),
+            other => anyhow::bail!(
+                "--kinds: unknown kind `{other}` (real, sim-building, lunar-sparse, lunar-very-sparse)"
+            ),
+        };
+        for &overlap_pct in &overlaps {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                args.seed ^ (u64::from(overlap_pct) << 32) ^ kind.len() as u64,
+            );
+            let spec = PairSpec {
+                overlap: f64::from(overlap_pct) / 100.0,
+                ..PairSpec::default()
+            };
+            let (mut ok, mut wrong, mut gross, mut refused) = (0usize, 0usize, 0usize, 0usize);
+            let mut times_ms = Vec::new();
+            for i in 0..args.pairs {
+                let source = &sources[i % sources.len()];
+                let Some(pair) = synth::make_pair(source, &spec, &mut rng) else {
+                    anyhow::bail!("source map {i} of {kind} has too few known cells");
+                };
+                if let Some(dir) = &args.dump {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
+                    for (map, side) in [(&pair.a, "a"), (&pair.b, "b")] {
+                        let path = dir.join(format!("{kind}-{overlap_pct}-{i}-{side}.png"));
+                        map.cells
+                            .write_png(&path, |c| match c {
+                                MapCell::Unknown => [128, 128, 128],
+                                MapCell::Free => [255, 255, 255],
+                                MapCell::Occupied => [0, 0, 0],
+                                MapCell::Hazard => [220, 120, 0],
+                            })
+                            .with_context(|| format!("writing {}", path.display()))?;
+                    }
+                }
+                let start = Instant::now();
+                let a = Prepared::new(&pair.a, &params);
+                let b = Prepared::new(&pair.b, &params);
+                let prep_ms = start.elapsed().as_secs_f64() * 1e3;
+                let est = realms_merge::estimate(&a, &b, &params);
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                times_ms.push(ms);
+                let centre = overlap_centre(&pair);
+                let cell_m = pair.b.geometry().resolution_m;
+                let (err_m, err_rad) = est.a_from_b.map_or((f64::INFINITY, f64::INFINITY), |p| {
+                    synth::pose_error(&p, &pair.a_from_b, centre)
+                });
+                let correct = err_m < SUCCESS_CELLS * cell_m && err_rad.to_degrees() < SUCCESS_DEG;
+                let verdict = match (est.accepted().is_some(), correct) {
+                    (true, true) => {
+                        ok += 1;
+                        "ok"
+                    }
+                    (true, false) => {
+                        wrong += 1;
+                        if err_m > GROSS_M || err_rad.to_degrees() > GROSS_DEG {
+                            gross += 1;
+                        }
+                        "WRONG"
+                    }
+                    (false, _) => {
+                        refused += 1;
+                        "refused"
+                    }
+                };
+                if args.verbose {
+                    let truth_grid = pair
+                        .a
+                        .frame_from_grid()
+                        .inverse()
+                        .compose(&pair.a_from_b)
+                        .compose(&pair.b.frame_from_grid());
+                    let t = realms_merge::verify::verify(
+                        &a,
+                        &b,
+                        &truth_grid,
+                        params.conflict_weight,
+                        realms_merge::verify::On::Refine,
+                    );
+                    eprintln!(
+                        "  truth: agree {} conflict {} overlap {:.0} m2 score {:.0}",
+                        t.agree, t.conflict, t.overlap_m2, t.score
+                    );
+                    for (p, search_score, screen) in &est.hypotheses {
+                        let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
+                        eprintln!(
+                            "    hypothesis err {em:.2} m {:.2} deg: search {search_score} screen {screen:.0}",
+                            er.to_degrees()
+                        );
+                    }
+                    let e = &est.evidence;
+                    eprintln!(
+                        "{kind} {overlap_pct}% #{i}: {verdict} (best {}) err {:.2} m {:.2} deg; agree {} conflict {} ({:.2}) overlap {:.0} m2 score {:.0} runner-up {:.0} sharp {:.2} conf {:.2}; {} headings {} nodes; {:.0} ms ({:.0} preparing){}",
+                        if correct { "right" } else { "wrong" },
+                        err_m,
+                        err_rad.to_degrees(),
+                        e.agree,
+                        e.conflict,
+                        e.agreement(),
+                        e.overlap_m2,
+                        e.score,
+                        est.runner_up_score,
+                        est.sharpness,
+                        est.confidence,
+                        est.stats.headings,
+                        est.stats.nodes,
+                        ms,
+                        prep_ms,
+                        est.refusal
+                            .as_deref()
+                            .map(|r| format!("; {r}"))
+                            .unwrap_or_default()
+                    );
+                }
+            }
+            let n = args.pairs.max(1) as f64;
+            rows.push(Row {
+                kind: kind.to_string(),
+                overlap_pct,
+                pairs: args.pairs,
+                success_pct: 100.0 * ok as f64 / n,
+                wrong_pct: 100.0 * wrong as f64 / n,
+                gross_wrong_pct: 100.0 * gross as f64 / n,
+                refused_pct: 100.0 * refused as f64 / n,
+                max_ms: times_ms.iter().copied().fold(0.0, f64::max),
+                median_ms: median(times_ms),
+            });
+        }
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "machine": machine(),
+                "pairs": args.pairs,
+                "seed": args.seed,
+                "rows": rows,
+            }))?
+        );
+        return Ok(());
+    }
+    println!("# realms bench merge");
+    println!();
+    println!(
+        "{} pairs per cell, seed {}; success = within {SUCCESS_CELLS} cells and {SUCCESS_DEG} deg; machine: {}",
+        args.pairs,
+        args.seed,
+        machine()
+    );
+    println!();
+    println!(
+        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | median ms | max ms |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for r in &rows {
+        println!(
+            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {:.0} | {:.0} |",
+            r.kind,
+            r.overlap_pct,
+            r.success_pct,
+            r.wrong_pct,
+            r.gross_wrong_pct,
+            r.refused_pct,
+            r.median_ms,
+            r.max_ms
+        );
+    }
+    Ok(())
+}

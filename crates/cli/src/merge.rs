@@ -1,0 +1,140 @@
+//! `realms merge A.yaml B.yaml [C.yaml ...] --out merged.yaml [--json]`: merges ROS
+//! map_server maps taken from unknown relative poses, prints where each later map's frame
+//! lies in the first map's frame (or why it was refused) and writes the merged map, plus a
+//! PNG of which map contributed each cell.
+
+use crate::cli::MergeArgs;
+use anyhow::{Context, Result};
+use realms_merge::compose::{self, Merged};
+use realms_merge::{MapCell, Params};
+use serde_json::json;
+
+/// Colours of the contribution image, by map index (cycled).
+const PALETTE: [[u8; 3]; 6] = [
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [214, 39, 40],
+    [148, 103, 189],
+    [140, 86, 75],
+];
+
+/// `realms merge`.
+pub fn run(args: MergeArgs) -> Result<()> {
+    let maps = args
+        .maps
+        .iter()
+        .map(|p| realms_merge::io::read(p).with_context(|| format!("reading {}", p.display())))
+        .collect::<Result<Vec<_>>>()?;
+    let merged = compose::merge(&maps, &Params::default())?;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let yaml = realms_merge::io::write(&merged.grid, &args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let png = args.out.with_extension("contributions.png");
+    write_contributions(&merged, &png)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report_json(&args, &merged))?
+        );
+        return Ok(());
+    }
+    for (path, p) in args.maps.iter().zip(&merged.placements).skip(1) {
+        match (p.reference_from_map, &p.refusal) {
+            (Some(pose), _) => println!(
+                "{}: x_m {:.3} y_m {:.3} yaw_rad {:.4} ({:.2} deg) confidence {:.2}{}",
+                path.display(),
+                pose.x_m,
+                pose.y_m,
+                pose.yaw_rad,
+                pose.yaw_rad.to_degrees(),
+                p.confidence,
+                p.via
+                    .filter(|v| *v != 0)
+                    .map(|v| format!(" (placed via {})", args.maps[v].display()))
+                    .unwrap_or_default()
+            ),
+            (None, reason) => println!(
+                "{}: refused: {}",
+                path.display(),
+                reason.as_deref().unwrap_or("not placed")
+            ),
+        }
+    }
+    for i in &merged.inconsistencies {
+        println!(
+            "warning: {} -> {} disagrees with the chain of other links by {:.2} m, {:.1} deg",
+            args.maps[i.fixed].display(),
+            args.maps[i.moving].display(),
+            i.error_m,
+            i.error_rad.to_degrees()
+        );
+    }
+    let placed = merged
+        .placements
+        .iter()
+        .filter(|p| p.reference_from_map.is_some())
+        .count();
+    println!(
+        "merged {placed} of {} maps into {} (contributions: {})",
+        maps.len(),
+        yaml.display(),
+        png.display()
+    );
+    Ok(())
+}
+
+/// `{"maps": [...]}`, one entry per map after the first.
+fn report_json(args: &MergeArgs, merged: &Merged) -> serde_json::Value {
+    let entries: Vec<serde_json::Value> = args
+        .maps
+        .iter()
+        .zip(&merged.placements)
+        .skip(1)
+        .map(|(path, p)| {
+            let name = path.display().to_string();
+            match p.reference_from_map {
+                Some(pose) => json!({
+                    "map": name,
+                    "x_m": pose.x_m,
+                    "y_m": pose.y_m,
+                    "yaw_rad": pose.yaw_rad,
+                    "confidence": p.confidence,
+                }),
+                None => json!({
+                    "map": name,
+                    "refused": p.refusal.clone().unwrap_or_else(|| "not placed".into()),
+                }),
+            }
+        })
+        .collect();
+    json!({ "maps": entries })
+}
+
+fn write_contributions(merged: &Merged, path: &std::path::Path) -> Result<()> {
+    let cells = merged.grid.cells();
+    let contributions = merged.contribution.cells();
+    let image = merged.contribution.map(|_| [0u8; 3]);
+    let colours: Vec<[u8; 3]> = cells
+        .iter()
+        .zip(contributions)
+        .map(|(c, mask)| {
+            if *mask == 0 {
+                return [128, 128, 128];
+            }
+            if matches!(c, MapCell::Occupied | MapCell::Hazard) {
+                return [0, 0, 0];
+            }
+            // The lowest-numbered contributing map's colour, lightened.
+            let i = mask.trailing_zeros() as usize % PALETTE.len();
+            PALETTE[i].map(|v| v / 2 + 128)
+        })
+        .collect();
+    let image = realms_core::Grid::from_cells(*image.geometry(), colours)
+        .context("contribution image size")?;
+    image
+        .write_png(path, |c| *c)
+        .with_context(|| format!("writing {}", path.display()))
+}

@@ -1,0 +1,417 @@
+//! The relative pose of two maps, with no prior or with a known start, verified and given a
+//! confidence, or refused with the reason.
+//!
+//! Coarse to fine:
+//! 1. headings: peaks of the correlated line-direction histograms ([`crate::rotation`]),
+//!    each also turned half a turn, searched a few degrees either side; every heading when
+//!    the histograms are flat;
+//! 2. the global search ([`crate::search`]) over all translations at those headings on the
+//!    coarse level, keeping the best few distinct hypotheses;
+//! 3. each refined and verified on the fine level ([`crate::verify`]);
+//! 4. the best verified hypothesis is accepted only if enough structure agrees, little
+//!    conflicts, the maps overlap enough and the runner-up (the best clearly different
+//!    pose) scores clearly lower. Refusing is always preferred to merging wrong.
+
+use crate::map::Map;
+use crate::prepare::{Params, Prepared};
+use crate::rotation;
+use crate::search::{self, SearchParams, SearchStats, Window};
+use crate::verify::{self, Evidence, On};
+use realms_core::geometry::normalize_angle_rad;
+use realms_core::{Point2, Pose2};
+use std::f64::consts::PI;
+
+/// The answer for one pair of maps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    /// Pose of the second map's frame in the first map's frame, by the best hypothesis
+    /// (`None` if there was none at all). Use [`Estimate::accepted`] for a merge.
+    pub a_from_b: Option<Pose2>,
+    /// Confidence in the best hypothesis, 0..1.
+    pub confidence: f64,
+    /// What verification found for it.
+    pub evidence: Evidence,
+    /// Verified score of the best clearly different hypothesis (0 if none).
+    pub runner_up_score: f64,
+    /// How sharply verification singles out the pose, 0..1 ([`verify::sharpness`]).
+    pub sharpness: f64,
+    /// Why the merge was refused; `None` if accepted.
+    pub refusal: Option<String>,
+    /// What the global search cost.
+    pub stats: SearchStats,
+    /// Every hypothesis of the global search as a pose of the second map's frame in the
+    /// first's, with its search score and coarse screening score (for diagnosis).
+    pub hypotheses: Vec<(Pose2, i32, f64)>,
+}
+
+impl Estimate {
+    /// The pose if the merge was accepted.
+    pub fn accepted(&self) -> Option<Pose2> {
+        if self.refusal.is_none() {
+            self.a_from_b
+        } else {
+            None
+        }
+    }
+
+    fn refused(reason: String) -> Estimate {
+        Estimate {
+            a_from_b: None,
+            confidence: 0.0,
+            evidence: Evidence::default(),
+            runner_up_score: 0.0,
+            sharpness: 0.0,
+            refusal: Some(reason),
+            stats: SearchStats::default(),
+            hypotheses: Vec::new(),
+        }
+    }
+}
+
+/// Where the second map's frame lies in the first's with no prior at all.
+pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
+    let (peaks, ratio) =
+        rotation::candidates(&a.directions, &b.directions, params.direction_peaks, 5);
+    // Each heading group is searched on its own: at low overlap a wrong heading that lays
+    // long walls over walls can outscore the true one, and one global list would then hold
+    // nothing but its variants.
+    let mut groups: Vec<Vec<f64>> = Vec::new();
+    if ratio >= params.min_direction_ratio && !peaks.is_empty() {
+        let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
+        for p in &peaks {
+            for base in [p.to_radians(), p.to_radians() + PI] {
+                groups.push(
+                    (-n..=n)
+                        .map(|k| normalize_angle_rad(base + k as f64 * params.yaw_step_rad))
+                        .collect(),
+                );
+            }
+        }
+    } else {
+        // No dominant directions: every heading, in quarter turns.
+        let n = (2.0 * PI / params.yaw_step_rad).round() as i64;
+        let all: Vec<f64> = (0..n)
+            .map(|k| normalize_angle_rad(k as f64 * 2.0 * PI / n as f64))
+            .collect();
+        groups.extend(
+            all.chunks(all.len().div_ceil(4).max(1))
+                .map(<[f64]>::to_vec),
+        );
+    }
+    run(a, b, &groups, None, params)
+}
+
+/// A known-start check: the prior, what the maps say, and whether they differ.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PriorCheck {
+    /// The estimate found near the prior (refused if the maps do not confirm any pose).
+    pub estimate: Estimate,
+    /// Distance between the prior and the estimate at the second map's centre, metres.
+    pub drift_m: f64,
+    /// Heading difference, radians.
+    pub drift_rad: f64,
+    /// Whether the maps confirm a pose that differs from the prior by more than the
+    /// tolerances.
+    pub drifted: bool,
+}
+
+/// How far from a prior to look, and how far counts as drift.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PriorWindow {
+    /// Half-width of the translation search, metres.
+    pub linear_m: f64,
+    /// Half-width of the heading search, radians.
+    pub angular_rad: f64,
+    /// A confirmed pose farther than this from the prior is drift, metres.
+    pub drift_tolerance_m: f64,
+    /// ... or turned more than this, radians.
+    pub drift_tolerance_rad: f64,
+}
+
+impl Default for PriorWindow {
+    fn default() -> Self {
+        PriorWindow {
+            linear_m: 3.0,
+            angular_rad: 10f64.to_radians(),
+            drift_tolerance_m: 0.3,
+            drift_tolerance_rad: 2f64.to_radians(),
+        }
+    }
+}
+
+/// Known-start mode: refines `prior` (pose of the second map's frame in the first's) within
+/// `window` and reports whether the maps have drifted from it.
+pub fn estimate_with_prior(
+    a: &Prepared,
+    b: &Prepared,
+    prior: Pose2,
+    window: &PriorWindow,
+    params: &Params,
+) -> PriorCheck {
+    let grid_prior = a
+        .frame_from_grid
+        .inverse()
+        .compose(&prior)
+        .compose(&b.frame_from_grid);
+    let n = (window.angular_rad / params.yaw_step_rad).ceil() as i64;
+    let yaws: Vec<f64> = (-n..=n)
+        .map(|k| normalize_angle_rad(grid_prior.yaw_rad + k as f64 * params.yaw_step_rad))
+        .collect();
+    let search_window = Window {
+        centroid_at: grid_prior.transform_point(b.centroid),
+        half_m: window.linear_m,
+    };
+    let estimate = run(a, b, &[yaws], Some(search_window), params);
+    let (mut drift_m, mut drift_rad) = (0.0, 0.0);
+    if let Some(found) = estimate.accepted() {
+        let centre = b.frame_from_grid.transform_point(b.centroid);
+        drift_m = prior
+            .transform_point(centre)
+            .distance_m(found.transform_point(centre));
+        drift_rad = normalize_angle_rad(found.yaw_rad - prior.yaw_rad).abs();
+    }
+    PriorCheck {
+        drifted: drift_m > window.drift_tolerance_m || drift_rad > window.drift_tolerance_rad,
+        estimate,
+        drift_m,
+        drift_rad,
+    }
+}
+
+/// Prepares both maps and estimates with no prior.
+pub fn estimate_maps(a: &Map, b: &Map, params: &Params) -> Estimate {
+    estimate(&Prepared::new(a, params), &Prepared::new(b, params), params)
+}
+
+/// Whether two grid-local poses put the moving centre within `distinct_m` and turn less
+/// than `distinct_rad` apart.
+fn same_pose(p: &Pose2, q: &Pose2, centre: Point2, params: &Params) -> bool {
+    p.transform_point(centre)
+        .distance_m(q.transform_point(centre))
+        < params.distinct_m
+        && normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs() < params.distinct_rad
+}
+
+fn run(
+    a: &Prepared,
+    b: &Prepared,
+    groups: &[Vec<f64>],
+    window: Option<Window>,
+    params: &Params,
+) -> Estimate {
+    let search_params = SearchParams {
+        hypotheses: params.hypotheses,
+        distinct_m: params.distinct_m,
+        distinct_rad: params.distinct_rad,
+        min_score: 1,
+        min_share_of_best: params.min_share_of_best,
+        max_nodes: params.max_search_nodes,
+    };
+    let mut stats = SearchStats::default();
+    // Hypotheses with the heading group they came from.
+    let mut hyps = Vec::new();
+    let mut groups_seen = 0usize;
+    let coarse = window.is_none() && a.extent_m > params.large_map_m;
+    for yaws in groups {
+        let (found, group_stats) = if coarse {
+            let yaws: Vec<f64> = yaws.iter().step_by(2).copied().collect();
+            search::search(
+                a.global_fields(),
+                a.global.cell_m,
+                &b.global_points,
+                b.centroid,
+                &yaws,
+                window,
+                &search_params,
+            )
+        } else {
+            search::search(
+                a.fields(),
+                a.search.cell_m,
+                &b.search_points,
+                b.centroid,
+                yaws,
+                window,
+                &search_params,
+            )
+        };
+        hyps.extend(found.into_iter().map(|h| (groups_seen, h)));
+        groups_seen += 1;
+        stats.headings += group_stats.headings;
+        stats.nodes += group_stats.nodes;
+    }
+    if hyps.is_empty() {
+        return Estimate::refused("no pose puts the second map's structure on the first's".into());
+    }
+    // Screen every hypothesis on the coarse level, then refine and verify the best few.
+    let to_frames = |p: &Pose2| {
+        a.frame_from_grid
+            .compose(p)
+            .compose(&b.frame_from_grid.inverse())
+    };
+    let mut screened: Vec<(usize, Pose2, Evidence)> = hyps
+        .iter()
+        .map(|(g, h)| {
+            let e = verify::verify(
+                a,
+                b,
+                &h.fixed_from_moving,
+                params.conflict_weight,
+                On::Search,
+            );
+            (*g, h.fixed_from_moving, e)
+        })
+        .collect();
+    let hypotheses = hyps
+        .iter()
+        .zip(&screened)
+        .map(|((_, h), (_, _, e))| (to_frames(&h.fixed_from_moving), h.score, e.score))
+        .collect();
+    screened.sort_by(|x, y| y.2.score.total_cmp(&x.2.score));
+    // The best of every heading group goes on (so that a true heading outscored by walls
+    // laid over walls at another heading is still verified, and seen as a rival), then the
+    // best of the rest.
+    let mut chosen: Vec<Pose2> = Vec::new();
+    for g in 0..groups_seen {
+        if let Some((_, p, e)) = screened.iter().find(|(hg, _, _)| *hg == g)
+            && e.score > 0.0
+        {
+            chosen.push(*p);
+        }
+    }
+    for (_, p, _) in &screened {
+        if chosen.len() >= params.refined_hypotheses.max(groups_seen) {
+            break;
+        }
+        if !chosen.contains(p) {
+            chosen.push(*p);
+        }
+    }
+    let mut verified: Vec<(Pose2, Evidence)> = chosen
+        .iter()
+        .map(|start| {
+            // Keep the refinement unless verification finds it clearly worse (verification
+            // tolerates a cell of slack, so within that it cannot tell which is more
+            // precise; refinement can).
+            let pose = verify::refine(a, b, *start, params);
+            let refined = verify::verify(a, b, &pose, params.conflict_weight, On::Refine);
+            let unrefined = verify::verify(a, b, start, params.conflict_weight, On::Refine);
+            if refined.score >= unrefined.score - 0.05 * unrefined.score.abs() {
+                (pose, refined)
+            } else {
+                (*start, unrefined)
+            }
+        })
+        .collect();
+    verified.sort_by(|x, y| y.1.score.total_cmp(&x.1.score));
+    let (best_pose, evidence) = verified[0];
+    let others: Vec<&(Pose2, Evidence)> = verified
+        .iter()
+        .skip(1)
+        .filter(|(p, _)| !same_pose(p, &best_pose, b.centroid, params))
+        .collect();
+    let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
+    // A clearly different pose that is as consistent (as little conflict) and explains a
+    // fair share of the structure is an alternative, however the totals compare: a larger
+    // overlap of walls buys a larger total without being any more likely.
+    let rival = others.iter().find(|(_, e)| {
+        e.agreement() >= params.min_agreement
+            && e.agree >= params.min_agree_cells
+            && e.agree as f64 >= params.rival_share * evidence.agree as f64
+    });
+    let a_from_b = to_frames(&best_pose);
+    let agreement = evidence.agreement();
+    let ratio = if evidence.score > 0.0 {
+        runner_up_score / evidence.score
+    } else {
+        1.0
+    };
+    let support = 1.0 - (-(evidence.agree as f64) / (2.0 * params.min_agree_cells as f64)).exp();
+    let sharpness = verify::sharpness(
+        a,
+        b,
+        &best_pose,
+        &evidence,
+        params.conflict_weight,
+        params.sharpness_shift_m,
+    );
+    let confidence =
+        (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
+    // Only worth looking for when the merge would otherwise be accepted.
+    let nearby = || {
+        verify::nearby_alternative(
+            a,
+            b,
+            &best_pose,
+            &evidence,
+            params,
+            params.precision_probe_m,
+            params.precision_apart_m,
+            params.precision_share,
+        )
+    };
+    let refusal = if evidence.overlap_m2 < params.min_overlap_m2 {
+        Some(format!(
+            "the maps overlap by only {:.1} m^2 at the best pose (at least {:.1} needed)",
+            evidence.overlap_m2, params.min_overlap_m2
+        ))
+    } else if evidence.agree < params.min_agree_cells {
+        Some(format!(
+            "too little structure agrees at the best pose ({} cells, at least {} needed)",
+            evidence.agree, params.min_agree_cells
+        ))
+    } else if agreement < params.min_agreement {
+        Some(format!(
+            "structure disagrees at the best pose: {:.0} % agrees ({} cells), {} cells conflict",
+            100.0 * agreement,
+            evidence.agree,
+            evidence.conflict
+        ))
+    } else if sharpness < params.min_sharpness {
+        Some(format!(
+            "poorly constrained: moved {:.1} m (or turned as much) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
+            params.sharpness_shift_m,
+            100.0 * (1.0 - sharpness)
+        ))
+    } else if let Some((pose, e)) = rival {
+        Some(format!(
+            "ambiguous: a pose {:.1} m and {:.0} deg away is as consistent ({} agreeing, {} conflicting)",
+            pose.transform_point(b.centroid)
+                .distance_m(best_pose.transform_point(b.centroid)),
+            normalize_angle_rad(pose.yaw_rad - best_pose.yaw_rad)
+                .to_degrees()
+                .abs(),
+            e.agree,
+            e.conflict
+        ))
+    } else if ratio >= params.max_runner_up_ratio {
+        Some(format!(
+            "ambiguous: a clearly different pose scores {:.0} % of the best",
+            100.0 * ratio
+        ))
+    } else if confidence < params.min_confidence {
+        Some(format!("confidence {confidence:.2} is too low"))
+    } else if let Some((pose, e)) = nearby() {
+        Some(format!(
+            "imprecise: a pose {:.2} m and {:.1} deg away explains the maps as well ({:.0} % of the score)",
+            pose.transform_point(evidence.overlap_centre)
+                .distance_m(best_pose.transform_point(evidence.overlap_centre)),
+            normalize_angle_rad(pose.yaw_rad - best_pose.yaw_rad)
+                .to_degrees()
+                .abs(),
+            100.0 * e.score / evidence.score
+        ))
+    } else {
+        None
+    };
+    Estimate {
+        a_from_b: Some(a_from_b),
+        confidence,
+        evidence,
+        runner_up_score,
+        sharpness,
+        refusal,
+        stats,
+        hypotheses,
+    }
+}

@@ -1,0 +1,446 @@
+//! A map reduced to a coarser cell for matching, and what the matcher reads from it: the
+//! structure points (boundaries of obstacles and hazards), the distance from every cell to
+//! the nearest structure, and the known cells.
+//!
+//! Reduction keeps structure: a coarse cell is an obstacle (or hazard) if any fine cell in it
+//! is one, once lone obstacle cells (sensor speckle: a real obstacle covers several cells)
+//! have been dropped; otherwise it is free if at least half of it is free, else unknown.
+
+use crate::map::{Map, MapCell};
+use realms_core::Point2;
+
+/// Coarse cell classes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Class {
+    /// Not observed (or too little of it).
+    Unknown = 0,
+    /// Free.
+    Free = 1,
+    /// An obstacle.
+    Occupied = 2,
+    /// A hazard.
+    Hazard = 3,
+}
+
+impl Class {
+    /// Obstacle or hazard.
+    pub fn is_feature(self) -> bool {
+        matches!(self, Class::Occupied | Class::Hazard)
+    }
+}
+
+/// Distances are kept in tenths of a cell up to this cap (the matcher never looks further).
+pub const DIST_CAP: u16 = 200;
+
+/// One reduced map.
+#[derive(Clone, Debug)]
+pub struct Level {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Cell edge, metres.
+    pub cell_m: f64,
+    /// Classes, row-major from the bottom row.
+    pub class: Vec<Class>,
+    /// Distance to the nearest surface cell (a feature cell with a normal), tenths of a cell
+    /// (3-4 chamfer), capped at [`DIST_CAP`].
+    pub dist: Vec<u16>,
+    /// For feature cells touching free space (8-neighbours): the direction from the cell to
+    /// the free space within two cells (the side a sensor saw the surface from), radians;
+    /// NaN otherwise.
+    pub normal: Vec<f32>,
+    /// `normal` as a direction bin, [`NO_BIN`] where there is none.
+    pub bin: Vec<u8>,
+}
+
+/// No normal, in [`Level::bin`].
+pub const NO_BIN: u8 = u8::MAX;
+
+/// A structure point: a feature cell's centre and the direction it was seen from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    /// Centre, grid-local metres.
+    pub p: Point2,
+    /// Direction towards the free side, radians (in the grid-local frame).
+    pub normal_rad: f64,
+    /// How much the point says about position: [`LINE_WEIGHT`] on straight runs of wall
+    /// (a wall matches itself slid along its length), [`SHAPE_WEIGHT`] on corners, rocks
+    /// and crater rims.
+    pub weight: u8,
+}
+
+/// Weight of a point on a straight run of structure.
+pub const LINE_WEIGHT: u8 = 1;
+/// Weight of a point on a corner, a rock or a rim.
+pub const SHAPE_WEIGHT: u8 = 8;
+
+/// Whether the structure within four cells of `(x, y)` is a straight line: the covariance
+/// of the structure cells there is nearly one-dimensional.
+fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
+    const R: usize = 4;
+    let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for ny in y.saturating_sub(R)..(y + R + 1).min(h) {
+        for nx in x.saturating_sub(R)..(x + R + 1).min(w) {
+            if class[ny * w + nx].is_feature() {
+                let (fx, fy) = (nx as f64 - x as f64, ny as f64 - y as f64);
+                n += 1.0;
+                sx += fx;
+                sy += fy;
+                sxx += fx * fx;
+                syy += fy * fy;
+                sxy += fx * fy;
+            }
+        }
+    }
+    if n < 4.0 {
+        return false;
+    }
+    let (mx, my) = (sx / n, sy / n);
+    let (cxx, cyy, cxy) = (sxx / n - mx * mx, syy / n - my * my, sxy / n - mx * my);
+    let tr = cxx + cyy;
+    tr > 0.0 && ((cxx - cyy).powi(2) + 4.0 * cxy * cxy).sqrt() / tr > 0.9
+}
+
+impl Level {
+    /// Reduces `map` to cells of `cell_m` metres (at least the map's own cell).
+    pub fn build(map: &Map, cell_m: f64) -> Level {
+        let g = map.geometry();
+        let r = g.resolution_m;
+        let cell_m = cell_m.max(r);
+        let fine = despeckled(map);
+        let width = ((g.width as f64 * r / cell_m).ceil() as usize).max(1);
+        let height = ((g.height as f64 * r / cell_m).ceil() as usize).max(1);
+        // Fine cell span of coarse index i: [span(i), span(i + 1)).
+        let ratio = cell_m / r;
+        let span = |i: usize, n: usize| ((i as f64 * ratio).round() as usize).min(n);
+        let mut class = vec![Class::Unknown; width * height];
+        for cy in 0..height {
+            let (y0, y1) = (
+                span(cy, g.height),
+                span(cy + 1, g.height).max(span(cy, g.height) + 1),
+            );
+            for cx in 0..width {
+                let (x0, x1) = (
+                    span(cx, g.width),
+                    span(cx + 1, g.width).max(span(cx, g.width) + 1),
+                );
+                let (mut occ, mut haz, mut free, mut total) = (false, false, 0usize, 0usize);
+                for y in y0..y1.min(g.height) {
+                    for x in x0..x1.min(g.width) {
+                        total += 1;
+                        match fine[y * g.width + x] {
+                            MapCell::Occupied => occ = true,
+                            MapCell::Hazard => haz = true,
+                            MapCell::Free => free += 1,
+                            MapCell::Unknown => {}
+                        }
+                    }
+                }
+                class[cy * width + cx] = if occ {
+                    Class::Occupied
+                } else if haz {
+                    Class::Hazard
+                } else if total > 0 && 2 * free >= total {
+                    Class::Free
+                } else {
+                    Class::Unknown
+                };
+            }
+        }
+        let normal = normals(&class, width, height);
+        let dist = chamfer(&normal, width, height);
+        let bin = normal
+            .iter()
+            .map(|n| {
+                if n.is_nan() {
+                    NO_BIN
+                } else {
+                    crate::search::direction_bin(*n as f64) as u8
+                }
+            })
+            .collect();
+        Level {
+            width,
+            height,
+            cell_m,
+            class,
+            dist,
+            normal,
+            bin,
+        }
+    }
+
+    /// The class at a cell, `Unknown` outside.
+    pub fn class_at(&self, x: i64, y: i64) -> Class {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return Class::Unknown;
+        }
+        self.class[y as usize * self.width + x as usize]
+    }
+
+    /// Distance to the nearest feature in cells, `None` outside the grid.
+    pub fn dist_at(&self, x: i64, y: i64) -> Option<f32> {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return None;
+        }
+        Some(self.dist[y as usize * self.width + x as usize] as f32 / 10.0)
+    }
+
+    /// Centre of a cell in grid-local metres.
+    pub fn center(&self, x: usize, y: usize) -> Point2 {
+        Point2::new(
+            (x as f64 + 0.5) * self.cell_m,
+            (y as f64 + 0.5) * self.cell_m,
+        )
+    }
+
+    /// Feature cells on the edge of their blob (a 4-neighbour of another class) that face
+    /// free space, at most `max_points` of them (evenly thinned, deterministically).
+    pub fn surfaces(&self, max_points: usize) -> Vec<Surface> {
+        let mut pts = Vec::new();
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let i = y * self.width + x;
+                let c = self.class[i];
+                if !c.is_feature() || self.normal[i].is_nan() {
+                    continue;
+                }
+                let (xi, yi) = (x as i64, y as i64);
+                let edge = [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                    .iter()
+                    .any(|(dx, dy)| self.class_at(xi + dx, yi + dy) != c);
+                if edge {
+                    let line = is_line(&self.class, self.width, self.height, x, y);
+                    pts.push(Surface {
+                        p: self.center(x, y),
+                        normal_rad: self.normal[i] as f64,
+                        weight: if line { LINE_WEIGHT } else { SHAPE_WEIGHT },
+                    });
+                }
+            }
+        }
+        thin(pts, max_points)
+    }
+
+    /// Direction bin ([`crate::search::direction_bin`]) of the cell's normal; `None`
+    /// outside or where there is none.
+    pub fn bin_at(&self, x: i64, y: i64) -> Option<usize> {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return None;
+        }
+        let b = self.bin[y as usize * self.width + x as usize];
+        (b != NO_BIN).then_some(b as usize)
+    }
+
+    /// Centres of known cells in grid-local metres, at most `max_points` (evenly thinned).
+    pub fn known_points(&self, max_points: usize) -> Vec<Point2> {
+        let mut pts = Vec::new();
+        for y in 0..self.height {
+            for x in 0..self.width {
+                if self.class[y * self.width + x] != Class::Unknown {
+                    pts.push(self.center(x, y));
+                }
+            }
+        }
+        thin(pts, max_points)
+    }
+}
+
+/// Direction from each feature cell to the free cells within two cells (the mean offset),
+/// NaN for other cells and for feature cells with no free cell that close.
+fn normals(class: &[Class], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![f32::NAN; class.len()];
+    for y in 0..h {
+        for x in 0..w {
+            if !class[y * w + x].is_feature() {
+                continue;
+            }
+            // Only the surface itself: a cell touching free space. (Cells deeper inside a
+            // thick wall would let a pose slid into the wall still look agreeing.)
+            let touches_free = (y.saturating_sub(1)..(y + 2).min(h)).any(|ny| {
+                (x.saturating_sub(1)..(x + 2).min(w)).any(|nx| class[ny * w + nx] == Class::Free)
+            });
+            if !touches_free {
+                continue;
+            }
+            let (mut vx, mut vy, mut n) = (0i32, 0i32, 0);
+            for ny in y.saturating_sub(2)..(y + 3).min(h) {
+                for nx in x.saturating_sub(2)..(x + 3).min(w) {
+                    if class[ny * w + nx] == Class::Free {
+                        vx += nx as i32 - x as i32;
+                        vy += ny as i32 - y as i32;
+                        n += 1;
+                    }
+                }
+            }
+            // Free space all around (a lone post seen from everywhere) has no side.
+            if n > 0 && (vx * vx + vy * vy) * 4 >= n * n {
+                out[y * w + x] = (vy as f32).atan2(vx as f32);
+            }
+        }
+    }
+    out
+}
+
+/// Keeps every k-th point so that at most `max_points` remain.
+fn thin<T: Copy>(pts: Vec<T>, max_points: usize) -> Vec<T> {
+    if pts.len() <= max_points || max_points == 0 {
+        return pts;
+    }
+    let step = pts.len() as f64 / max_points as f64;
+    (0..max_points)
+        .filter_map(|i| pts.get((i as f64 * step) as usize).copied())
+        .collect()
+}
+
+/// The map's cells with lone feature cells (no feature among their 8 neighbours) made
+/// unknown: speckle is neither evidence of an obstacle nor of free space.
+fn despeckled(map: &Map) -> Vec<MapCell> {
+    let g = map.geometry();
+    let (w, h) = (g.width, g.height);
+    let src = map.cells.cells();
+    let mut out = src.to_vec();
+    for y in 0..h {
+        for x in 0..w {
+            if !src[y * w + x].is_feature() {
+                continue;
+            }
+            let mut neighbour = false;
+            'n: for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    if (nx, ny) != (x, y) && src[ny * w + nx].is_feature() {
+                        neighbour = true;
+                        break 'n;
+                    }
+                }
+            }
+            if !neighbour {
+                out[y * w + x] = MapCell::Unknown;
+            }
+        }
+    }
+    out
+}
+
+/// 3-4 chamfer distance (in tenths of a cell, ~exact to 8 %) from every cell to the nearest
+/// surface cell (a feature cell with a normal) (Borgefors 1986, "Distance transformations in
+/// digital images"). Surfaces, not all structure: deep inside a crater or a thick wall is
+/// far from anything a sensor saw, so a pose cannot gain by sinking points into it.
+fn chamfer(normal: &[f32], w: usize, h: usize) -> Vec<u16> {
+    let mut d: Vec<u16> = normal
+        .iter()
+        .map(|n| if n.is_nan() { DIST_CAP } else { 0 })
+        .collect();
+    // Steps of 10 (straight) and 14 (diagonal) tenths.
+    let relax = |d: &mut Vec<u16>, i: usize, j: usize, step: u16| {
+        let v = d[j].saturating_add(step);
+        if v < d[i] {
+            d[i] = v;
+        }
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x > 0 {
+                relax(&mut d, i, i - 1, 10);
+            }
+            if y > 0 {
+                relax(&mut d, i, i - w, 10);
+                if x > 0 {
+                    relax(&mut d, i, i - w - 1, 14);
+                }
+                if x + 1 < w {
+                    relax(&mut d, i, i - w + 1, 14);
+                }
+            }
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            if x + 1 < w {
+                relax(&mut d, i, i + 1, 10);
+            }
+            if y + 1 < h {
+                relax(&mut d, i, i + w, 10);
+                if x + 1 < w {
+                    relax(&mut d, i, i + w + 1, 14);
+                }
+                if x > 0 {
+                    relax(&mut d, i, i + w - 1, 14);
+                }
+            }
+        }
+    }
+    d.iter_mut().for_each(|v| *v = (*v).min(DIST_CAP));
+    d
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realms_core::{Grid, GridGeometry};
+
+    fn map_from(rows: &[&str], r: f64) -> Map {
+        let h = rows.len();
+        let w = rows[0].len();
+        let mut cells = Vec::new();
+        for row in rows.iter().rev() {
+            cells.extend(row.chars().map(|c| match c {
+                '#' => MapCell::Occupied,
+                'h' => MapCell::Hazard,
+                '.' => MapCell::Free,
+                _ => MapCell::Unknown,
+            }));
+        }
+        let g = GridGeometry {
+            width: w,
+            height: h,
+            resolution_m: r,
+            origin: Point2::new(0.0, 0.0),
+        };
+        Map::new(Grid::from_cells(g, cells).expect("sizes match"))
+    }
+
+    #[test]
+    fn reduction_keeps_structure_and_drops_speckle() {
+        let map = map_from(
+            &[
+                "....????", //
+                "..#.????", // a lone speck: dropped
+                "........", //
+                "##......", //
+            ],
+            0.05,
+        );
+        let level = Level::build(&map, 0.1);
+        assert_eq!((level.width, level.height), (4, 2));
+        // Bottom row: the wall pair makes the first coarse cell an obstacle.
+        assert_eq!(level.class_at(0, 0), Class::Occupied);
+        assert_eq!(level.class_at(1, 0), Class::Free);
+        // Top row: the speck is gone, the unknown half stays unknown.
+        assert_eq!(level.class_at(1, 1), Class::Free);
+        assert_eq!(level.class_at(3, 1), Class::Unknown);
+        assert_eq!(level.dist_at(0, 0), Some(0.0));
+        assert_eq!(level.dist_at(1, 0), Some(1.0));
+        assert_eq!(level.dist_at(1, 1), Some(1.4));
+        let s = level.surfaces(100);
+        assert_eq!(s.len(), 1);
+        // The wall cell's free side is up and to the right.
+        assert!(s[0].normal_rad > 0.2 && s[0].normal_rad < 1.4, "{s:?}");
+    }
+
+    #[test]
+    fn hazard_is_structure_too() {
+        let map = map_from(&["hh..", "hh.."], 0.1);
+        let level = Level::build(&map, 0.1);
+        assert_eq!(level.class_at(0, 0), Class::Hazard);
+        // Only the column touching free space is surface.
+        let s = level.surfaces(100);
+        assert_eq!(s.len(), 2);
+        assert!(s.iter().all(|s| s.normal_rad.abs() < 0.8), "{s:?}");
+        assert_eq!(level.known_points(2).len(), 2);
+    }
+}

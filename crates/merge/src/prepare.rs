@@ -1,0 +1,236 @@
+//! Everything the estimator reads from one map, computed once per map (a lander merging N
+//! maps prepares each once for all its pairs): the coarse search level with its branch and
+//! bound pyramid, the finer refinement level with its distance field, structure and known
+//! points, and the line-direction histogram.
+
+use crate::level::{Class, Level, Surface};
+use crate::map::Map;
+use crate::rotation::Directions;
+use crate::search::Fields;
+use realms_core::{Point2, Pose2};
+
+/// Settings of the estimator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// Cell of the global search, metres (coarse: the search is over every pose).
+    pub search_cell_m: f64,
+    /// Cell of refinement and verification, metres.
+    pub refine_cell_m: f64,
+    /// Search score of a structure point on the other map's free space (a hit scores 2).
+    pub free_penalty: i8,
+    /// Levels of block maxima for branch and bound (blocks up to `2^depth` cells).
+    pub pyramid_depth: usize,
+    /// At most this many structure points of the moving map enter the global search.
+    pub max_search_points: usize,
+    /// At most this many structure points per map enter verification.
+    pub max_refine_points: usize,
+    /// At most this many surface points per map enter refinement on the fine level.
+    pub max_local_points: usize,
+    /// Hypotheses scoring below this share of the best in the global search are dropped.
+    pub min_share_of_best: f64,
+    /// Branch and bound expands at most this many nodes per heading group, then keeps the
+    /// hypotheses it has (best first, so the best ones come out first): a safety net for
+    /// time. (Capping it at 8000 halves the time on Willow Garage but loses a third of its
+    /// merges at 10 % overlap, so the default is far above what any map needed.)
+    pub max_search_nodes: usize,
+    /// Distinct hypotheses taken from the global search per heading group, screened on
+    /// the coarse level.
+    pub hypotheses: usize,
+    /// The best screened hypotheses refined and verified on the fine level.
+    pub refined_hypotheses: usize,
+    /// Heading step of the global search, radians.
+    pub yaw_step_rad: f64,
+    /// Heading peaks taken from the direction histograms (each also turned by 180 degrees).
+    pub direction_peaks: usize,
+    /// Half-width of the heading search around each direction peak, radians.
+    pub peak_halfwidth_rad: f64,
+    /// Below this peak-to-mean ratio the direction histograms say nothing and every heading
+    /// is searched.
+    pub min_direction_ratio: f64,
+    /// Poses whose moving-map centres lie closer than this (and headings closer than
+    /// `distinct_rad`) are one hypothesis, metres.
+    pub distinct_m: f64,
+    /// See `distinct_m`, radians.
+    pub distinct_rad: f64,
+    /// Verification: how many conflicts one agreement is worth (score = agree - w * conflict).
+    pub conflict_weight: f64,
+    /// Refuse below this share of agreeing structure among agreeing and conflicting.
+    pub min_agreement: f64,
+    /// Refuse with fewer agreeing structure cells than this (per map, summed both ways).
+    pub min_agree_cells: usize,
+    /// Refuse when the runner-up's verified score reaches this share of the winner's.
+    pub max_runner_up_ratio: f64,
+    /// Refuse when moving the pose this far (or turning it as much) keeps too much of its
+    /// score, metres.
+    pub sharpness_shift_m: f64,
+    /// Refuse below this sharpness ([`crate::verify::sharpness`]).
+    pub min_sharpness: f64,
+    /// The precision check restarts refinement from the pose moved this far, metres...
+    pub precision_probe_m: f64,
+    /// ... and refuses if a restart settles farther than this away, metres (or turned as
+    /// much at the overlap's edge) ...
+    pub precision_apart_m: f64,
+    /// ... with at least this share of the best verified score.
+    pub precision_share: f64,
+    /// Refuse below this overlap of known cells, square metres.
+    pub min_overlap_m2: f64,
+    /// Refuse below this confidence.
+    pub min_confidence: f64,
+    /// Refuse when a clearly different pose is as consistent (agreement at least
+    /// `min_agreement`) and explains at least this share of the best one's agreeing
+    /// structure.
+    pub rival_share: f64,
+    /// A fixed map larger than this (metres, its larger side) is searched globally on a
+    /// level twice as coarse, with heading steps twice as large: the search's cost grows
+    /// with the area of translations, and refinement recovers the precision.
+    pub large_map_m: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            search_cell_m: 0.2,
+            refine_cell_m: 0.1,
+            free_penalty: 10,
+            pyramid_depth: 6,
+            max_search_points: 600,
+            max_refine_points: 4000,
+            max_local_points: 1500,
+            min_share_of_best: 0.5,
+            max_search_nodes: 2_000_000,
+            hypotheses: 5,
+            refined_hypotheses: 8,
+            yaw_step_rad: 0.5f64.to_radians(),
+            direction_peaks: 3,
+            peak_halfwidth_rad: 3.0f64.to_radians(),
+            min_direction_ratio: 1.5,
+            distinct_m: 1.0,
+            distinct_rad: 3.0f64.to_radians(),
+            conflict_weight: 10.0,
+            min_agreement: 0.95,
+            min_agree_cells: 60,
+            max_runner_up_ratio: 0.7,
+            min_overlap_m2: 8.0,
+            precision_probe_m: 0.4,
+            precision_apart_m: 0.15,
+            precision_share: 0.97,
+            sharpness_shift_m: 0.3,
+            min_sharpness: 0.25,
+            min_confidence: 0.3,
+            rival_share: 0.2,
+            large_map_m: 30.0,
+        }
+    }
+}
+
+/// One map, ready for matching.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// The search level.
+    pub search: Level,
+    /// Its branch and bound fields, built the first time the map is the fixed one.
+    fields: std::cell::OnceCell<Fields>,
+    /// A level twice as coarse, for the global search of large maps.
+    pub global: Level,
+    /// Its surface points.
+    pub global_points: Vec<Surface>,
+    /// Its branch and bound fields (built on first use).
+    global_fields: std::cell::OnceCell<Fields>,
+    /// The larger side of the map, metres.
+    pub extent_m: f64,
+    /// Fields of the search level without the pyramid, for refinement.
+    flat_fields: std::cell::OnceCell<Fields>,
+    /// Fields of the refinement level (no pyramid), for refinement.
+    local_fields: std::cell::OnceCell<Fields>,
+    /// Surface points for refinement on the fine level.
+    pub local_points: Vec<Surface>,
+    free_penalty: i8,
+    pyramid_depth: usize,
+    /// Surface points for the global search.
+    pub search_points: Vec<Surface>,
+    /// The refinement level.
+    pub refine: Level,
+    /// Surface points for verification.
+    pub refine_points: Vec<Surface>,
+    /// Known cells of the search level, grid-local metres (for the overlap area).
+    pub known_points: Vec<Point2>,
+    /// Line directions of the structure.
+    pub directions: Directions,
+    /// Centre of the known cells, grid-local metres.
+    pub centroid: Point2,
+    /// Pose of the grid-local frame in the map frame.
+    pub frame_from_grid: Pose2,
+    /// Area each of `known_points` stands for, square metres (they are thinned evenly).
+    pub known_area_per_point_m2: f64,
+}
+
+impl Prepared {
+    /// The coarse global level's fields (built on first use).
+    pub fn global_fields(&self) -> &Fields {
+        self.global_fields
+            .get_or_init(|| Fields::new(&self.global, self.free_penalty, self.pyramid_depth))
+    }
+
+    /// The search level's fields without the pyramid (built on first use).
+    pub fn flat_fields(&self) -> &Fields {
+        self.flat_fields
+            .get_or_init(|| Fields::new(&self.search, self.free_penalty, 0))
+    }
+
+    /// The refinement level's fields (built on first use).
+    pub fn local_fields(&self) -> &Fields {
+        self.local_fields
+            .get_or_init(|| Fields::new(&self.refine, self.free_penalty, 0))
+    }
+
+    /// The search fields (built on first use: only the fixed map of a pair needs them).
+    pub fn fields(&self) -> &Fields {
+        self.fields
+            .get_or_init(|| Fields::new(&self.search, self.free_penalty, self.pyramid_depth))
+    }
+
+    /// Prepares `map` with `params`.
+    pub fn new(map: &Map, params: &Params) -> Prepared {
+        let search = Level::build(map, params.search_cell_m);
+        let global = Level::build(map, 2.0 * params.search_cell_m);
+        let refine = Level::build(map, params.refine_cell_m);
+        let refine_points = refine.surfaces(params.max_refine_points);
+        let step = refine_points
+            .len()
+            .div_ceil(params.max_local_points.max(1))
+            .max(1);
+        let local_points = refine_points.iter().step_by(step).copied().collect();
+        let known_points = search.known_points(20_000);
+        let known = search
+            .class
+            .iter()
+            .filter(|c| **c != Class::Unknown)
+            .count();
+        let known_area_per_point_m2 = if known_points.is_empty() {
+            0.0
+        } else {
+            known as f64 * search.cell_m * search.cell_m / known_points.len() as f64
+        };
+        Prepared {
+            search_points: search.surfaces(params.max_search_points),
+            global_points: global.surfaces(params.max_search_points),
+            global,
+            global_fields: std::cell::OnceCell::new(),
+            extent_m: map.geometry().width_m().max(map.geometry().height_m()),
+            known_points,
+            known_area_per_point_m2,
+            refine_points,
+            directions: Directions::of(&refine),
+            centroid: map.known_centroid_in_grid(),
+            frame_from_grid: map.frame_from_grid(),
+            fields: std::cell::OnceCell::new(),
+            local_fields: std::cell::OnceCell::new(),
+            flat_fields: std::cell::OnceCell::new(),
+            local_points,
+            free_penalty: params.free_penalty,
+            pyramid_depth: params.pyramid_depth,
+            search,
+            refine,
+        }
+    }
+}

@@ -1,0 +1,482 @@
+//! Local refinement and verification of one hypothesis on the finer level.
+//!
+//! Refinement climbs the search's direction-aware score made symmetric (each map's surface
+//! points on the other's fields), first on the coarse level, then on the fine one, with
+//! halving steps down to a quarter of a fine cell, and finishes on distances to surfaces.
+//!
+//! Verification counts, both ways, structure cells that land on structure facing the same
+//! way (agree), that land on the other map's free space far from any structure (conflict),
+//! and the overlap of known cells. A true alignment agrees almost everywhere the maps
+//! overlap; a wrong one that lays walls over walls must also put the rest of its structure
+//! on the other map's free space. Two more checks judge how well the pose is pinned down:
+//! [`sharpness`] (does the score fall when the pose moves?) and [`nearby_alternative`] (is
+//! there a second optimum close by that explains the maps as well?).
+
+use crate::level::{Class, Level, Surface};
+use crate::prepare::{Params, Prepared};
+use crate::search::{DIRECTION_BINS, Fields, direction_bin};
+use realms_core::{Point2, Pose2};
+
+/// Agreeing: the other map has structure within this many fine cells.
+const AGREE_CELLS: f32 = 1.5;
+/// Conflicting: free there, and no structure within this many fine cells.
+const CONFLICT_CELLS: f32 = 2.5;
+
+/// What verification found for one pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Evidence {
+    /// Structure cells (both maps) landing on the other's structure facing the same way,
+    /// weighted by [`Surface::weight`].
+    pub agree: usize,
+    /// Structure cells (both maps) landing on the other's free space, far from structure,
+    /// weighted alike.
+    pub conflict: usize,
+    /// Overlap of the known areas, square metres.
+    pub overlap_m2: f64,
+    /// Centre of the overlap, in the second map's grid-local metres.
+    pub overlap_centre: Point2,
+    /// Root mean square distance of the overlap from its centre, metres.
+    pub overlap_radius_m: f64,
+    /// `agree - conflict_weight * conflict`.
+    pub score: f64,
+}
+
+impl Evidence {
+    /// Share of agreeing structure among agreeing and conflicting (0 with neither).
+    pub fn agreement(&self) -> f64 {
+        let n = self.agree + self.conflict;
+        if n == 0 {
+            0.0
+        } else {
+            self.agree as f64 / n as f64
+        }
+    }
+}
+
+/// A pose with its sine and cosine worked out once, for transforming many points.
+#[derive(Clone, Copy)]
+struct Rigid {
+    x_m: f64,
+    y_m: f64,
+    sin: f64,
+    cos: f64,
+}
+
+impl Rigid {
+    fn new(p: &Pose2) -> Rigid {
+        let (sin, cos) = p.yaw_rad.sin_cos();
+        Rigid {
+            x_m: p.x_m,
+            y_m: p.y_m,
+            sin,
+            cos,
+        }
+    }
+
+    #[inline]
+    fn apply(&self, p: Point2) -> Point2 {
+        Point2::new(
+            self.x_m + self.cos * p.x_m - self.sin * p.y_m,
+            self.y_m + self.sin * p.x_m + self.cos * p.y_m,
+        )
+    }
+}
+
+/// The search score of `points` carried by `target_from_source` onto `fields`.
+fn field_score(
+    fields: &Fields,
+    cell_m: f64,
+    points: &[Surface],
+    target_from_source: &Pose2,
+) -> i64 {
+    let t = Rigid::new(target_from_source);
+    points
+        .iter()
+        .map(|s| {
+            let q = t.apply(s.p);
+            let k = direction_bin(s.normal_rad + target_from_source.yaw_rad);
+            let v = fields.bins[k].value(
+                (q.x_m / cell_m).floor() as i64,
+                (q.y_m / cell_m).floor() as i64,
+            );
+            v as i64 * s.weight as i64
+        })
+        .sum()
+}
+
+/// Both maps' points on each other's fields: a pose that looks right one way but puts the
+/// other map's structure on free space scores low.
+fn symmetric_score(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> i64 {
+    match on {
+        On::Search => {
+            field_score(a.flat_fields(), a.search.cell_m, &b.search_points, a_from_b)
+                + field_score(
+                    b.flat_fields(),
+                    b.search.cell_m,
+                    &a.search_points,
+                    &a_from_b.inverse(),
+                )
+        }
+        On::Refine => {
+            field_score(a.local_fields(), a.refine.cell_m, &b.local_points, a_from_b)
+                + field_score(
+                    b.local_fields(),
+                    b.refine.cell_m,
+                    &a.local_points,
+                    &a_from_b.inverse(),
+                )
+        }
+    }
+}
+
+/// Refines a hypothesis (grid-local `a_from_b`) by coordinate ascent on the symmetric,
+/// direction-aware field score: first on the coarse level from two coarse cells and two
+/// heading steps, then on the fine level from two fine cells and half a degree down to a
+/// quarter of a fine cell.
+pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose2 {
+    let coarse = a.search.cell_m;
+    let fine = a.refine.cell_m;
+    let yaw = params.yaw_step_rad;
+    let deg = 1f64.to_radians();
+    let pose = climb(
+        a,
+        b,
+        On::Search,
+        start,
+        (2.0 * coarse, 2.0 * yaw),
+        (coarse / 2.0, 0.25 * deg),
+    );
+    let pose = climb(
+        a,
+        b,
+        On::Refine,
+        pose,
+        (2.0 * fine, 0.5 * deg),
+        (fine / 4.0, 0.03 * deg),
+    );
+    // The field score is flat within a cell of slack; finish on distances, which are not,
+    // from close enough that the nearest structure is the right one.
+    polish(a, b, pose, fine, deg)
+}
+
+/// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
+/// directions and turned as much either way (about the overlap's centre); the first
+/// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
+/// with a verified score at least `share` of `evidence`'s. In a narrow overlap of walls and
+/// a rock or two, poses a few cells or a degree apart can explain the maps equally well;
+/// then the merge is not precise, whatever its confidence.
+#[allow(clippy::too_many_arguments)]
+pub fn nearby_alternative(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    evidence: &Evidence,
+    params: &Params,
+    probe_m: f64,
+    apart_m: f64,
+    share: f64,
+) -> Option<(Pose2, Evidence)> {
+    if evidence.score <= 0.0 {
+        return None;
+    }
+    let fine = a.refine.cell_m;
+    let deg = 1f64.to_radians();
+    let c = evidence.overlap_centre;
+    let turn_rad = (probe_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let apart_rad = (apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let mut probes: Vec<Pose2> = (0..8)
+        .map(|k| {
+            let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
+            Pose2::new(
+                a_from_b.x_m + probe_m * co,
+                a_from_b.y_m + probe_m * s,
+                a_from_b.yaw_rad,
+            )
+        })
+        .collect();
+    probes.push(turned_about(a_from_b, c, turn_rad));
+    probes.push(turned_about(a_from_b, c, -turn_rad));
+    let here = a_from_b.transform_point(c);
+    for probe in probes {
+        let p = climb(
+            a,
+            b,
+            On::Refine,
+            probe,
+            (2.0 * fine, 0.5 * deg),
+            (fine / 4.0, 0.03 * deg),
+        );
+        let p = polish(a, b, p, fine, deg);
+        let moved = p.transform_point(c).distance_m(here);
+        let turned = realms_core::geometry::normalize_angle_rad(p.yaw_rad - a_from_b.yaw_rad).abs();
+        if moved <= apart_m && turned <= apart_rad {
+            continue;
+        }
+        let e = verify(a, b, &p, params.conflict_weight, On::Refine);
+        if e.score >= share * evidence.score {
+            return Some((p, e));
+        }
+    }
+    None
+}
+
+/// Distance (fine cells) from a grid-local point to `level`'s nearest structure,
+/// interpolated; `None` outside the grid.
+fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
+    let fx = p.x_m / level.cell_m - 0.5;
+    let fy = p.y_m / level.cell_m - 0.5;
+    let (x0, y0) = (fx.floor(), fy.floor());
+    let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let d00 = level.dist_at(x0, y0)?;
+    let d10 = level.dist_at(x0 + 1, y0).unwrap_or(d00);
+    let d01 = level.dist_at(x0, y0 + 1).unwrap_or(d00);
+    let d11 = level.dist_at(x0 + 1, y0 + 1).unwrap_or(d00);
+    Some((d00 * (1.0 - tx) + d10 * tx) * (1.0 - ty) + (d01 * (1.0 - tx) + d11 * tx) * ty)
+}
+
+/// Each point earns `1 - d / 2` for its distance `d` (fine cells) to the other map's
+/// nearest structure, both maps' points: smooth, for the last fraction of a cell.
+fn smooth_score(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f32 {
+    let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
+        let r = Rigid::new(t);
+        points
+            .iter()
+            .filter_map(|s| dist_interp(target, r.apply(s.p)))
+            .map(|d| (1.0 - d / 2.0).max(0.0))
+            .sum()
+    };
+    one(&b.local_points, &a.refine, a_from_b) + one(&a.local_points, &b.refine, &a_from_b.inverse())
+}
+
+/// Coordinate ascent on [`smooth_score`] from half a cell and a quarter degree down.
+fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
+    let c = b.centroid;
+    let (mut step_xy, mut step_yaw) = (fine / 2.0, 0.25 * deg);
+    let mut pose = start;
+    let mut best = smooth_score(a, b, &pose);
+    for _ in 0..60 {
+        if step_xy < fine / 8.0 && step_yaw < 0.02 * deg {
+            break;
+        }
+        let mut improved = false;
+        for m in [
+            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
+            turned_about(&pose, c, step_yaw),
+            turned_about(&pose, c, -step_yaw),
+        ] {
+            let s = smooth_score(a, b, &m);
+            if s > best {
+                (best, pose, improved) = (s, m, true);
+            }
+        }
+        if !improved {
+            step_xy /= 2.0;
+            step_yaw /= 2.0;
+        }
+    }
+    pose
+}
+
+/// `p` turned by `dyaw` about the point `c` of the moving map (grid-local metres).
+fn turned_about(p: &Pose2, c: Point2, dyaw: f64) -> Pose2 {
+    let pc = p.transform_point(c);
+    let q = Pose2::new(p.x_m, p.y_m, p.yaw_rad + dyaw);
+    let qc = q.transform_point(c);
+    Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
+}
+
+/// Coordinate ascent with halving steps from `steps` down to `min_steps` (metres, radians);
+/// turns are about the moving map's centre, which keeps heading and translation nearly
+/// independent.
+fn climb(
+    a: &Prepared,
+    b: &Prepared,
+    on: On,
+    start: Pose2,
+    steps: (f64, f64),
+    min_steps: (f64, f64),
+) -> Pose2 {
+    let c = b.centroid;
+    let turn = |p: &Pose2, dyaw: f64| {
+        let pc = p.transform_point(c);
+        let q = Pose2::new(p.x_m, p.y_m, p.yaw_rad + dyaw);
+        let qc = q.transform_point(c);
+        Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
+    };
+    let (mut step_xy, mut step_yaw) = steps;
+    let mut pose = start;
+    let mut best = symmetric_score(a, b, on, &pose);
+    for _ in 0..100 {
+        if step_xy < min_steps.0 && step_yaw < min_steps.1 {
+            break;
+        }
+        let moves = [
+            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
+            turn(&pose, step_yaw),
+            turn(&pose, -step_yaw),
+        ];
+        let mut improved = false;
+        for m in moves {
+            let s = symmetric_score(a, b, on, &m);
+            if s > best {
+                best = s;
+                pose = m;
+                improved = true;
+            }
+        }
+        if !improved {
+            step_xy /= 2.0;
+            step_yaw /= 2.0;
+        }
+    }
+    pose
+}
+
+fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> (usize, usize) {
+    let (mut agree, mut conflict) = (0, 0);
+    let t = Rigid::new(target_from_source);
+    for s in points {
+        let q = t.apply(s.p);
+        let (x, y) = (
+            (q.x_m / target.cell_m).floor() as i64,
+            (q.y_m / target.cell_m).floor() as i64,
+        );
+        let Some(d) = target.dist_at(x, y) else {
+            continue;
+        };
+        if d <= AGREE_CELLS {
+            // A surface facing the same way (within a direction bin) within a cell.
+            let n = direction_bin(s.normal_rad + target_from_source.yaw_rad);
+            let facing = (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    target.bin_at(x + dx, y + dy).is_some_and(|m| {
+                        let d = m.abs_diff(n);
+                        d.min(DIRECTION_BINS - d) <= 1
+                    })
+                })
+            });
+            if facing {
+                agree += s.weight as usize;
+            }
+        } else if d > CONFLICT_CELLS && target.class_at(x, y) == Class::Free {
+            conflict += s.weight as usize;
+        }
+    }
+    (agree, conflict)
+}
+
+/// Which level verification reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum On {
+    /// The coarse search level: a cheap screen of many hypotheses.
+    Search,
+    /// The fine level: the verdict.
+    Refine,
+}
+
+/// Verifies grid-local `a_from_b` on level `on`.
+pub fn verify(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    conflict_weight: f64,
+    on: On,
+) -> Evidence {
+    let (ag1, co1, ag2, co2) = match on {
+        On::Search => {
+            let (ag1, co1) = count_one_way(&b.search_points, &a.search, a_from_b);
+            let (ag2, co2) = count_one_way(&a.search_points, &b.search, &a_from_b.inverse());
+            (ag1, co1, ag2, co2)
+        }
+        On::Refine => {
+            let (ag1, co1) = count_one_way(&b.refine_points, &a.refine, a_from_b);
+            let (ag2, co2) = count_one_way(&a.refine_points, &b.refine, &a_from_b.inverse());
+            (ag1, co1, ag2, co2)
+        }
+    };
+    let t = Rigid::new(a_from_b);
+    let (mut overlap_points, mut sx, mut sy, mut sq) = (0usize, 0.0, 0.0, 0.0);
+    for p in &b.known_points {
+        let q = t.apply(*p);
+        let (x, y) = (
+            (q.x_m / a.search.cell_m).floor() as i64,
+            (q.y_m / a.search.cell_m).floor() as i64,
+        );
+        if a.search.class_at(x, y) != Class::Unknown {
+            overlap_points += 1;
+            sx += p.x_m;
+            sy += p.y_m;
+            sq += p.x_m * p.x_m + p.y_m * p.y_m;
+        }
+    }
+    let (overlap_centre, overlap_radius_m) = if overlap_points == 0 {
+        (b.centroid, 0.0)
+    } else {
+        let n = overlap_points as f64;
+        let (cx, cy) = (sx / n, sy / n);
+        (
+            Point2::new(cx, cy),
+            (sq / n - cx * cx - cy * cy).max(0.0).sqrt(),
+        )
+    };
+    let agree = ag1 + ag2;
+    let conflict = co1 + co2;
+    Evidence {
+        agree,
+        conflict,
+        overlap_m2: overlap_points as f64 * b.known_area_per_point_m2,
+        overlap_centre,
+        overlap_radius_m,
+        score: agree as f64 - conflict_weight * conflict as f64,
+    }
+}
+
+/// How sharply verification singles out `a_from_b`: one less the best share of its score
+/// kept by the pose moved `shift_m` in any of eight directions or turned either way about
+/// the overlap's centre by the angle that moves the overlap `shift_m` on average. Near 0 when the maps could slide (walls and nothing
+/// else in the overlap) or turn; near 1 when any move loses most of the agreement. The
+/// same idea as judging a correlative match by the spread of its score (Olson 2009).
+pub fn sharpness(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    evidence: &Evidence,
+    conflict_weight: f64,
+    shift_m: f64,
+) -> f64 {
+    if evidence.score <= 0.0 {
+        return 0.0;
+    }
+    let turn_rad = (shift_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let c = evidence.overlap_centre;
+    let turned = |dyaw: f64| {
+        let pc = a_from_b.transform_point(c);
+        let q = Pose2::new(a_from_b.x_m, a_from_b.y_m, a_from_b.yaw_rad + dyaw);
+        let qc = q.transform_point(c);
+        Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
+    };
+    let mut moved: Vec<Pose2> = (0..8)
+        .map(|k| {
+            let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
+            Pose2::new(
+                a_from_b.x_m + shift_m * co,
+                a_from_b.y_m + shift_m * s,
+                a_from_b.yaw_rad,
+            )
+        })
+        .collect();
+    moved.push(turned(turn_rad));
+    moved.push(turned(-turn_rad));
+    let kept = moved
+        .iter()
+        .map(|p| verify(a, b, p, conflict_weight, On::Refine).score / evidence.score)
+        .fold(0.0, f64::max);
+    (1.0 - kept).clamp(0.0, 1.0)
+}

@@ -1,0 +1,88 @@
+//! Shared by the integration tests: where the recorded maps are, a lunar source map from
+//! the simulator's ground truth, and how far an estimate may be from the answer.
+
+#![allow(dead_code)]
+
+use realms_core::{Grid, Point2, Pose2};
+use realms_merge::synth::{self, Pair};
+use realms_merge::{Estimate, Map, MapCell};
+use realms_sim::{GroundTruth, Scenario, Terrain, TruthCell};
+use std::path::PathBuf;
+
+/// `../shared/data/maps` of the checkout (never copied into the repository).
+pub fn maps_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/maps")
+}
+
+/// A recorded map by name.
+pub fn recorded(name: &str) -> Map {
+    let path = maps_dir().join(format!("{name}.yaml"));
+    realms_merge::io::read(&path).unwrap_or_else(|e| {
+        panic!(
+            "{} must be readable (../shared/data present?): {e:#}",
+            path.display()
+        )
+    })
+}
+
+/// The default arena of `seed` with `large` lidar-visible boulders and `small` rocks, as the
+/// map a perfect sensor suite would build (lidar obstacles occupied, craters and low rocks
+/// hazards, explorable ground free).
+pub fn lunar(seed: u64, large: u32, small: u32) -> Grid<MapCell> {
+    let mut sc = Scenario {
+        seed,
+        ..Scenario::default()
+    };
+    sc.boulders.large_count = large;
+    sc.boulders.small_count = small;
+    let terrain = Terrain::generate(&sc);
+    let truth = GroundTruth::derive(&terrain, &sc);
+    let trav = truth.traversability.cells();
+    let lidar = truth.lidar_obstacles.cells();
+    let explorable = truth.explorable.cells();
+    let cells = (0..trav.len())
+        .map(|i| {
+            if lidar[i] {
+                MapCell::Occupied
+            } else if trav[i] != TruthCell::Free {
+                MapCell::Hazard
+            } else if explorable[i] {
+                MapCell::Free
+            } else {
+                MapCell::Unknown
+            }
+        })
+        .collect();
+    Grid::from_cells(*truth.traversability.geometry(), cells).expect("truth geometry")
+}
+
+/// Translation error at the second map's known centre (metres) and heading error (radians).
+pub fn error(found: &Pose2, truth: &Pose2, b: &Map) -> (f64, f64) {
+    let centre: Point2 = b
+        .frame_from_grid()
+        .transform_point(b.known_centroid_in_grid());
+    synth::pose_error(found, truth, centre)
+}
+
+/// Whether an estimate is within 3 cells (at its centre) and 2 degrees of the truth.
+pub fn close(found: &Pose2, truth: &Pose2, b: &Map) -> bool {
+    let (m, rad) = error(found, truth, b);
+    m < 3.0 * b.geometry().resolution_m && rad < 2f64.to_radians()
+}
+
+/// An accepted estimate must be right: panics on a wrong merge; returns whether accepted.
+pub fn accepted_and_right(est: &Estimate, pair: &Pair, what: &str) -> bool {
+    match est.accepted() {
+        Some(p) => {
+            let (m, rad) = error(&p, &pair.a_from_b, &pair.b);
+            assert!(
+                close(&p, &pair.a_from_b, &pair.b),
+                "{what}: WRONG merge accepted: off by {m:.2} m, {:.2} deg (confidence {:.2})",
+                rad.to_degrees(),
+                est.confidence
+            );
+            true
+        }
+        None => false,
+    }
+}

@@ -1,0 +1,135 @@
+//! Relative pose estimation against known answers: pairs cut from the recorded maps and
+//! from simulated lunar arenas, turned and shifted at random. Accepted estimates must be
+//! right (a wrong merge fails the test); most must be accepted; maps that share nothing
+//! must be refused; swapping the maps must give the inverse.
+
+mod common;
+
+use rand::SeedableRng;
+use realms_merge::synth::{self, Pair, PairSpec};
+use realms_merge::{Params, Prepared, estimate};
+
+fn pairs(
+    source: &realms_core::Grid<realms_merge::MapCell>,
+    overlap: f64,
+    seed: u64,
+    n: usize,
+) -> Vec<Pair> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let spec = PairSpec {
+        overlap,
+        ..PairSpec::default()
+    };
+    (0..n)
+        .map(|_| synth::make_pair(source, &spec, &mut rng).expect("source has known cells"))
+        .collect()
+}
+
+fn run(pairs: &[Pair], what: &str) -> usize {
+    let params = Params::default();
+    let mut accepted = 0;
+    for (i, pair) in pairs.iter().enumerate() {
+        let est = estimate(
+            &Prepared::new(&pair.a, &params),
+            &Prepared::new(&pair.b, &params),
+            &params,
+        );
+        if common::accepted_and_right(&est, pair, &format!("{what} #{i}")) {
+            accepted += 1;
+        }
+    }
+    accepted
+}
+
+#[test]
+fn recorded_office_pairs_are_recovered() {
+    let office = common::recorded("tb3_office_real").cells;
+    let ok = run(&pairs(&office, 0.4, 11, 3), "office 40 %");
+    assert!(ok >= 2, "only {ok} of 3 office pairs merged");
+}
+
+#[test]
+fn simulated_building_pairs_are_recovered() {
+    let warehouse = common::recorded("aws_small_warehouse").cells;
+    let ok = run(&pairs(&warehouse, 0.4, 12, 3), "warehouse 40 %");
+    assert!(ok >= 2, "only {ok} of 3 warehouse pairs merged");
+}
+
+#[test]
+fn sparse_lunar_pairs_are_recovered() {
+    let arena = common::lunar(3, 5, 120);
+    let ok = run(&pairs(&arena, 0.3, 13, 3), "lunar 30 %");
+    assert!(ok >= 2, "only {ok} of 3 lunar pairs merged");
+}
+
+#[test]
+fn maps_that_share_nothing_are_refused() {
+    let params = Params::default();
+    for (what, source) in [
+        ("office", common::recorded("tb3_office_real").cells),
+        ("lunar", common::lunar(4, 5, 120)),
+    ] {
+        for pair in pairs(&source, 0.0, 14, 2) {
+            let est = estimate(
+                &Prepared::new(&pair.a, &params),
+                &Prepared::new(&pair.b, &params),
+                &params,
+            );
+            assert!(
+                est.accepted().is_none(),
+                "{what}: disjoint maps merged at {:?} with confidence {:.2}",
+                est.a_from_b,
+                est.confidence
+            );
+            assert!(est.refusal.as_deref().is_some_and(|r| !r.is_empty()));
+        }
+    }
+}
+
+#[test]
+fn swapping_the_maps_gives_the_inverse() {
+    let params = Params::default();
+    let office = common::recorded("aws_bookstore").cells;
+    let pair = &pairs(&office, 0.5, 15, 1)[0];
+    let (a, b) = (
+        Prepared::new(&pair.a, &params),
+        Prepared::new(&pair.b, &params),
+    );
+    let ab = estimate(&a, &b, &params).accepted().expect("A <- B merges");
+    let ba = estimate(&b, &a, &params).accepted().expect("B <- A merges");
+    assert!(common::close(&ab, &pair.a_from_b, &pair.b));
+    assert!(
+        common::close(&ba.inverse(), &pair.a_from_b, &pair.b),
+        "{ab:?} vs inverse of {ba:?}"
+    );
+}
+
+#[test]
+fn a_known_start_is_confirmed_or_found_drifted() {
+    use realms_core::Pose2;
+    use realms_merge::{PriorWindow, estimate_with_prior};
+    let params = Params::default();
+    let office = common::recorded("tb3_office_real").cells;
+    let pair = &pairs(&office, 0.4, 16, 1)[0];
+    let (a, b) = (
+        Prepared::new(&pair.a, &params),
+        Prepared::new(&pair.b, &params),
+    );
+    let window = PriorWindow::default();
+    // The rover started where the lander says: confirmed, no drift.
+    let same = estimate_with_prior(&a, &b, pair.a_from_b, &window, &params);
+    let found = same.estimate.accepted().expect("the prior is confirmed");
+    assert!(common::close(&found, &pair.a_from_b, &pair.b));
+    assert!(!same.drifted, "{same:?}");
+    // The map has drifted 1 m and 4 degrees from the prior: found, and reported.
+    let prior = pair
+        .a_from_b
+        .compose(&Pose2::new(0.8, -0.6, 4f64.to_radians()));
+    let drifted = estimate_with_prior(&a, &b, prior, &window, &params);
+    let found = drifted
+        .estimate
+        .accepted()
+        .expect("the drifted pose is found");
+    assert!(common::close(&found, &pair.a_from_b, &pair.b), "{found:?}");
+    assert!(drifted.drifted && drifted.drift_m > 0.5, "{drifted:?}");
+}
