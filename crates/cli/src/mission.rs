@@ -188,9 +188,39 @@ pub fn run(args: MissionArgs) -> Result<()> {
     }
     println!("results in {}/", out.display());
     println!(
-        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  {}roverN_map.png/.pgm/.yaml",
-        if net.simulated { "network.png  " } else { "" }
+        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  {}{}roverN_map.png/.pgm/.yaml",
+        if net.simulated { "network.png  " } else { "" },
+        if report.merge.is_some() {
+            "merged_map.png/.pgm/.yaml  "
+        } else {
+            ""
+        }
     );
+    if let Some(m) = &report.merge {
+        for l in &m.maps {
+            match (&l.pose, &l.refused) {
+                (Some(p), _) => println!(
+                    "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}{}",
+                    l.rover,
+                    m.reference,
+                    p[0],
+                    p[1],
+                    p[2].to_degrees(),
+                    l.confidence,
+                    if l.drifted {
+                        ", drifted from the known start"
+                    } else {
+                        ""
+                    }
+                ),
+                (None, why) => println!(
+                    "  merge: {} refused: {}",
+                    l.rover,
+                    why.as_deref().unwrap_or("no pose")
+                ),
+            }
+        }
+    }
     Ok(())
 }
 

@@ -5,6 +5,8 @@ use crate::Mission;
 use crate::slam_record::{RoverSlamSummary, map_grid};
 use realms_core::map_server::{self, Trinary};
 use realms_core::msgs::OccupancyGrid;
+use realms_merge::MapCell;
+use realms_node::lander_merge::MergedMap;
 use realms_sim::SimEvent;
 use realms_sim::render;
 use serde::Serialize;
@@ -64,6 +66,8 @@ pub struct MissionReport {
     /// The network: traffic per rover and node, map updates against full grids, the
     /// ground's map lag, drops.
     pub network: crate::netreport::NetworkSummary,
+    /// The lander's merge of the rovers' maps (absent if fewer than two maps reached it).
+    pub merge: Option<MergeSummary>,
     /// The other files in the folder.
     pub files: BTreeMap<&'static str, &'static str>,
 }
@@ -215,6 +219,7 @@ impl MissionReport {
                 .map(|(k, v)| (k.to_string(), *v))
                 .collect(),
             network: crate::netreport::NetworkSummary::new(mission),
+            merge: merge_summary(mission),
             files: {
                 let mut files = BTreeMap::from([
                     ("truth", "truth.png"),
@@ -225,10 +230,102 @@ impl MissionReport {
                 if mission.network().is_some() {
                     files.insert("network", "network.png");
                 }
+                if merged(mission).is_some() {
+                    files.insert("merged_map", "merged_map.png");
+                }
                 files
             },
         }
     }
+}
+
+/// The lander's merged map, if it made one.
+fn merged(mission: &Mission) -> Option<&MergedMap> {
+    mission
+        .station(realms_net::NodeAddr::Lander)
+        .and_then(|s| s.merged())
+}
+
+/// `mission.json`'s `merge`.
+#[derive(Clone, Debug, Serialize)]
+pub struct MergeSummary {
+    /// The rover whose map frame the merged map is in.
+    pub reference: String,
+    /// How each other rover's map joined.
+    pub maps: Vec<MergeLinkSummary>,
+}
+
+/// One rover's map in the merge.
+#[derive(Clone, Debug, Serialize)]
+pub struct MergeLinkSummary {
+    /// The rover.
+    pub rover: String,
+    /// Pose of its map's frame in the reference's, `[x_m, y_m, yaw_rad]`, if merged.
+    pub pose: Option<[f64; 3]>,
+    /// Confidence, 0..1.
+    pub confidence: f64,
+    /// Why it was left out.
+    pub refused: Option<String>,
+    /// Whether its map has drifted from the known start (beyond 0.3 m or 2 deg).
+    pub drifted: bool,
+    /// How far, metres.
+    pub drift_m: f64,
+}
+
+fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
+    let m = merged(mission)?;
+    Some(MergeSummary {
+        reference: m.reference.to_string(),
+        maps: m
+            .links
+            .iter()
+            .map(|l| MergeLinkSummary {
+                rover: l.rover.to_string(),
+                pose: l.reference_from_map.map(|p| [p.x_m, p.y_m, p.yaw_rad]),
+                confidence: l.confidence,
+                refused: l.refused.clone(),
+                drifted: l.drifted,
+                drift_m: l.drift_m,
+            })
+            .collect(),
+    })
+}
+
+/// Writes `merged_map.png` (every known cell in the colour of the first rover whose map
+/// knew it, obstacles black, hazards orange, unknown grey) and the map_server pair
+/// `merged_map.pgm` + `.yaml`.
+fn write_merged(m: &MergedMap, dir: &Path) -> Result<(), ReportError> {
+    let geo = *m.cells.geometry();
+    let pixels: Vec<[u8; 3]> = m
+        .cells
+        .cells()
+        .iter()
+        .zip(m.contribution.cells())
+        .map(|(c, bits)| match c {
+            MapCell::Unknown => [205, 205, 205],
+            MapCell::Occupied => [0, 0, 0],
+            MapCell::Hazard => [240, 140, 20],
+            MapCell::Free => {
+                let rover = bits.trailing_zeros() as usize;
+                let k = m
+                    .rovers
+                    .get(rover)
+                    .map_or(0, |r| r.0.saturating_sub(1) as usize);
+                let c = ROVER_COLORS[k % ROVER_COLORS.len()];
+                [c[0] / 2 + 120, c[1] / 2 + 120, c[2] / 2 + 120]
+            }
+        })
+        .collect();
+    if let Some(img) = realms_core::Grid::from_cells(geo, pixels) {
+        img.write_png(&dir.join("merged_map.png"), |c| *c)?;
+    }
+    let trinary = m.cells.map(|c| match c {
+        MapCell::Unknown => Trinary::Unknown,
+        MapCell::Free => Trinary::Free,
+        _ => Trinary::Occupied,
+    });
+    map_server::write(&trinary, dir, "merged_map")?;
+    Ok(())
 }
 
 /// File stem of a rover's map in the results folder.
@@ -377,6 +474,9 @@ pub fn write_results(
     }
 
     write_coverage(mission, &truth_img, &dir.join("coverage.png"))?;
+    if let Some(m) = merged(mission) {
+        write_merged(m, dir)?;
+    }
     if let Some(chart) = crate::netreport::network_chart(mission, &ROVER_COLORS) {
         chart.write_png(&dir.join("network.png"), |c| *c)?;
     }

@@ -9,10 +9,12 @@
 //! - [`mapping::Mapping`]: the rover's SLAM on board, and what it publishes.
 //! - [`navigation::Navigator`]: exploration, planning, path following and recovery.
 //! - [`guard::Guard`]: the reactive check of the rover's own sensors.
+//! - [`lander_merge`]: the lander's job of merging every rover's map into one.
 //! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
 //!   from its updates, its pose and its status.
 
 pub mod guard;
+pub mod lander_merge;
 pub mod mapping;
 pub mod navigation;
 pub mod rover;

@@ -4,6 +4,7 @@
 //! The lander is where rover data is stored for the mission (its merging comes with the
 //! map-merging issue); the ground station is what the operator sees.
 
+use crate::lander_merge::{MergedMap, merge_from_known_start};
 use crate::{Node, Outgoing};
 use realms_core::msgs::{Header, LocalisationState, MapDelta, Message, NavStatus, NetworkStats};
 use realms_core::{Duration, Grid, Pose2, RoverId, Time, Topic};
@@ -12,6 +13,9 @@ use std::collections::BTreeMap;
 
 /// Where the lander publishes the network's traffic statistics.
 pub const NETWORK_STATS_TOPIC: &str = "lander/network/stats";
+
+/// The lander merges the rovers' maps this often.
+const MERGE_PERIOD: Duration = Duration::from_secs(120);
 
 /// A snapshot request is repeated after this long if no snapshot came.
 const REQUEST_RETRY: Duration = Duration::from_secs(10);
@@ -52,6 +56,10 @@ pub struct StationNode {
     fleet: Vec<RoverId>,
     rovers: BTreeMap<RoverId, RoverRecord>,
     network: Option<NetworkStats>,
+    /// The lander merges the rovers' maps this often (the ground station does not merge).
+    merge_period: Option<Duration>,
+    next_merge: Time,
+    merged: Option<MergedMap>,
     outbox: Vec<Outgoing>,
 }
 
@@ -66,6 +74,9 @@ impl StationNode {
             fleet,
             rovers: BTreeMap::new(),
             network: None,
+            merge_period: (role == StationRole::Lander).then_some(MERGE_PERIOD),
+            next_merge: Time::ZERO,
+            merged: None,
             outbox: Vec::new(),
         }
     }
@@ -73,6 +84,28 @@ impl StationNode {
     /// What the station knows of `rover`.
     pub fn rover(&self, rover: RoverId) -> Option<&RoverRecord> {
         self.rovers.get(&rover)
+    }
+
+    /// The lander's latest merge of the rovers' maps.
+    pub fn merged(&self) -> Option<&MergedMap> {
+        self.merged.as_ref()
+    }
+
+    /// Merges every rover's rebuilt map now (the lander's job).
+    pub fn merge_now(&mut self) {
+        let maps: Vec<(RoverId, &Grid<i8>)> = self
+            .fleet
+            .iter()
+            .filter_map(|r| {
+                self.rovers
+                    .get(r)
+                    .and_then(|rec| rec.map.map())
+                    .map(|m| (*r, m))
+            })
+            .collect();
+        if maps.len() >= 2 {
+            self.merged = merge_from_known_start(&maps);
+        }
     }
 
     /// The latest network statistics heard.
@@ -137,7 +170,15 @@ impl Node for StationNode {
         }
         let Some(rover) = topic.rover() else { return };
         match message {
-            Message::MapDelta(delta) => self.on_delta(now, rover, delta),
+            Message::MapDelta(delta) => {
+                self.on_delta(now, rover, delta);
+                if let Some(period) = self.merge_period
+                    && now >= self.next_merge
+                {
+                    self.next_merge = now + period;
+                    self.merge_now();
+                }
+            }
             Message::Pose(p) => {
                 let q = &p.pose.pose;
                 let pose = Pose2::new(q.position.x, q.position.y, q.orientation.yaw_rad());
@@ -155,6 +196,12 @@ impl Node for StationNode {
     }
 
     fn on_tick(&mut self, _now: Time) {}
+
+    fn on_shutdown(&mut self, _now: Time) {
+        if self.merge_period.is_some() {
+            self.merge_now();
+        }
+    }
 
     fn drain_outbox(&mut self) -> Vec<Outgoing> {
         std::mem::take(&mut self.outbox)
