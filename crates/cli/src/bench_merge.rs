@@ -16,7 +16,7 @@ use rand::SeedableRng;
 use realms_core::Grid;
 use realms_merge::synth::{self, PairSpec};
 use realms_merge::{MapCell, Params, Prepared};
-use realms_sim::{GroundTruth, Scenario, Terrain, TruthCell};
+use realms_sim::{GroundTruth, Scenario, Terrain};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -50,24 +50,7 @@ struct Row {
 /// obstacles occupied; craters, steep slopes and rocks the lidar passes over as hazards;
 /// explorable ground free; the rest unknown.
 pub fn lunar_map(truth: &GroundTruth) -> Grid<MapCell> {
-    let trav = truth.traversability.cells();
-    let lidar = truth.lidar_obstacles.cells();
-    let explorable = truth.explorable.cells();
-    let cells = (0..trav.len())
-        .map(|i| {
-            if lidar[i] {
-                MapCell::Occupied
-            } else if trav[i] != TruthCell::Free {
-                MapCell::Hazard
-            } else if explorable[i] {
-                MapCell::Free
-            } else {
-                MapCell::Unknown
-            }
-        })
-        .collect();
-    Grid::from_cells(*truth.traversability.geometry(), cells)
-        .expect("same geometry as the truth grids")
+    truth.perfect_map().map(|v| MapCell::from_occupancy(*v))
 }
 
 /// The default arena with fewer rocks and craters.

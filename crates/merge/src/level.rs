@@ -76,15 +76,21 @@ pub const LINE_WEIGHT: u8 = 1;
 /// Weight of a point on a corner, a rock or a rim.
 pub const SHAPE_WEIGHT: u8 = 8;
 
-/// Whether the structure within four cells of `(x, y)` is a straight line: the covariance
-/// of the structure cells there is nearly one-dimensional.
-fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
-    const R: usize = 4;
+/// The shape of the feature cells within `r` cells of `(x, y)` (their structure tensor):
+/// how many there are, their coherence `(l1 - l2) / (l1 + l2)` (1 on a straight line, 0 on
+/// a round blob) and the direction of their main axis, radians in `[-pi/2, pi/2]`. `None`
+/// when there are none or they are all one point.
+pub fn local_shape(
+    feature: impl Fn(i64, i64) -> bool,
+    x: i64,
+    y: i64,
+    r: i64,
+) -> Option<(f64, f64, f64)> {
     let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for ny in y.saturating_sub(R)..(y + R + 1).min(h) {
-        for nx in x.saturating_sub(R)..(x + R + 1).min(w) {
-            if class[ny * w + nx].is_feature() {
-                let (fx, fy) = (nx as f64 - x as f64, ny as f64 - y as f64);
+    for dy in -r..=r {
+        for dx in -r..=r {
+            if feature(x + dx, y + dy) {
+                let (fx, fy) = (dx as f64, dy as f64);
                 n += 1.0;
                 sx += fx;
                 sy += fy;
@@ -94,13 +100,29 @@ fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
             }
         }
     }
-    if n < 4.0 {
-        return false;
+    if n == 0.0 {
+        return None;
     }
     let (mx, my) = (sx / n, sy / n);
     let (cxx, cyy, cxy) = (sxx / n - mx * mx, syy / n - my * my, sxy / n - mx * my);
     let tr = cxx + cyy;
-    tr > 0.0 && ((cxx - cyy).powi(2) + 4.0 * cxy * cxy).sqrt() / tr > 0.9
+    if tr <= 1e-9 {
+        return None;
+    }
+    let coherence = ((cxx - cyy).powi(2) + 4.0 * cxy * cxy).sqrt() / tr;
+    Some((n, coherence, 0.5 * (2.0 * cxy).atan2(cxx - cyy)))
+}
+
+/// Whether the structure within four cells of `(x, y)` is a straight line: the covariance
+/// of the structure cells there is nearly one-dimensional.
+fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
+    let feature = |fx: i64, fy: i64| {
+        (0..w as i64).contains(&fx)
+            && (0..h as i64).contains(&fy)
+            && class[fy as usize * w + fx as usize].is_feature()
+    };
+    local_shape(feature, x as i64, y as i64, 4)
+        .is_some_and(|(n, coherence, _)| n >= 4.0 && coherence > 0.9)
 }
 
 impl Level {

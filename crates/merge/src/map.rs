@@ -2,6 +2,7 @@
 //! and the pose of the grid in the map's own frame (a ROS map_server origin, yaw included).
 
 use realms_core::map_server::Trinary;
+use realms_core::msgs::OccupancyGrid;
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
 /// What one cell of a map says.
@@ -30,6 +31,18 @@ impl MapCell {
     /// Whether the cell is structure the matcher can align on (an obstacle or a hazard).
     pub fn is_feature(self) -> bool {
         matches!(self, MapCell::Occupied | MapCell::Hazard)
+    }
+}
+
+impl MapCell {
+    /// A cell of a realms occupancy map (ROS values, and the hazard value).
+    pub fn from_occupancy(v: i8) -> MapCell {
+        match v {
+            OccupancyGrid::FREE => MapCell::Free,
+            OccupancyGrid::OCCUPIED => MapCell::Occupied,
+            OccupancyGrid::HAZARD => MapCell::Hazard,
+            _ => MapCell::Unknown,
+        }
     }
 }
 

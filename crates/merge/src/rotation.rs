@@ -5,7 +5,7 @@
 //! directions taken from the local covariance of structure cells instead of a Hough
 //! transform, weighted by how line-like the neighbourhood is (a boulder votes for nothing).
 
-use crate::level::Level;
+use crate::level::{Level, local_shape};
 
 /// Histogram bins over 180 degrees.
 pub const BINS: usize = 180;
@@ -28,35 +28,13 @@ impl Directions {
                 if !level.class_at(x, y).is_feature() {
                     continue;
                 }
-                let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) =
-                    (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-                for dy in -R..=R {
-                    for dx in -R..=R {
-                        if level.class_at(x + dx, y + dy).is_feature() {
-                            let (fx, fy) = (dx as f64, dy as f64);
-                            n += 1.0;
-                            sx += fx;
-                            sy += fy;
-                            sxx += fx * fx;
-                            syy += fy * fy;
-                            sxy += fx * fy;
-                        }
-                    }
-                }
+                let feature = |fx: i64, fy: i64| level.class_at(fx, fy).is_feature();
+                let Some((n, coherence, angle)) = local_shape(feature, x, y, R) else {
+                    continue;
+                };
                 if n < 3.0 {
                     continue;
                 }
-                let (mx, my) = (sx / n, sy / n);
-                let cxx = sxx / n - mx * mx;
-                let cyy = syy / n - my * my;
-                let cxy = sxy / n - mx * my;
-                let tr = cxx + cyy;
-                if tr <= 1e-9 {
-                    continue;
-                }
-                // Coherence (l1 - l2) / (l1 + l2): 1 for a line, 0 for a round blob.
-                let coherence = ((cxx - cyy).powi(2) + 4.0 * cxy * cxy).sqrt() / tr;
-                let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
                 let deg = angle.to_degrees().rem_euclid(180.0);
                 let weight = coherence * coherence;
                 // Split the vote between the two nearest bins.

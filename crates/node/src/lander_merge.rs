@@ -3,7 +3,6 @@
 //! expected to coincide with the first's; the known-start mode of `realms-merge` refines that
 //! prior, notices a map that has drifted from it, and refuses rather than merge wrong.
 
-use realms_core::msgs::OccupancyGrid;
 use realms_core::{Grid, Pose2, RoverId};
 use realms_merge::compose::compose;
 use realms_merge::{Map, MapCell, Params, Prepared, PriorWindow, estimate_with_prior};
@@ -42,12 +41,7 @@ pub struct MergedMap {
 
 /// A rover's published map as the merger's cells.
 pub fn to_merge_map(grid: &Grid<i8>) -> Map {
-    Map::new(grid.map(|v| match *v {
-        OccupancyGrid::FREE => MapCell::Free,
-        OccupancyGrid::OCCUPIED => MapCell::Occupied,
-        OccupancyGrid::HAZARD => MapCell::Hazard,
-        _ => MapCell::Unknown,
-    }))
+    Map::new(grid.map(|v| MapCell::from_occupancy(*v)))
 }
 
 /// Merges `maps` (rover and rebuilt map, reference first) from the known start: every map's
@@ -92,6 +86,7 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realms_core::msgs::OccupancyGrid;
     use realms_core::{GridGeometry, Point2};
 
     /// A 20 m x 15 m walled hall at 5 cm with a few rocks, everything shifted by `dx_m`.

@@ -4,6 +4,7 @@
 
 use crate::scenario::Scenario;
 use crate::terrain::{SurfaceKind, Terrain};
+use realms_core::msgs::OccupancyGrid;
 use realms_core::{Cell, Grid};
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -34,6 +35,30 @@ pub struct GroundTruth {
 }
 
 impl GroundTruth {
+    /// The map a perfect sensor suite would build, in ROS occupancy values with the hazard
+    /// value of realms' maps: lidar obstacles occupied; craters, steep slopes and rocks the
+    /// lidar passes over hazard; explorable ground free; the rest unknown.
+    pub fn perfect_map(&self) -> Grid<i8> {
+        let trav = self.traversability.cells();
+        let lidar = self.lidar_obstacles.cells();
+        let explorable = self.explorable.cells();
+        let cells = (0..trav.len())
+            .map(|i| {
+                if lidar[i] {
+                    OccupancyGrid::OCCUPIED
+                } else if trav[i] != TruthCell::Free {
+                    OccupancyGrid::HAZARD
+                } else if explorable[i] {
+                    OccupancyGrid::FREE
+                } else {
+                    OccupancyGrid::UNKNOWN
+                }
+            })
+            .collect();
+        Grid::from_cells(*self.traversability.geometry(), cells)
+            .expect("the truth grids share one geometry")
+    }
+
     /// Derives ground truth from a terrain and the rover limits of its scenario.
     ///
     /// - Obstacle: walls, the lander, and rocks standing more than `max_step_m` above the floor.

@@ -6,7 +6,7 @@
 use realms_core::{Grid, Point2, Pose2};
 use realms_merge::synth::{self, Pair};
 use realms_merge::{Estimate, Map, MapCell};
-use realms_sim::{GroundTruth, Scenario, Terrain, TruthCell};
+use realms_sim::{GroundTruth, Scenario, Terrain};
 use std::path::PathBuf;
 
 /// `../shared/data/maps` of the checkout (never copied into the repository).
@@ -36,24 +36,9 @@ pub fn lunar(seed: u64, large: u32, small: u32) -> Grid<MapCell> {
     sc.boulders.large_count = large;
     sc.boulders.small_count = small;
     let terrain = Terrain::generate(&sc);
-    let truth = GroundTruth::derive(&terrain, &sc);
-    let trav = truth.traversability.cells();
-    let lidar = truth.lidar_obstacles.cells();
-    let explorable = truth.explorable.cells();
-    let cells = (0..trav.len())
-        .map(|i| {
-            if lidar[i] {
-                MapCell::Occupied
-            } else if trav[i] != TruthCell::Free {
-                MapCell::Hazard
-            } else if explorable[i] {
-                MapCell::Free
-            } else {
-                MapCell::Unknown
-            }
-        })
-        .collect();
-    Grid::from_cells(*truth.traversability.geometry(), cells).expect("truth geometry")
+    GroundTruth::derive(&terrain, &sc)
+        .perfect_map()
+        .map(|v| MapCell::from_occupancy(*v))
 }
 
 /// Translation error at the second map's known centre (metres) and heading error (radians).
