@@ -5,6 +5,10 @@ use realms_core::{RoverId, Time, Topic};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
+/// A packet that has taken this many mesh hops is in a loop (the mesh is far smaller), and
+/// is dropped.
+pub const MAX_HOPS: u8 = 16;
+
 /// Bytes each packet costs beyond its payload: 802.11 MAC and mesh headers (about 40), IP
 /// and UDP (28) and our own header (topic id, sequence, stamp: about 12).
 pub const HEADER_BYTES: usize = 80;
@@ -61,6 +65,8 @@ pub struct Packet {
     pub created: Time,
     /// The encoded message.
     pub payload: Vec<u8>,
+    /// Mesh hops taken so far.
+    pub hops: u8,
 }
 
 impl Packet {

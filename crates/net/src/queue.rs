@@ -20,6 +20,8 @@ pub enum DropReason {
     Superseded,
     /// The radio gave up on it (best effort only).
     LinkLoss,
+    /// It went round a routing loop (more than [`crate::packet::MAX_HOPS`] hops).
+    HopLimit,
     /// The node holding it went down.
     NodeDown,
 }
@@ -61,12 +63,15 @@ impl TxQueue {
     pub fn push(&mut self, p: Packet, dropped: &mut Vec<(Packet, DropReason)>) {
         let level = p.qos.priority.index();
         if p.qos.supersedes()
-            && let Some(old) = self.levels[level]
-                .iter_mut()
-                .find(|q| q.src == p.src && q.dst == p.dst && q.topic == p.topic)
+            && let Some(i) = self.levels[level]
+                .iter()
+                .position(|q| q.src == p.src && q.dst == p.dst && q.topic == p.topic)
+            && let Some(old) = self.levels[level].remove(i)
         {
+            // The newer one goes to the back: map packets keep the order they were made in,
+            // so an update never overtakes the snapshot it builds on.
             self.bytes = self.bytes + p.wire_bytes() - old.wire_bytes();
-            let old = std::mem::replace(old, p);
+            self.levels[level].push_back(p);
             dropped.push((old, DropReason::Superseded));
             return;
         }
@@ -151,6 +156,7 @@ mod tests {
             qos: Qos::for_topic(&Topic::new(topic)),
             created: Time::ZERO,
             payload: vec![0; bytes],
+            hops: 0,
         }
     }
 
@@ -181,11 +187,22 @@ mod tests {
         assert_eq!((dropped[0].0.id, dropped[0].1), (1, DropReason::QueueFull));
         q.push(packet(5, "rover1/localisation", 100), &mut dropped);
         assert_eq!((dropped[1].0.id, dropped[1].1), (3, DropReason::QueueFull));
-        // A newer map packet replaces the queued one in place.
+        // A newer map packet replaces the queued one.
         q.push(packet(6, "rover1/map/delta", 100), &mut dropped);
         assert_eq!((dropped[2].0.id, dropped[2].1), (2, DropReason::Superseded));
         let ids: Vec<u64> = q.iter().map(|p| p.id).collect();
         assert_eq!(ids, vec![5, 4, 6]);
+        // ... behind other map packets queued since, and never a snapshot's topic (the pose
+        // goes to make room: map data is never dropped).
+        q.push(packet(7, "rover1/map/snapshot", 100), &mut dropped);
+        q.push(packet(8, "rover1/map/delta", 100), &mut dropped);
+        let ids: Vec<u64> = q.iter().map(|p| p.id).collect();
+        assert_eq!(ids, vec![5, 7, 8]);
+        let gone: Vec<(u64, DropReason)> = dropped.iter().map(|(p, why)| (p.id, *why)).collect();
+        assert_eq!(
+            gone[3..],
+            [(4, DropReason::QueueFull), (6, DropReason::Superseded)]
+        );
         assert_eq!(q.bytes(), 3 * one);
     }
 

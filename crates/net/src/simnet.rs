@@ -237,6 +237,7 @@ impl SimNetwork {
             qos,
             created: self.now,
             payload,
+            hops: 0,
         };
         *seq += 1;
         self.next_id += 1;
@@ -301,10 +302,11 @@ impl SimNetwork {
     pub fn advance_to(&mut self, until: Time) {
         loop {
             let t = self.channel_free_at.max(self.now);
-            self.land_mesh_arrivals(t);
             if t > until {
+                // The frame on the air ends after `until`: it lands on a later call.
                 break;
             }
+            self.land_mesh_arrivals(t);
             self.now = t;
             if t >= self.next_refresh {
                 self.refresh_paths();
@@ -572,7 +574,11 @@ impl SimNetwork {
                 .forwarded
                 .add(p.wire_bytes());
         }
-        if delivered {
+        if delivered && p.hops >= crate::packet::MAX_HOPS {
+            self.dropped(p, DropReason::HopLimit);
+        } else if delivered {
+            let mut p = p;
+            p.hops += 1;
             self.in_air.push((end, hop, p));
         } else if p.qos.reliability == Reliability::Reliable {
             if let Some(n) = self.mesh.get_mut(&from) {
@@ -682,7 +688,12 @@ impl SimNetwork {
             }
         }
         for p in ready {
-            self.hand_over(to, p);
+            if p.expired(self.now) {
+                // Its turn came too late (it waited for an earlier one).
+                self.stats.drop(&p.topic, DropReason::Expired);
+            } else {
+                self.hand_over(to, p);
+            }
         }
     }
 
@@ -740,7 +751,9 @@ impl SimNetwork {
                 break;
             }
             if let Some(light) = self.cfg.ground.light_after(start.as_secs_f64()) {
-                self.ground_direction(up).free_at = Time::from_secs_f64(light);
+                // At least a nanosecond on: an end finer than the clock must not stall here.
+                let resume = Time::from_secs_f64(light).max(start + Duration::from_ns(1));
+                self.ground_direction(up).free_at = resume;
                 continue;
             }
             let (from, to) = (dir.from, dir.to);

@@ -395,8 +395,15 @@ impl Mapping {
         };
         let update = self.delta_encoder.update(&grid, self.snapshot_wanted);
         self.snapshot_wanted = false;
+        // Snapshots go on their own topic: a queue that supersedes stale map updates must
+        // never replace a snapshot with an update that builds on it.
+        let leaf = if update.is_snapshot() {
+            "map/snapshot"
+        } else {
+            "map/delta"
+        };
         out.push(Outgoing {
-            topic: self.id.topic("map/delta"),
+            topic: self.id.topic(leaf),
             message: Message::MapDelta(Box::new(MapDelta {
                 header: map.header,
                 update,

@@ -155,9 +155,15 @@ impl Node for StationNode {
         self.fleet
             .iter()
             .flat_map(|r| {
-                ["map/delta", "pose", "localisation", "nav/status"]
-                    .iter()
-                    .map(|leaf| r.topic(leaf))
+                [
+                    "map/delta",
+                    "map/snapshot",
+                    "pose",
+                    "localisation",
+                    "nav/status",
+                ]
+                .iter()
+                .map(|leaf| r.topic(leaf))
             })
             .chain(std::iter::once(Topic::new(NETWORK_STATS_TOPIC)))
             .collect()
