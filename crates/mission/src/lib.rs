@@ -559,13 +559,15 @@ impl Mission {
                             .map(|Outgoing { topic, message }| (from, topic, message)),
                     );
                 }
+                // Only map updates are counted for the report; other traffic skips the lookup.
+                let rover = matches!(message, Message::MapDelta(_))
+                    .then(|| self.rover_index(&topic))
+                    .flatten();
                 if remote && let Some(net) = &mut self.net {
                     let qos = Qos::for_topic(&topic);
                     let payload = realms_core::codec::encode(&message);
                     if let Message::MapDelta(delta) = &message
-                        && let Some(k) = topic
-                            .rover()
-                            .and_then(|r| self.world.rovers().position(|b| b.id == r))
+                        && let Some(k) = rover
                     {
                         let u = &delta.update;
                         let d = &mut self.downlink[k];

@@ -599,10 +599,9 @@ impl SimNetwork {
             .partition(|(at, _, _)| *at <= t);
         self.in_air = later;
         for (at, node, p) in due {
-            let keep = self.now;
+            // Delivered at its own arrival time; the caller moves the clock on to `t` after.
             self.now = self.now.max(at);
             self.arrive(node, p);
-            self.now = keep.max(at);
         }
     }
 
