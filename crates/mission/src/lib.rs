@@ -197,7 +197,10 @@ impl Mission {
             let lander = Point2::new(scenario.lander.x_m, scenario.lander.y_m);
             let mut net = SimNetwork::new(cfg, lander);
             for b in world.rovers() {
-                net.add_mesh_node(NodeAddr::rover(b.id), b.pose.position());
+                let addr = NodeAddr::rover(b.id);
+                net.add_mesh_node(addr, b.pose.position());
+                // The rover's drive listens for velocities from other computers.
+                net.subscribe(addr, b.id.topic("cmd_vel"));
             }
             net
         });
@@ -382,6 +385,12 @@ impl Mission {
                     continue;
                 }
             };
+            if let (Some(rover), Message::CmdVel(cmd)) = (d.topic.rover(), &message)
+                && d.topic.leaf() == "cmd_vel"
+                && d.to == NodeAddr::rover(rover)
+            {
+                self.world.command(rover, cmd.clone());
+            }
             if d.to == NodeAddr::Ground
                 && let Message::MapDelta(delta) = &message
                 && let Some(k) = self.rover_index(&d.topic)
@@ -539,12 +548,18 @@ impl Mission {
                 if matches!(topic.leaf(), "pose" | "localisation" | "map" | "nav/status") {
                     self.record_slam(t, &topic, &message);
                 }
+                let mut remote = false;
                 if let (Some(rover), Message::CmdVel(cmd)) = (topic.rover(), &message)
                     && topic.leaf() == "cmd_vel"
                 {
-                    self.world.command(rover, cmd.clone());
+                    // The drive is on the rover's own computer: a velocity from anywhere else
+                    // (the operator's teleoperation) crosses the network to reach it.
+                    if self.net.is_none() || origin == NodeAddr::rover(rover) {
+                        self.world.command(rover, cmd.clone());
+                    } else {
+                        remote = true;
+                    }
                 }
-                let mut remote = false;
                 for i in self.bus.subscribers(&topic).to_vec() {
                     if self.net.is_some() && self.addrs[i] != origin {
                         remote = true;

@@ -124,3 +124,49 @@ fn malformed_packets_are_counted_and_dropped_and_the_mission_goes_on() {
     let arrivals = &mission.downlink()[0].arrivals;
     assert!(arrivals.iter().any(|(_, at)| at.as_secs_f64() > 25.0));
 }
+
+/// The velocity an operator sends from the ground: a turn no navigator would command.
+fn teleop(mission: &Mission) -> realms_core::msgs::Message {
+    let mut cmd = realms_core::msgs::TwistStamped::default();
+    cmd.header.stamp = mission.now();
+    cmd.header.frame_id = "rover1/base_link".into();
+    cmd.twist.angular.z = 0.123;
+    realms_core::msgs::Message::CmdVel(cmd)
+}
+
+#[test]
+fn teleoperation_from_the_ground_crosses_the_link_and_dies_in_a_blackout() {
+    let s = small_with_blackout();
+    let mut mission = Mission::with_options(World::new(&s), MissionOptions::default());
+    let topic = realms_core::RoverId(1).topic("cmd_vel");
+    let counts = |m: &Mission| {
+        let stats = m.network().expect("simulated").stats();
+        let t = stats.topics.get(&topic).cloned().unwrap_or_default();
+        let expired = t.dropped.get("Expired").copied().unwrap_or(0);
+        (t.published.messages, t.delivered.messages, expired)
+    };
+    let turning = |m: &Mission| {
+        let rover = m.world().rovers().next().expect("rover1");
+        rover
+            .command
+            .as_ref()
+            .is_some_and(|c| c.twist.angular.z == 0.123)
+    };
+
+    mission.run_until(Time::from_secs_f64(20.0));
+    let cmd = teleop(&mission);
+    mission.publish(topic.clone(), cmd);
+    // Nothing reaches the rover before the link has carried it.
+    assert!(!turning(&mission), "the command skipped the network");
+    assert_eq!(counts(&mission), (1, 0, 0));
+    mission.run_until(Time::from_secs_f64(23.0));
+    assert_eq!(counts(&mission), (1, 1, 0), "delivered once, in time");
+
+    // In a blackout it waits at the ground, outlives its time to live and is dropped, not
+    // executed two minutes late.
+    mission.run_until(Time::from_secs_f64(90.0));
+    let cmd = teleop(&mission);
+    mission.publish(topic.clone(), cmd);
+    mission.run_until(Time::from_secs_f64(200.0));
+    assert_eq!(counts(&mission), (2, 1, 1));
+}

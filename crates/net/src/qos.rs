@@ -67,7 +67,9 @@ impl Qos {
         let secs = |s: i64| Some(Duration::from_secs(s));
         let (reliability, priority, ttl) =
             match topic.as_str().rsplit('/').next().unwrap_or_default() {
-                "cmd_vel" => (Reliability::BestEffort, Priority::Command, secs(1)),
+                // Three seconds: the ground link alone takes one, and teleoperation from the ground
+                // must still work; older velocities are worse than none.
+                "cmd_vel" => (Reliability::BestEffort, Priority::Command, secs(3)),
                 "goal" | "command" | "cancel" => {
                     (Reliability::Reliable, Priority::Command, secs(600))
                 }

@@ -434,9 +434,15 @@ impl SimNetwork {
                         })
                     })
                     .min_by(|a, b| a.metric_us.total_cmp(&b.metric_us));
-                let current = self.routes.get(&(src, dst)).map(|r| {
+                // The current path is kept (hysteresis) only while its next hop is strictly
+                // nearer the destination than this node: the feasibility condition of loop-free
+                // distance-vector routing (Babel, RFC 8966 s. 2.4). Without it two nodes that
+                // each keep an old path through the other would bounce packets between them.
+                let own = best.get(&src).copied().unwrap_or(f64::INFINITY);
+                let current = self.routes.get(&(src, dst)).and_then(|r| {
                     let h = r.next_hop;
-                    cost(self, src, h) + best.get(&h).copied().unwrap_or(f64::INFINITY)
+                    let via = best.get(&h).copied().unwrap_or(f64::INFINITY);
+                    (via < own).then(|| cost(self, src, h) + via)
                 });
                 match (candidate, current) {
                     (None, _) => {
@@ -447,8 +453,12 @@ impl SimNetwork {
                             r.metric_us = cur;
                         }
                     }
-                    (Some(c), old) => {
-                        if old.is_some() {
+                    (Some(c), _) => {
+                        if self
+                            .routes
+                            .get(&(src, dst))
+                            .is_some_and(|r| r.next_hop != c.next_hop)
+                        {
                             self.stats.route_changes += 1;
                         }
                         self.routes.insert((src, dst), c);

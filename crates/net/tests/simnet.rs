@@ -240,3 +240,57 @@ fn a_relay_raises_throughput_at_the_edge_of_range_as_in_the_field() {
         "relay gain {gain:.1} ({direct:.2} -> {relayed:.2} Mb/s)"
     );
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(1500))]
+
+    /// However the rovers wander and however loaded the links are, every node's next hops
+    /// lead to the destination: no path bounces between two nodes that each kept an old path
+    /// through the other (the hysteresis must not override loop freedom).
+    #[test]
+    fn paths_never_loop_while_rovers_move(
+        start in proptest::collection::vec((0.0f64..300.0, -150.0f64..150.0), 5),
+        steps in proptest::collection::vec(
+            proptest::collection::vec((-8.0f64..8.0, -8.0f64..8.0), 5),
+            40,
+        ),
+    ) {
+        let mut net = SimNetwork::new(NetworkConfig::default(), Point2::new(0.0, 0.0));
+        let rovers: Vec<NodeAddr> = (1..=5).map(NodeAddr::Rover).collect();
+        let mut at: Vec<Point2> = start.iter().map(|&(x, y)| Point2::new(x, y)).collect();
+        for (r, p) in rovers.iter().zip(&at) {
+            net.add_mesh_node(*r, *p);
+        }
+        let topic = Topic::new("rover1/camera/image");
+        net.subscribe(NodeAddr::Lander, topic.clone());
+        let mut nodes = rovers.clone();
+        nodes.push(NodeAddr::Lander);
+        for (k, step) in steps.iter().enumerate() {
+            for ((r, p), (dx, dy)) in rovers.iter().zip(at.iter_mut()).zip(step) {
+                *p = Point2::new(p.x_m + dx, p.y_m + dy);
+                net.set_position(*r, *p);
+            }
+            // Traffic from every rover so the load term moves the metrics too.
+            for r in &rovers {
+                net.publish(*r, &topic, vec![0; 4000], Qos::for_topic(&topic));
+            }
+            net.advance_to(Time::from_secs_f64(k as f64 + 1.0));
+            net.take_deliveries();
+            for &src in &nodes {
+                for &dst in &nodes {
+                    let mut here = src;
+                    let mut hops = 0;
+                    while here != dst {
+                        let Some(next) = net.next_hop(here, dst) else { break };
+                        here = next;
+                        hops += 1;
+                        proptest::prop_assert!(
+                            hops <= nodes.len(),
+                            "path {src:?} -> {dst:?} loops at {:.0} s", k + 1
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
