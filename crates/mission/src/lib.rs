@@ -446,6 +446,11 @@ impl Mission {
         &self.downlink
     }
 
+    /// The node of the `index`-th rover.
+    pub fn rover_node(&self, index: usize) -> Option<&realms_node::rover::RoverNode> {
+        self.nodes.get(index)?.as_rover()
+    }
+
     /// The network's counters, unless communication is ideal.
     pub fn network(&self) -> Option<&SimNetwork> {
         self.net.as_ref()
@@ -487,6 +492,17 @@ impl Mission {
         let mut pending = Vec::new();
         for (node, from) in self.nodes.iter_mut().zip(&self.addrs) {
             node.on_shutdown(t);
+            if let Some(rover) = node.as_rover() {
+                let trajectory: Vec<(f64, realms_core::Pose2)> = rover
+                    .mapping()
+                    .trajectory()
+                    .iter()
+                    .map(|s| (s.timestamp_s, s.pose))
+                    .collect();
+                if let Some(k) = self.world.rovers().position(|b| b.id == rover.id()) {
+                    self.slam[k].attach_trajectory(&trajectory);
+                }
+            }
             pending.extend(
                 node.drain_outbox()
                     .into_iter()

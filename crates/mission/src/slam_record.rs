@@ -22,6 +22,9 @@ pub struct PoseCheck {
     pub odometry: Pose2,
     /// The truth.
     pub truth: Pose2,
+    /// SLAM's estimate of the same instant at the end of the mission, after every loop
+    /// closure (what an absolute trajectory error grades), once attached.
+    pub optimised: Option<Pose2>,
 }
 
 /// A change of localisation state as reported.
@@ -57,7 +60,29 @@ impl RoverSlamRecord {
                 estimate,
                 odometry,
                 truth,
+                optimised: None,
             });
+        }
+    }
+}
+
+/// A scan's pose this close in time to a check stands for it (scans come at 10 Hz).
+const SAME_INSTANT_S: f64 = 0.051;
+
+impl RoverSlamRecord {
+    /// Attaches the rover's final trajectory (`(t_s, pose)` per scan, in time order) to the
+    /// checks it covers.
+    pub fn attach_trajectory(&mut self, trajectory: &[(f64, Pose2)]) {
+        for c in &mut self.checks {
+            let t = c.t.as_secs_f64();
+            let k = trajectory.partition_point(|(s, _)| *s < t);
+            c.optimised = [k.checked_sub(1), Some(k)]
+                .into_iter()
+                .flatten()
+                .filter_map(|i| trajectory.get(i))
+                .filter(|(s, _)| (s - t).abs() <= SAME_INSTANT_S)
+                .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+                .map(|(_, p)| *p);
         }
     }
 }
@@ -75,26 +100,64 @@ pub struct PoseErrors {
     pub heading_rmse_deg: f64,
 }
 
-fn errors(checks: &[PoseCheck], pick: impl Fn(&PoseCheck) -> Pose2) -> PoseErrors {
-    if checks.is_empty() {
-        return PoseErrors::default();
-    }
-    let (mut sq, mut max, mut sq_yaw) = (0.0, 0.0f64, 0.0);
-    for c in checks {
-        let d = pick(c).relative_to(&c.truth);
-        let e = pick(c).position().distance_m(c.truth.position());
+/// The errors of `(estimate, truth)` pairs in time order.
+fn errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
+    let (mut sq, mut max, mut sq_yaw, mut n) = (0.0, 0.0f64, 0.0, 0usize);
+    let mut last = 0.0;
+    for (estimate, truth) in pairs {
+        let d = estimate.relative_to(&truth);
+        let e = estimate.position().distance_m(truth.position());
         sq += e * e;
         max = max.max(e);
         sq_yaw += d.yaw_rad.to_degrees().powi(2);
+        n += 1;
+        last = e;
     }
-    let n = checks.len() as f64;
-    let last = checks.last().expect("not empty");
+    if n == 0 {
+        return PoseErrors::default();
+    }
+    let n = n as f64;
     PoseErrors {
         rmse_m: (sq / n).sqrt(),
         max_m: max,
-        final_m: pick(last).position().distance_m(last.truth.position()),
+        final_m: last,
         heading_rmse_deg: (sq_yaw / n).sqrt(),
     }
+}
+
+/// The RMS distance of `(estimate, truth)` point pairs once the estimates are moved by the
+/// rotation and translation that fit them best to the truth (the closed form of Horn 1987 /
+/// Umeyama 1991 in the plane); `None` without pairs.
+pub fn aligned_rmse(pairs: &[(Point2, Point2)]) -> Option<f64> {
+    if pairs.is_empty() {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let mean = |f: fn(&(Point2, Point2)) -> (f64, f64)| {
+        let (x, y) = pairs
+            .iter()
+            .map(f)
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        (x / n, y / n)
+    };
+    let (ax, ay) = mean(|p| (p.0.x_m, p.0.y_m));
+    let (bx, by) = mean(|p| (p.1.x_m, p.1.y_m));
+    let (mut dot, mut cross) = (0.0, 0.0);
+    for (a, b) in pairs {
+        let (px, py, qx, qy) = (a.x_m - ax, a.y_m - ay, b.x_m - bx, b.y_m - by);
+        dot += px * qx + py * qy;
+        cross += px * qy - py * qx;
+    }
+    let (s, c) = cross.atan2(dot).sin_cos();
+    let sq: f64 = pairs
+        .iter()
+        .map(|(a, b)| {
+            let (px, py) = (a.x_m - ax, a.y_m - ay);
+            let (x, y) = (c * px - s * py + bx, s * px + c * py + by);
+            (x - b.x_m).powi(2) + (y - b.y_m).powi(2)
+        })
+        .sum();
+    Some((sq / n).sqrt())
 }
 
 /// How one rover's map compares with the truth.
@@ -218,8 +281,16 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
 /// One rover's SLAM in `mission.json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RoverSlamSummary {
-    /// SLAM's pose estimate against the truth.
+    /// SLAM's pose estimate against the truth, as published at the time.
     pub pose_error: PoseErrors,
+    /// The absolute trajectory error: SLAM's final trajectory (loop closures applied to
+    /// past poses) against the truth at the same instants; `None` if none was attached.
+    pub trajectory_error: Option<PoseErrors>,
+    /// The RMS position error of the final trajectory after the rigid motion that best lays
+    /// it on the truth is taken out: the absolute trajectory error as the TUM RGB-D benchmark
+    /// defines it (Sturm et al., IROS 2012), blind to a drift of the whole map against the
+    /// start, metres.
+    pub trajectory_error_aligned_m: Option<f64>,
     /// Wheel odometry against the truth, the baseline.
     pub odometry_error: PoseErrors,
     /// Graded instants (one per second of scans).
@@ -236,12 +307,54 @@ impl RoverSlamRecord {
     /// The summary for the report.
     pub fn summary(&self, truth: &GroundTruth, map_png: Option<String>) -> RoverSlamSummary {
         RoverSlamSummary {
-            pose_error: errors(&self.checks, |c| c.estimate),
-            odometry_error: errors(&self.checks, |c| c.odometry),
+            pose_error: errors(self.checks.iter().map(|c| (c.estimate, c.truth))),
+            trajectory_error: self.checks.iter().any(|c| c.optimised.is_some()).then(|| {
+                errors(
+                    self.checks
+                        .iter()
+                        .filter_map(|c| c.optimised.map(|o| (o, c.truth))),
+                )
+            }),
+            trajectory_error_aligned_m: aligned_rmse(
+                &self
+                    .checks
+                    .iter()
+                    .filter_map(|c| c.optimised.map(|o| (o.position(), c.truth.position())))
+                    .collect::<Vec<_>>(),
+            ),
+            odometry_error: errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
             checks: self.checks.len(),
             localisation: self.changes.clone(),
             map: self.map.as_ref().map(|m| grade_map(m, truth)),
             map_png,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn aligned_error_ignores_a_rigid_motion_and_keeps_a_change_of_shape() {
+        let est = [(0.0, 0.0), (4.0, 0.0), (4.0, 3.0), (-1.0, 2.0)];
+        let (s, c) = 0.5f64.sin_cos();
+        let moved: Vec<(Point2, Point2)> = est
+            .iter()
+            .map(|&(x, y)| {
+                let truth = Point2::new(c * x - s * y + 3.0, s * x + c * y - 2.0);
+                (Point2::new(x, y), truth)
+            })
+            .collect();
+        assert!(aligned_rmse(&moved).expect("pairs") < 1e-9);
+        // A rod 2 m long estimated where the truth is 4 m long: no rigid motion helps, each
+        // end stays 1 m off.
+        let stretched = [
+            (Point2::new(-1.0, 0.0), Point2::new(-2.0, 5.0)),
+            (Point2::new(1.0, 0.0), Point2::new(2.0, 5.0)),
+        ];
+        let e = aligned_rmse(&stretched).expect("pairs");
+        assert!((e - 1.0).abs() < 1e-9, "{e}");
+        assert_eq!(aligned_rmse(&[]), None);
     }
 }

@@ -59,4 +59,9 @@ pub trait Node {
     fn as_station(&self) -> Option<&station::StationNode> {
         None
     }
+
+    /// The node as a rover, for a driver that grades what its SLAM estimated.
+    fn as_rover(&self) -> Option<&rover::RoverNode> {
+        None
+    }
 }

@@ -63,6 +63,12 @@ pub fn rover_mapper_config() -> MapperConfig {
     // Hours of driving in one hall: keep one submap per few metres of ground, not per few
     // metres driven.
     cfg.trim_radius_m = Some(3.0);
+    // The rover parks often (calibrating, planning, waiting): matching while parked only
+    // lets the pose wander.
+    cfg.motion_filter = Some(realms_slam::mapper::MotionFilter {
+        translation_m: 0.02,
+        rotation_rad: 0.5f64.to_radians(),
+    });
     cfg
 }
 
@@ -135,6 +141,17 @@ impl Mapping {
     /// The pose estimate now, in the map frame.
     pub fn pose(&self) -> Pose2 {
         self.mapper.pose()
+    }
+
+    /// Every scan's pose as the SLAM now has it (loop closures move past poses too), for
+    /// grading the trajectory afterwards.
+    pub fn trajectory(&self) -> Vec<realms_slam::trajectory::StampedPose> {
+        self.mapper.trajectory()
+    }
+
+    /// Loop closures accepted so far.
+    pub fn closures(&self) -> usize {
+        self.mapper.closures
     }
 
     /// Takes a wheel odometry reading. Its translation is kept; its heading is replaced by

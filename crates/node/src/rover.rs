@@ -82,6 +82,16 @@ impl RoverNode {
         }
     }
 
+    /// Which rover this is.
+    pub fn id(&self) -> RoverId {
+        self.id
+    }
+
+    /// The rover's on-board SLAM.
+    pub fn mapping(&self) -> &Mapping {
+        &self.mapping
+    }
+
     fn header(&self, now: Time) -> Header {
         Header {
             stamp: now,
@@ -258,6 +268,10 @@ impl Node for RoverNode {
 
     fn on_shutdown(&mut self, now: Time) {
         self.mapping.publish_map(now, &mut self.outbox);
+    }
+
+    fn as_rover(&self) -> Option<&RoverNode> {
+        Some(self)
     }
 
     fn drain_outbox(&mut self) -> Vec<Outgoing> {

@@ -78,6 +78,21 @@ pub struct MapperConfig {
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
     pub trim_radius_m: Option<f64>,
+    /// Motion filter: a scan is matched only once odometry has moved this far since the last
+    /// matched scan (`None`: match every scan).
+    pub motion_filter: Option<MotionFilter>,
+}
+
+/// Scans taken while the robot stands still carry nothing new, and matching them against a
+/// young, sparse submap lets the estimate wander (a degree of heading while parked in
+/// feature-poor terrain, then baked into every later keyframe). Standard practice (e.g.
+/// Cartographer's motion filter, slam_toolbox's minimum travel) is to skip them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionFilter {
+    /// Odometry translation since the last matched scan, metres ...
+    pub translation_m: f64,
+    /// ... or rotation, radians, before the next scan is matched.
+    pub rotation_rad: f64,
 }
 
 impl Default for MapperConfig {
@@ -96,6 +111,7 @@ impl Default for MapperConfig {
             loop_candidates: 3,
             health: HealthConfig::default(),
             trim_radius_m: None,
+            motion_filter: None,
         }
     }
 }
@@ -151,6 +167,8 @@ pub struct Mapper {
     scans: Vec<ScanPose>,
     pose: Pose2,
     last_odom: Option<Pose2>,
+    /// Odometry at the last scan that was matched (for the motion filter).
+    last_matched_odom: Option<Pose2>,
     pending_closures: bool,
     /// Closures found in the last few keyframes, and whether each is in the graph.
     recent_closures: Vec<(Edge, bool)>,
@@ -175,6 +193,7 @@ impl Mapper {
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
             last_odom: None,
+            last_matched_odom: None,
             pending_closures: false,
             recent_closures: Vec::new(),
             health: HealthMonitor::new(cfg.health),
@@ -231,8 +250,16 @@ impl Mapper {
                 .submaps
                 .iter()
                 .position(|s| !s.finished && s.keyframes > 0);
+            let moved = match (self.cfg.motion_filter, self.last_matched_odom) {
+                (Some(f), Some(at)) => {
+                    let d = at.inverse() * odom;
+                    d.x_m.hypot(d.y_m) >= f.translation_m || d.yaw_rad.abs() >= f.rotation_rad
+                }
+                _ => true,
+            };
             self.pose = match tracking {
-                Some(i) if points.len() >= MIN_POINTS => {
+                Some(i) if points.len() >= MIN_POINTS && moved => {
+                    self.last_matched_odom = Some(odom);
                     let origin = self.graph.nodes[self.submaps[i].origin_node];
                     let m = match_scan(
                         &self.submaps[i].map,
@@ -246,6 +273,8 @@ impl Mapper {
                 }
                 _ => predicted,
             };
+            // The first scan fixes the pose as firmly as a match would.
+            self.last_matched_odom.get_or_insert(odom);
             let observed = TrackedScan {
                 time_s,
                 odom_delta,

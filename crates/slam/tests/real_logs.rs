@@ -180,3 +180,49 @@ fn verified_loop_closures_keep_the_aces_building_consistent() {
         "ACES with closures: {e:?}"
     );
 }
+
+/// A parked robot's scans (a real scan, re-read with centimetre noise) are not matched with
+/// the motion filter on: the pose cannot wander; the first scan after it moves is matched.
+#[test]
+fn motion_filter_holds_a_parked_robot_still_and_matches_once_it_moves() {
+    use realms_slam::frontend::scan_points;
+    use realms_slam::mapper::{Mapper, MapperConfig, MotionFilter};
+    let l = log("intel");
+    let base = scan_points(&l.scans[0], 0.1, 25.0);
+    let noisy = |k: usize| -> Vec<Point2> {
+        base.iter()
+            .enumerate()
+            .map(|(i, p)| {
+                // Deterministic +-2 cm along the beam, different every scan.
+                let e = 0.02 * (((i * 7 + k * 13) % 5) as f64 - 2.0) / 2.0;
+                let r = p.x_m.hypot(p.y_m);
+                Point2::new(p.x_m * (1.0 + e / r), p.y_m * (1.0 + e / r))
+            })
+            .collect()
+    };
+    let parked = |filter: Option<MotionFilter>| {
+        let mut mapper = Mapper::new(MapperConfig {
+            motion_filter: filter,
+            ..Default::default()
+        });
+        let mut scores = Vec::new();
+        for k in 0..30 {
+            let t = mapper.add_points(k as f64 * 0.1, Pose2::IDENTITY, noisy(k));
+            scores.push(t.score);
+        }
+        let moved = Pose2::new(0.05, 0.0, 0.0);
+        let last = mapper.add_points(3.0, moved, noisy(30));
+        (mapper.trajectory(), scores, last)
+    };
+    let filter = MotionFilter {
+        translation_m: 0.02,
+        rotation_rad: 0.5f64.to_radians(),
+    };
+    let (traj, scores, last) = parked(Some(filter));
+    assert!(traj[..30].iter().all(|s| s.pose == Pose2::IDENTITY));
+    assert!(scores[2..].iter().all(|s| s.is_none()), "{scores:?}");
+    assert!(last.score.is_some(), "matched once moved");
+    // Without the filter every parked scan is matched (and the pose may move).
+    let (_, scores, _) = parked(None);
+    assert!(scores[2..].iter().all(|s| s.is_some()));
+}
