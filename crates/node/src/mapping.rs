@@ -69,6 +69,8 @@ pub fn rover_mapper_config() -> MapperConfig {
         translation_m: 0.02,
         rotation_rad: 0.5f64.to_radians(),
     });
+    // The gyro's heading, bias measured at the start, holds a match that would turn more.
+    cfg.max_heading_step_rad = Some(1f64.to_radians());
     cfg
 }
 

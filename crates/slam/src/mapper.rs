@@ -23,6 +23,7 @@ use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan,
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
 use crate::posegraph::{Edge, PoseGraph};
 use crate::trajectory::StampedPose;
+use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Point2, Pose2};
 
 /// Loop closures are searched at every this many keyframes.
@@ -81,6 +82,10 @@ pub struct MapperConfig {
     /// Motion filter: a scan is matched only once odometry has moved this far since the last
     /// matched scan (`None`: match every scan).
     pub motion_filter: Option<MotionFilter>,
+    /// With a gyro: a match that turns the pose more than this away from the odometry's
+    /// heading is redone with the heading held to the odometry's (`None`: trust the match;
+    /// right for wheel-only headings such as the recorded logs'), radians.
+    pub max_heading_step_rad: Option<f64>,
 }
 
 /// Scans taken while the robot stands still carry nothing new, and matching them against a
@@ -112,6 +117,7 @@ impl Default for MapperConfig {
             health: HealthConfig::default(),
             trim_radius_m: None,
             motion_filter: None,
+            max_heading_step_rad: None,
         }
     }
 }
@@ -150,6 +156,9 @@ pub struct Tracked {
 
 /// A refinement that moves the searched pose farther than this found another basin: refused.
 const MAX_REFINE_SHIFT_M: f64 = 0.2;
+/// The heading prior's weight (per point, per square radian) when a match's turn is refused:
+/// far above what the map's gradients give a point, so the heading stays put.
+const HELD_HEADING_WEIGHT: f64 = 1e7;
 /// Scans with fewer endpoints than this are neither matched nor mapped.
 const MIN_POINTS: usize = 10;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
@@ -178,6 +187,8 @@ pub struct Mapper {
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
+    /// Matches redone with the heading held to the odometry's.
+    pub heading_holds: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
 }
@@ -201,6 +212,7 @@ impl Mapper {
             lost_at: None,
             last_information: [[0.0; 3]; 3],
             closures: 0,
+            heading_holds: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
         }
     }
@@ -261,12 +273,21 @@ impl Mapper {
                 Some(i) if points.len() >= MIN_POINTS && moved => {
                     self.last_matched_odom = Some(odom);
                     let origin = self.graph.nodes[self.submaps[i].origin_node];
-                    let m = match_scan(
-                        &self.submaps[i].map,
-                        &points,
-                        origin.inverse() * predicted,
-                        &self.cfg.frontend.matcher,
-                    );
+                    let prior = origin.inverse() * predicted;
+                    let map = &self.submaps[i].map;
+                    let mut m = match_scan(map, &points, prior, &self.cfg.frontend.matcher);
+                    if let Some(gate) = self.cfg.max_heading_step_rad
+                        && normalize_angle_rad(m.pose.yaw_rad - prior.yaw_rad).abs() > gate
+                    {
+                        // Over one scan a gyro's heading is far more precise than a match
+                        // on a few boulders, whose turns are how sparse scenes go wrong.
+                        let held = MatcherConfig {
+                            prior_rotation_weight: HELD_HEADING_WEIGHT,
+                            ..self.cfg.frontend.matcher
+                        };
+                        m = match_scan(map, &points, prior, &held);
+                        self.heading_holds += 1;
+                    }
                     score = Some(m.score);
                     self.last_information = m.information;
                     origin * m.pose

@@ -226,3 +226,31 @@ fn motion_filter_holds_a_parked_robot_still_and_matches_once_it_moves() {
     let (_, scores, _) = parked(None);
     assert!(scores[2..].iter().all(|s| s.is_some()));
 }
+
+/// Odometry says the robot turned 3 degrees; the scan (the same real scan again) says it did
+/// not. Trusting the match takes the scan's word; with a gyro's heading and a 1 degree gate
+/// the heading is held to the odometry's instead.
+#[test]
+fn a_match_that_turns_against_the_gyro_is_held_to_its_heading() {
+    use realms_slam::frontend::scan_points;
+    use realms_slam::mapper::{Mapper, MapperConfig};
+    let l = log("intel");
+    let points = scan_points(&l.scans[0], 0.1, 25.0);
+    let turned = Pose2::new(0.0, 0.0, 3f64.to_radians());
+    let heading_after = |gate: Option<f64>| {
+        let mut mapper = Mapper::new(MapperConfig {
+            max_heading_step_rad: gate,
+            ..Default::default()
+        });
+        mapper.add_points(0.0, Pose2::IDENTITY, points.clone());
+        let t = mapper.add_points(0.1, turned, points.clone());
+        (t.pose.yaw_rad.to_degrees(), mapper.heading_holds)
+    };
+    let (free, holds) = heading_after(None);
+    // The match turns back towards the scan's heading (the odometry prior slows it).
+    assert!(free < 2.0, "the match follows the scan: {free}");
+    assert_eq!(holds, 0);
+    let (held, holds) = heading_after(Some(1f64.to_radians()));
+    assert!((held - 3.0).abs() < 0.1, "held to the odometry: {held}");
+    assert_eq!(holds, 1);
+}
