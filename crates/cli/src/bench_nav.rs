@@ -145,6 +145,8 @@ struct Run {
     hazard_entries: u32,
     stuck: u32,
     wall_s: f64,
+    /// Per rover: the final trajectory's RMS error in the arena frame, and aligned, metres.
+    slam: Vec<(f64, f64)>,
 }
 
 impl Run {
@@ -155,6 +157,13 @@ impl Run {
             .take_while(|(t, _)| *t <= t_s)
             .last()
             .map_or(0.0, |(_, f)| *f)
+    }
+
+    /// The worst rover's final trajectory error, in the arena frame and aligned.
+    fn worst_slam(&self) -> (f64, f64) {
+        self.slam
+            .iter()
+            .fold((0.0, 0.0), |(a, b), (x, y)| (a.max(*x), b.max(*y)))
     }
 
     fn time_to(&self, level: f64) -> Option<f64> {
@@ -237,9 +246,16 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                         hazard_entries: bodies.iter().map(|b| b.stats.hazard_entries).sum(),
                         stuck: bodies.iter().filter(|b| b.stuck).count() as u32,
                         wall_s: t0.elapsed().as_secs_f64(),
+                        slam: mission
+                            .slam_records()
+                            .iter()
+                            .filter_map(|r| {
+                                Some((r.trajectory_error()?.rmse_m, r.trajectory_error_aligned_m()?))
+                            })
+                            .collect(),
                     };
                     eprintln!(
-                        "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, {:.0} s wall",
+                        "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, SLAM worst {:.2} m ({:.2} m aligned), {:.0} s wall",
                         run.rovers,
                         run.seed,
                         100.0 * run.series.last().map_or(0.0, |s| s.1),
@@ -247,6 +263,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                         if run.complete { " (complete)" } else { "" },
                         run.collisions,
                         run.hazard_entries,
+                        run.worst_slam().0,
+                        run.worst_slam().1,
                         run.wall_s
                     );
                     runs.lock().expect("no worker panics holding it").push(run);
@@ -258,13 +276,13 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     runs.sort_by_key(|r| (r.rovers, r.seed));
 
     println!(
-        "| seed | rovers | coverage | 90 % at | 95 % at | done at | complete | collisions | hazard entries | stuck | wall |"
+        "| seed | rovers | coverage | 90 % at | 95 % at | done at | complete | collisions | hazard entries | stuck | SLAM RMS, worst rover (aligned) | wall |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let minutes = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{:.1} min", t / 60.0));
     for r in &runs {
         println!(
-            "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.0} s |",
+            "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.2} m ({:.2} m) | {:.0} s |",
             r.seed,
             r.rovers,
             100.0 * r.series.last().map_or(0.0, |s| s.1),
@@ -275,6 +293,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             r.collisions,
             r.hazard_entries,
             r.stuck,
+            r.worst_slam().0,
+            r.worst_slam().1,
             r.wall_s
         );
     }
@@ -282,9 +302,9 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     println!("Median over seeds (a run that never got there counts as the time limit):");
     println!();
     println!(
-        "| rovers | 50 % at | 90 % at | 95 % at | coverage at 15 / 30 / 60 / 90 min | collisions | hazard entries |"
+        "| rovers | 50 % at | 90 % at | 95 % at | coverage at 15 / 30 / 60 / 90 min | collisions | hazard entries | SLAM RMS per rover, median (aligned) |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     let median_time = |set: &[&Run], level: f64| {
         crate::bench::median(
             set.iter()
@@ -300,7 +320,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         let m90 = median_time(&set, 0.9);
         t90.push((*n, m90));
         println!(
-            "| {n} | {:.1} min | {:.1} min | {:.1} min | {:.0} / {:.0} / {:.0} / {:.0} % | {} | {} |",
+            "| {n} | {:.1} min | {:.1} min | {:.1} min | {:.0} / {:.0} / {:.0} / {:.0} % | {} | {} | {:.2} m ({:.2} m) |",
             median_time(&set, 0.5) / 60.0,
             m90 / 60.0,
             median_time(&set, 0.95) / 60.0,
@@ -310,6 +330,16 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             100.0 * at(5400.0),
             set.iter().map(|r| r.collisions).sum::<u32>(),
             set.iter().map(|r| r.hazard_entries).sum::<u32>(),
+            crate::bench::median(
+                set.iter()
+                    .flat_map(|r| r.slam.iter().map(|s| s.0))
+                    .collect()
+            ),
+            crate::bench::median(
+                set.iter()
+                    .flat_map(|r| r.slam.iter().map(|s| s.1))
+                    .collect()
+            ),
         );
         let points = (0..=(limit_s / 30.0) as usize)
             .map(|i| {

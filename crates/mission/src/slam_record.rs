@@ -70,6 +70,28 @@ impl RoverSlamRecord {
 const SAME_INSTANT_S: f64 = 0.051;
 
 impl RoverSlamRecord {
+    /// The final trajectory's errors against the truth, once attached.
+    pub fn trajectory_error(&self) -> Option<PoseErrors> {
+        self.checks.iter().any(|c| c.optimised.is_some()).then(|| {
+            errors(
+                self.checks
+                    .iter()
+                    .filter_map(|c| c.optimised.map(|o| (o, c.truth))),
+            )
+        })
+    }
+
+    /// The final trajectory's RMS position error after the best rigid alignment, metres.
+    pub fn trajectory_error_aligned_m(&self) -> Option<f64> {
+        aligned_rmse(
+            &self
+                .checks
+                .iter()
+                .filter_map(|c| c.optimised.map(|o| (o.position(), c.truth.position())))
+                .collect::<Vec<_>>(),
+        )
+    }
+
     /// Attaches the rover's final trajectory (`(t_s, pose)` per scan, in time order) to the
     /// checks it covers.
     pub fn attach_trajectory(&mut self, trajectory: &[(f64, Pose2)]) {
@@ -308,20 +330,8 @@ impl RoverSlamRecord {
     pub fn summary(&self, truth: &GroundTruth, map_png: Option<String>) -> RoverSlamSummary {
         RoverSlamSummary {
             pose_error: errors(self.checks.iter().map(|c| (c.estimate, c.truth))),
-            trajectory_error: self.checks.iter().any(|c| c.optimised.is_some()).then(|| {
-                errors(
-                    self.checks
-                        .iter()
-                        .filter_map(|c| c.optimised.map(|o| (o, c.truth))),
-                )
-            }),
-            trajectory_error_aligned_m: aligned_rmse(
-                &self
-                    .checks
-                    .iter()
-                    .filter_map(|c| c.optimised.map(|o| (o.position(), c.truth.position())))
-                    .collect::<Vec<_>>(),
-            ),
+            trajectory_error: self.trajectory_error(),
+            trajectory_error_aligned_m: self.trajectory_error_aligned_m(),
             odometry_error: errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
             checks: self.checks.len(),
             localisation: self.changes.clone(),
