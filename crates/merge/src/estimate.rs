@@ -42,6 +42,9 @@ pub struct Estimate {
     /// Every hypothesis of the global search as a pose of the second map's frame in the
     /// first's, with its search score and coarse screening score (for diagnosis).
     pub hypotheses: Vec<(Pose2, i32, f64)>,
+    /// Every refined and verified hypothesis, best first, as a pose of the second map's
+    /// frame in the first's with its evidence (for diagnosis).
+    pub verified: Vec<(Pose2, Evidence)>,
 }
 
 impl Estimate {
@@ -64,6 +67,7 @@ impl Estimate {
             refusal: Some(reason),
             stats: SearchStats::default(),
             hypotheses: Vec::new(),
+            verified: Vec::new(),
         }
     }
 }
@@ -367,6 +371,14 @@ fn run(
             evidence.agree,
             evidence.conflict
         ))
+    } else if evidence.landmark_conflict >= params.min_landmark_conflicts
+        && evidence.landmark_conflict as f64
+            > params.max_landmark_conflict_share * evidence.landmark_agree as f64
+    {
+        Some(format!(
+            "landmarks disagree at the best pose: {} landmark points land on open ground, {} on landmarks",
+            evidence.landmark_conflict, evidence.landmark_agree
+        ))
     } else if sharpness < params.min_sharpness {
         Some(format!(
             "poorly constrained: moved {:.1} m (or turned as much) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
@@ -413,5 +425,6 @@ fn run(
         refusal,
         stats,
         hypotheses,
+        verified: verified.iter().map(|(p, e)| (to_frames(p), *e)).collect(),
     }
 }

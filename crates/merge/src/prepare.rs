@@ -58,6 +58,13 @@ pub struct Params {
     pub min_agreement: f64,
     /// Refuse with fewer agreeing structure cells than this (per map, summed both ways).
     pub min_agree_cells: usize,
+    /// Refuse when at least this many landmark points (rocks, craters, furniture:
+    /// [`crate::level::Level::landmark`]) land on the other map's open ground...
+    pub min_landmark_conflicts: usize,
+    /// ... and they are more than this share of the landmark points that agree. Walls
+    /// agree with walls at a quarter turn in a rectangular arena; a rock on open ground
+    /// does not happen at the true pose, whatever the walls say.
+    pub max_landmark_conflict_share: f64,
     /// Refuse when the runner-up's verified score reaches this share of the winner's.
     pub max_runner_up_ratio: f64,
     /// Refuse when moving the pose this far (or turning it as much) keeps too much of its
@@ -109,6 +116,8 @@ impl Default for Params {
             conflict_weight: 10.0,
             min_agreement: 0.95,
             min_agree_cells: 60,
+            min_landmark_conflicts: 5,
+            max_landmark_conflict_share: 0.125,
             max_runner_up_ratio: 0.7,
             min_overlap_m2: 8.0,
             precision_probe_m: 0.4,
