@@ -196,6 +196,12 @@ fn same_pose(p: &Pose2, q: &Pose2, centre: Point2, params: &Params) -> bool {
         && normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs() < params.distinct_rad
 }
 
+/// Whether landmark points land on open ground too often for `e`'s pose to be right.
+fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
+    e.landmark_conflict >= params.min_landmark_conflicts
+        && e.landmark_conflict as f64 > params.max_landmark_conflict_share * e.landmark_agree as f64
+}
+
 fn run(
     a: &Prepared,
     b: &Prepared,
@@ -317,9 +323,14 @@ fn run(
     let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
     // A clearly different pose that is as consistent (as little conflict) and explains a
     // fair share of the structure is an alternative, however the totals compare: a larger
-    // overlap of walls buys a larger total without being any more likely.
+    // overlap of walls buys a larger total without being any more likely. As consistent
+    // means no more than `rival_agreement_slack` worse in agreement than the best, and no
+    // landmark on open ground: a pose that puts a few per cent of its structure on open
+    // ground where the best puts none is not an alternative on maps this clean.
     let rival = others.iter().find(|(_, e)| {
         e.agreement() >= params.min_agreement
+            && e.agreement() >= evidence.agreement() - params.rival_agreement_slack
+            && !landmarks_disagree(e, params)
             && e.agree >= params.min_agree_cells
             && e.agree as f64 >= params.rival_share * evidence.agree as f64
     });
@@ -371,10 +382,7 @@ fn run(
             evidence.agree,
             evidence.conflict
         ))
-    } else if evidence.landmark_conflict >= params.min_landmark_conflicts
-        && evidence.landmark_conflict as f64
-            > params.max_landmark_conflict_share * evidence.landmark_agree as f64
-    {
+    } else if landmarks_disagree(&evidence, params) {
         Some(format!(
             "landmarks disagree at the best pose: {} landmark points land on open ground, {} on landmarks",
             evidence.landmark_conflict, evidence.landmark_agree

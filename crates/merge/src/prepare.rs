@@ -87,6 +87,9 @@ pub struct Params {
     /// `min_agreement`) and explains at least this share of the best one's agreeing
     /// structure.
     pub rival_share: f64,
+    /// A rival must also agree at least as well as the best less this (share of agreeing
+    /// structure among agreeing and conflicting).
+    pub rival_agreement_slack: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -127,6 +130,7 @@ impl Default for Params {
             min_sharpness: 0.25,
             min_confidence: 0.3,
             rival_share: 0.2,
+            rival_agreement_slack: 0.03,
             large_map_m: 30.0,
         }
     }

@@ -12,7 +12,7 @@
 //! [`sharpness`] (does the score fall when the pose moves?) and [`nearby_alternative`] (is
 //! there a second optimum close by that explains the maps as well?).
 
-use crate::level::{Class, Level, SHAPE_WEIGHT, Surface};
+use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};
 use crate::prepare::{Params, Prepared};
 use crate::search::{DIRECTION_BINS, Fields, direction_bin};
 use realms_core::{Point2, Pose2};
@@ -105,10 +105,7 @@ fn field_score(
         .map(|s| {
             let q = t.apply(s.p);
             let k = direction_bin(s.normal_rad + target_from_source.yaw_rad);
-            let v = fields.bins[k].value(
-                (q.x_m / cell_m).floor() as i64,
-                (q.y_m / cell_m).floor() as i64,
-            );
+            let v = fields.bins[k].value(floor_i64(q.x_m / cell_m), floor_i64(q.y_m / cell_m));
             v as i64 * s.weight as i64
         })
         .sum()
@@ -235,9 +232,8 @@ pub fn nearby_alternative(
 fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
     let fx = p.x_m / level.cell_m - 0.5;
     let fy = p.y_m / level.cell_m - 0.5;
-    let (x0, y0) = (fx.floor(), fy.floor());
-    let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
-    let (x0, y0) = (x0 as i64, y0 as i64);
+    let (x0, y0) = (floor_i64(fx), floor_i64(fy));
+    let (tx, ty) = ((fx - x0 as f64) as f32, (fy - y0 as f64) as f32);
     let d00 = level.dist_at(x0, y0)?;
     let d10 = level.dist_at(x0 + 1, y0).unwrap_or(d00);
     let d01 = level.dist_at(x0, y0 + 1).unwrap_or(d00);
@@ -366,8 +362,8 @@ fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2)
     for s in points {
         let q = t.apply(s.p);
         let (x, y) = (
-            (q.x_m / target.cell_m).floor() as i64,
-            (q.y_m / target.cell_m).floor() as i64,
+            floor_i64(q.x_m / target.cell_m),
+            floor_i64(q.y_m / target.cell_m),
         );
         let Some(d) = target.dist_at(x, y) else {
             continue;
@@ -429,8 +425,8 @@ pub fn verify(
     for p in &b.known_points {
         let q = t.apply(*p);
         let (x, y) = (
-            (q.x_m / a.search.cell_m).floor() as i64,
-            (q.y_m / a.search.cell_m).floor() as i64,
+            floor_i64(q.x_m / a.search.cell_m),
+            floor_i64(q.y_m / a.search.cell_m),
         );
         if a.search.class_at(x, y) != Class::Unknown {
             overlap_points += 1;
