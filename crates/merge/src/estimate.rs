@@ -74,8 +74,26 @@ impl Estimate {
 
 /// Where the second map's frame lies in the first's with no prior at all.
 pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
-    let (peaks, ratio) =
+    let (mut peaks, ratio) =
         rotation::candidates(&a.directions, &b.directions, params.direction_peaks, 5);
+    // The peaks a few degrees apart can all be one broad lobe of the correlation; in a
+    // building the other lobe, a quarter turn away, can hold the answer (walls both ways
+    // correlate almost equally). The best peak of another lobe is searched too.
+    let (lobes, _) = rotation::candidates(
+        &a.directions,
+        &b.directions,
+        params.direction_lobes + 1,
+        params.lobe_separation_deg,
+    );
+    for lobe in lobes {
+        let apart = |p: &f64| {
+            let d = (lobe - p).rem_euclid(180.0);
+            d.min(180.0 - d) >= params.lobe_separation_deg as f64
+        };
+        if peaks.iter().all(apart) {
+            peaks.push(lobe);
+        }
+    }
     // Each heading group is searched on its own: at low overlap a wrong heading that lays
     // long walls over walls can outscore the true one, and one global list would then hold
     // nothing but its variants.

@@ -42,6 +42,11 @@ pub struct Params {
     pub yaw_step_rad: f64,
     /// Heading peaks taken from the direction histograms (each also turned by 180 degrees).
     pub direction_peaks: usize,
+    /// Peaks of other lobes of the direction correlation (at least `lobe_separation_deg`
+    /// from every other peak) searched as well.
+    pub direction_lobes: usize,
+    /// See `direction_lobes`, degrees.
+    pub lobe_separation_deg: usize,
     /// Half-width of the heading search around each direction peak, radians.
     pub peak_halfwidth_rad: f64,
     /// Below this peak-to-mean ratio the direction histograms say nothing and every heading
@@ -112,6 +117,8 @@ impl Default for Params {
             refined_hypotheses: 8,
             yaw_step_rad: 0.5f64.to_radians(),
             direction_peaks: 3,
+            direction_lobes: 1,
+            lobe_separation_deg: 20,
             peak_halfwidth_rad: 3.0f64.to_radians(),
             min_direction_ratio: 1.5,
             distinct_m: 1.0,
