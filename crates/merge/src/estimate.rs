@@ -7,10 +7,13 @@
 //!    the histograms are flat;
 //! 2. the global search ([`crate::search`]) over all translations at those headings on the
 //!    coarse level, keeping the best few distinct hypotheses;
-//! 3. each refined and verified on the fine level ([`crate::verify`]);
-//! 4. the best verified hypothesis is accepted only if enough structure agrees, little
+//! 3. on large maps (searched on a level twice as coarse) each also searched again on the
+//!    search level in a small window, both kept;
+//! 4. each refined and verified on the fine level ([`crate::verify`]);
+//! 5. the best verified hypothesis is accepted only if enough structure agrees, little
 //!    conflicts, the maps overlap enough and the runner-up (the best clearly different
-//!    pose) scores clearly lower. Refusing is always preferred to merging wrong.
+//!    pose) scores clearly lower, no landmark lands on open ground, and no pose close by
+//!    explains the maps as well. Refusing is always preferred to merging wrong.
 
 use crate::map::Map;
 use crate::prepare::{Params, Prepared};
@@ -220,6 +223,43 @@ fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
         && e.landmark_conflict as f64 > params.max_landmark_conflict_share * e.landmark_agree as f64
 }
 
+/// A hypothesis of the coarse global level searched again on the search level, the
+/// headings of half a heading group at half its step and a window of two coarse cells
+/// either way: the middle step of coarse to fine (Olson 2009 searches a finer grid only
+/// where the coarse one allows). At the coarse level's cell and step a pose a metre and two
+/// degrees off can outscore the true one nearby, and refinement by coordinate ascent does
+/// not always climb out of that.
+fn rescan(
+    a: &Prepared,
+    b: &Prepared,
+    start: Pose2,
+    search_params: &SearchParams,
+    params: &Params,
+) -> Pose2 {
+    let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
+    let yaws: Vec<f64> = (-n..=n)
+        .map(|k| normalize_angle_rad(start.yaw_rad + k as f64 * params.yaw_step_rad))
+        .collect();
+    let window = Window {
+        centroid_at: start.transform_point(b.centroid),
+        half_m: 2.0 * a.global.cell_m,
+    };
+    let one = SearchParams {
+        hypotheses: 1,
+        ..*search_params
+    };
+    let (found, _) = search::search(
+        a.fields(),
+        a.search.cell_m,
+        &b.search_points,
+        b.centroid,
+        &yaws,
+        Some(window),
+        &one,
+    );
+    found.first().map_or(start, |h| h.fixed_from_moving)
+}
+
 fn run(
     a: &Prepared,
     b: &Prepared,
@@ -315,6 +355,25 @@ fn run(
             chosen.push(*p);
         }
     }
+    if coarse {
+        // Each coarse hypothesis is also searched again on the search level (see
+        // [`rescan`]); the original stays too, so that a rival it leads to is still seen.
+        let rescanned: Vec<Pose2> = chosen
+            .iter()
+            .map(|p| rescan(a, b, *p, &search_params, params))
+            .collect();
+        for r in rescanned {
+            let settled = |p: &Pose2| {
+                p.transform_point(b.centroid)
+                    .distance_m(r.transform_point(b.centroid))
+                    < a.search.cell_m
+                    && normalize_angle_rad(p.yaw_rad - r.yaw_rad).abs() < params.yaw_step_rad
+            };
+            if !chosen.iter().any(settled) {
+                chosen.push(r);
+            }
+        }
+    }
     let mut verified: Vec<(Pose2, Evidence)> = chosen
         .iter()
         .map(|start| {
@@ -370,8 +429,24 @@ fn run(
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
-    // Only worth looking for when the merge would otherwise be accepted.
+    // Only worth looking for when the merge would otherwise be accepted. First among the
+    // hypotheses already refined: two that settled apart near the best, verifying as well,
+    // say the same as a restart would, at no cost.
     let nearby = || {
+        let c = evidence.overlap_centre;
+        let apart_rad = (params.precision_apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+        let settled_apart = verified.iter().skip(1).find(|(p, e)| {
+            same_pose(p, &best_pose, b.centroid, params)
+                && e.score >= params.precision_share * evidence.score
+                && (p
+                    .transform_point(c)
+                    .distance_m(best_pose.transform_point(c))
+                    > params.precision_apart_m
+                    || normalize_angle_rad(p.yaw_rad - best_pose.yaw_rad).abs() > apart_rad)
+        });
+        if let Some(found) = settled_apart {
+            return Some(*found);
+        }
         verify::nearby_alternative(
             a,
             b,
