@@ -468,6 +468,15 @@ fn run(
             "too little structure agrees at the best pose ({} cells, at least {} needed)",
             evidence.agree, params.min_agree_cells
         ))
+    } else if evidence.score < params.min_score {
+        Some(format!(
+            "too little evidence at the best pose: {} agreeing less {} x {} conflicting is {:.0} (at least {:.0} needed)",
+            evidence.agree,
+            params.conflict_weight,
+            evidence.conflict,
+            evidence.score,
+            params.min_score
+        ))
     } else if agreement < params.min_agreement {
         Some(format!(
             "structure disagrees at the best pose: {:.0} % agrees ({} cells), {} cells conflict",
