@@ -232,9 +232,31 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                         realms_merge::verify::On::Refine,
                     );
                     eprintln!(
-                        "  truth: agree {} conflict {} overlap {:.0} m2 score {:.0}",
-                        t.agree, t.conflict, t.overlap_m2, t.score
+                        "  truth: agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
+                        t.agree,
+                        t.conflict,
+                        t.shape_agree,
+                        t.shape_conflict,
+                        t.landmark_agree,
+                        t.landmark_conflict,
+                        t.overlap_m2,
+                        t.score
                     );
+                    for (p, e) in &est.verified {
+                        let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
+                        eprintln!(
+                            "    verified err {em:.2} m {:.2} deg: agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
+                            er.to_degrees(),
+                            e.agree,
+                            e.conflict,
+                            e.shape_agree,
+                            e.shape_conflict,
+                            e.landmark_agree,
+                            e.landmark_conflict,
+                            e.overlap_m2,
+                            e.score
+                        );
+                    }
                     for (p, search_score, screen) in &est.hypotheses {
                         let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
                         eprintln!(

@@ -337,6 +337,7 @@ mod tests {
             refusal: None,
             stats: Default::default(),
             hypotheses: Vec::new(),
+            verified: Vec::new(),
         }
     }
 

@@ -7,10 +7,13 @@
 //!    the histograms are flat;
 //! 2. the global search ([`crate::search`]) over all translations at those headings on the
 //!    coarse level, keeping the best few distinct hypotheses;
-//! 3. each refined and verified on the fine level ([`crate::verify`]);
-//! 4. the best verified hypothesis is accepted only if enough structure agrees, little
+//! 3. on large maps (searched on a level twice as coarse) each also searched again on the
+//!    search level in a small window, both kept;
+//! 4. each refined and verified on the fine level ([`crate::verify`]);
+//! 5. the best verified hypothesis is accepted only if enough structure agrees, little
 //!    conflicts, the maps overlap enough and the runner-up (the best clearly different
-//!    pose) scores clearly lower. Refusing is always preferred to merging wrong.
+//!    pose) scores clearly lower, no landmark lands on open ground, and no pose close by
+//!    explains the maps as well. Refusing is always preferred to merging wrong.
 
 use crate::map::Map;
 use crate::prepare::{Params, Prepared};
@@ -42,6 +45,9 @@ pub struct Estimate {
     /// Every hypothesis of the global search as a pose of the second map's frame in the
     /// first's, with its search score and coarse screening score (for diagnosis).
     pub hypotheses: Vec<(Pose2, i32, f64)>,
+    /// Every refined and verified hypothesis, best first, as a pose of the second map's
+    /// frame in the first's with its evidence (for diagnosis).
+    pub verified: Vec<(Pose2, Evidence)>,
 }
 
 impl Estimate {
@@ -64,14 +70,33 @@ impl Estimate {
             refusal: Some(reason),
             stats: SearchStats::default(),
             hypotheses: Vec::new(),
+            verified: Vec::new(),
         }
     }
 }
 
 /// Where the second map's frame lies in the first's with no prior at all.
 pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
-    let (peaks, ratio) =
+    let (mut peaks, ratio) =
         rotation::candidates(&a.directions, &b.directions, params.direction_peaks, 5);
+    // The peaks a few degrees apart can all be one broad lobe of the correlation; in a
+    // building the other lobe, a quarter turn away, can hold the answer (walls both ways
+    // correlate almost equally). The best peak of another lobe is searched too.
+    let (lobes, _) = rotation::candidates(
+        &a.directions,
+        &b.directions,
+        params.direction_lobes + 1,
+        params.lobe_separation_deg,
+    );
+    for lobe in lobes {
+        let apart = |p: &f64| {
+            let d = (lobe - p).rem_euclid(180.0);
+            d.min(180.0 - d) >= params.lobe_separation_deg as f64
+        };
+        if peaks.iter().all(apart) {
+            peaks.push(lobe);
+        }
+    }
     // Each heading group is searched on its own: at low overlap a wrong heading that lays
     // long walls over walls can outscore the true one, and one global list would then hold
     // nothing but its variants.
@@ -192,6 +217,49 @@ fn same_pose(p: &Pose2, q: &Pose2, centre: Point2, params: &Params) -> bool {
         && normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs() < params.distinct_rad
 }
 
+/// Whether landmark points land on open ground too often for `e`'s pose to be right.
+fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
+    e.landmark_conflict >= params.min_landmark_conflicts
+        && e.landmark_conflict as f64 > params.max_landmark_conflict_share * e.landmark_agree as f64
+}
+
+/// A hypothesis of the coarse global level searched again on the search level, the
+/// headings of half a heading group at half its step and a window of two coarse cells
+/// either way: the middle step of coarse to fine (Olson 2009 searches a finer grid only
+/// where the coarse one allows). At the coarse level's cell and step a pose a metre and two
+/// degrees off can outscore the true one nearby, and refinement by coordinate ascent does
+/// not always climb out of that.
+fn rescan(
+    a: &Prepared,
+    b: &Prepared,
+    start: Pose2,
+    search_params: &SearchParams,
+    params: &Params,
+) -> Pose2 {
+    let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
+    let yaws: Vec<f64> = (-n..=n)
+        .map(|k| normalize_angle_rad(start.yaw_rad + k as f64 * params.yaw_step_rad))
+        .collect();
+    let window = Window {
+        centroid_at: start.transform_point(b.centroid),
+        half_m: 2.0 * a.global.cell_m,
+    };
+    let one = SearchParams {
+        hypotheses: 1,
+        ..*search_params
+    };
+    let (found, _) = search::search(
+        a.fields(),
+        a.search.cell_m,
+        &b.search_points,
+        b.centroid,
+        &yaws,
+        Some(window),
+        &one,
+    );
+    found.first().map_or(start, |h| h.fixed_from_moving)
+}
+
 fn run(
     a: &Prepared,
     b: &Prepared,
@@ -287,6 +355,25 @@ fn run(
             chosen.push(*p);
         }
     }
+    if coarse {
+        // Each coarse hypothesis is also searched again on the search level (see
+        // [`rescan`]); the original stays too, so that a rival it leads to is still seen.
+        let rescanned: Vec<Pose2> = chosen
+            .iter()
+            .map(|p| rescan(a, b, *p, &search_params, params))
+            .collect();
+        for r in rescanned {
+            let settled = |p: &Pose2| {
+                p.transform_point(b.centroid)
+                    .distance_m(r.transform_point(b.centroid))
+                    < a.search.cell_m
+                    && normalize_angle_rad(p.yaw_rad - r.yaw_rad).abs() < params.yaw_step_rad
+            };
+            if !chosen.iter().any(settled) {
+                chosen.push(r);
+            }
+        }
+    }
     let mut verified: Vec<(Pose2, Evidence)> = chosen
         .iter()
         .map(|start| {
@@ -313,9 +400,14 @@ fn run(
     let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
     // A clearly different pose that is as consistent (as little conflict) and explains a
     // fair share of the structure is an alternative, however the totals compare: a larger
-    // overlap of walls buys a larger total without being any more likely.
+    // overlap of walls buys a larger total without being any more likely. As consistent
+    // means no more than `rival_agreement_slack` worse in agreement than the best, and no
+    // landmark on open ground: a pose that puts a few per cent of its structure on open
+    // ground where the best puts none is not an alternative on maps this clean.
     let rival = others.iter().find(|(_, e)| {
         e.agreement() >= params.min_agreement
+            && e.agreement() >= evidence.agreement() - params.rival_agreement_slack
+            && !landmarks_disagree(e, params)
             && e.agree >= params.min_agree_cells
             && e.agree as f64 >= params.rival_share * evidence.agree as f64
     });
@@ -337,8 +429,24 @@ fn run(
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
-    // Only worth looking for when the merge would otherwise be accepted.
+    // Only worth looking for when the merge would otherwise be accepted. First among the
+    // hypotheses already refined: two that settled apart near the best, verifying as well,
+    // say the same as a restart would, at no cost.
     let nearby = || {
+        let c = evidence.overlap_centre;
+        let apart_rad = (params.precision_apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+        let settled_apart = verified.iter().skip(1).find(|(p, e)| {
+            same_pose(p, &best_pose, b.centroid, params)
+                && e.score >= params.precision_share * evidence.score
+                && (p
+                    .transform_point(c)
+                    .distance_m(best_pose.transform_point(c))
+                    > params.precision_apart_m
+                    || normalize_angle_rad(p.yaw_rad - best_pose.yaw_rad).abs() > apart_rad)
+        });
+        if let Some(found) = settled_apart {
+            return Some(*found);
+        }
         verify::nearby_alternative(
             a,
             b,
@@ -360,12 +468,26 @@ fn run(
             "too little structure agrees at the best pose ({} cells, at least {} needed)",
             evidence.agree, params.min_agree_cells
         ))
+    } else if evidence.score < params.min_score {
+        Some(format!(
+            "too little evidence at the best pose: {} agreeing less {} x {} conflicting is {:.0} (at least {:.0} needed)",
+            evidence.agree,
+            params.conflict_weight,
+            evidence.conflict,
+            evidence.score,
+            params.min_score
+        ))
     } else if agreement < params.min_agreement {
         Some(format!(
             "structure disagrees at the best pose: {:.0} % agrees ({} cells), {} cells conflict",
             100.0 * agreement,
             evidence.agree,
             evidence.conflict
+        ))
+    } else if landmarks_disagree(&evidence, params) {
+        Some(format!(
+            "landmarks disagree at the best pose: {} landmark points land on open ground, {} on landmarks",
+            evidence.landmark_conflict, evidence.landmark_agree
         ))
     } else if sharpness < params.min_sharpness {
         Some(format!(
@@ -413,5 +535,6 @@ fn run(
         refusal,
         stats,
         hypotheses,
+        verified: verified.iter().map(|(p, e)| (to_frames(p), *e)).collect(),
     }
 }

@@ -53,6 +53,9 @@ pub struct Level {
     pub normal: Vec<f32>,
     /// `normal` as a direction bin, [`NO_BIN`] where there is none.
     pub bin: Vec<u8>,
+    /// For feature cells: whether their blob (8-connected feature cells) is a landmark,
+    /// compact and not a straight line (see [`landmarks`]).
+    pub landmark: Vec<bool>,
 }
 
 /// No normal, in [`Level::bin`].
@@ -69,12 +72,23 @@ pub struct Surface {
     /// (a wall matches itself slid along its length), [`SHAPE_WEIGHT`] on corners, rocks
     /// and crater rims.
     pub weight: u8,
+    /// Whether the point lies on a landmark ([`Level::landmark`]): a rock, a boulder, a
+    /// crater, a piece of furniture, rather than a wall.
+    pub landmark: bool,
 }
 
 /// Weight of a point on a straight run of structure.
 pub const LINE_WEIGHT: u8 = 1;
 /// Weight of a point on a corner, a rock or a rim.
 pub const SHAPE_WEIGHT: u8 = 8;
+
+/// `x.floor() as i64`, without the library call that `floor` is on a baseline x86-64
+/// target (no SSE4.1): the matcher floors a few million coordinates per pair.
+#[inline]
+pub fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    i - i64::from((i as f64) > x)
+}
 
 /// The shape of the feature cells within `r` cells of `(x, y)` (their structure tensor):
 /// how many there are, their coherence `(l1 - l2) / (l1 + l2)` (1 on a straight line, 0 on
@@ -183,6 +197,7 @@ impl Level {
                 }
             })
             .collect();
+        let landmark = landmarks(&class, width, height, cell_m);
         Level {
             width,
             height,
@@ -191,6 +206,7 @@ impl Level {
             dist,
             normal,
             bin,
+            landmark,
         }
     }
 
@@ -239,6 +255,7 @@ impl Level {
                         p: self.center(x, y),
                         normal_rad: self.normal[i] as f64,
                         weight: if line { LINE_WEIGHT } else { SHAPE_WEIGHT },
+                        landmark: self.landmark[i],
                     });
                 }
             }
@@ -300,6 +317,76 @@ fn normals(class: &[Class], w: usize, h: usize) -> Vec<f32> {
             // Free space all around (a lone post seen from everywhere) has no side.
             if n > 0 && (vx * vx + vy * vy) * 4 >= n * n {
                 out[y * w + x] = (vy as f32).atan2(vx as f32);
+            }
+        }
+    }
+    out
+}
+
+/// Largest side of a landmark's bounding box, metres: rocks, boulders, craters and
+/// furniture are smaller; a room's or an arena's walls, connected, are larger.
+const LANDMARK_MAX_M: f64 = 8.0;
+/// Blobs more coherent than this (structure tensor over the whole blob) are a stretch of
+/// wall, whatever their size.
+const LANDMARK_MAX_COHERENCE: f64 = 0.8;
+
+/// Marks the feature cells whose blob (8-connected) is a landmark: at most
+/// [`LANDMARK_MAX_M`] across and not a straight line. A map that agrees with another only
+/// on walls is weak evidence of a pose: the walls of a rectangular room or arena match
+/// themselves turned by a quarter turn, in another corner; landmarks do not repeat so.
+fn landmarks(class: &[Class], w: usize, h: usize, cell_m: f64) -> Vec<bool> {
+    let mut out = vec![false; class.len()];
+    let mut seen = vec![false; class.len()];
+    let max_cells = (LANDMARK_MAX_M / cell_m).ceil() as usize;
+    let mut stack = Vec::new();
+    let mut blob = Vec::new();
+    for start in 0..class.len() {
+        if seen[start] || !class[start].is_feature() {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        blob.clear();
+        while let Some(i) = stack.pop() {
+            blob.push(i);
+            let (x, y) = (i % w, i / w);
+            for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let j = ny * w + nx;
+                    if !seen[j] && class[j].is_feature() {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        let (mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &i in &blob {
+            let (x, y) = (i % w, i / w);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+            let (fx, fy) = (x as f64, y as f64);
+            sx += fx;
+            sy += fy;
+            sxx += fx * fx;
+            syy += fy * fy;
+            sxy += fx * fy;
+        }
+        if x1 - x0 + 1 > max_cells || y1 - y0 + 1 > max_cells {
+            continue;
+        }
+        let n = blob.len() as f64;
+        let (mx, my) = (sx / n, sy / n);
+        let (cxx, cyy, cxy) = (sxx / n - mx * mx, syy / n - my * my, sxy / n - mx * my);
+        let tr = cxx + cyy;
+        let coherence = if tr > 1e-9 {
+            ((cxx - cyy).powi(2) + 4.0 * cxy * cxy).sqrt() / tr
+        } else {
+            0.0
+        };
+        if coherence <= LANDMARK_MAX_COHERENCE {
+            for &i in &blob {
+                out[i] = true;
             }
         }
     }
@@ -464,5 +551,36 @@ mod tests {
         assert_eq!(s.len(), 2);
         assert!(s.iter().all(|s| s.normal_rad.abs() < 0.8), "{s:?}");
         assert_eq!(level.known_points(2).len(), 2);
+    }
+
+    #[test]
+    fn rocks_are_landmarks_and_walls_are_not() {
+        // A wall along the bottom and up the left side (an L, 10 m and 6 m), a 0.3 m rock
+        // and a 0.4 m crater (hazard) on open ground.
+        let mut rows = vec![String::new(); 60];
+        for (y, row) in rows.iter_mut().enumerate() {
+            *row = (0..100)
+                .map(|x| {
+                    let rock = (30..33).contains(&x) && (20..23).contains(&y);
+                    if y == 59 || x == 0 || rock {
+                        '#'
+                    } else if (60..64).contains(&x) && (40..44).contains(&y) {
+                        'h'
+                    } else {
+                        '.'
+                    }
+                })
+                .collect();
+        }
+        let rows: Vec<&str> = rows.iter().map(String::as_str).collect();
+        let level = Level::build(&map_from(&rows, 0.1), 0.1);
+        let at = |x: usize, y: usize| level.landmark[y * level.width + x];
+        // Rows are given top first: the rock's rows 20..23 from the top are 37..40 up.
+        assert!(at(31, 38), "the rock");
+        assert!(at(61, 17), "the crater");
+        assert!(!at(50, 0), "the bottom wall");
+        assert!(!at(0, 30), "the side wall");
+        let s = level.surfaces(10_000);
+        assert!(s.iter().any(|p| p.landmark) && s.iter().any(|p| !p.landmark));
     }
 }

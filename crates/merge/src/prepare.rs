@@ -42,6 +42,11 @@ pub struct Params {
     pub yaw_step_rad: f64,
     /// Heading peaks taken from the direction histograms (each also turned by 180 degrees).
     pub direction_peaks: usize,
+    /// Peaks of other lobes of the direction correlation (at least `lobe_separation_deg`
+    /// from every other peak) searched as well.
+    pub direction_lobes: usize,
+    /// See `direction_lobes`, degrees.
+    pub lobe_separation_deg: usize,
     /// Half-width of the heading search around each direction peak, radians.
     pub peak_halfwidth_rad: f64,
     /// Below this peak-to-mean ratio the direction histograms say nothing and every heading
@@ -58,6 +63,17 @@ pub struct Params {
     pub min_agreement: f64,
     /// Refuse with fewer agreeing structure cells than this (per map, summed both ways).
     pub min_agree_cells: usize,
+    /// Refuse below this verified score (agreeing less `conflict_weight` times conflicting):
+    /// a few dozen cells of a wall and a corner, with some of them on open ground, are
+    /// too little to merge on (Willow Garage at 5 % overlap: a pose 1.2 m off scored 169).
+    pub min_score: f64,
+    /// Refuse when at least this many landmark points (rocks, craters, furniture:
+    /// [`crate::level::Level::landmark`]) land on the other map's open ground...
+    pub min_landmark_conflicts: usize,
+    /// ... and they are more than this share of the landmark points that agree. Walls
+    /// agree with walls at a quarter turn in a rectangular arena; a rock on open ground
+    /// does not happen at the true pose, whatever the walls say.
+    pub max_landmark_conflict_share: f64,
     /// Refuse when the runner-up's verified score reaches this share of the winner's.
     pub max_runner_up_ratio: f64,
     /// Refuse when moving the pose this far (or turning it as much) keeps too much of its
@@ -80,6 +96,9 @@ pub struct Params {
     /// `min_agreement`) and explains at least this share of the best one's agreeing
     /// structure.
     pub rival_share: f64,
+    /// A rival must also agree at least as well as the best less this (share of agreeing
+    /// structure among agreeing and conflicting).
+    pub rival_agreement_slack: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -102,6 +121,8 @@ impl Default for Params {
             refined_hypotheses: 8,
             yaw_step_rad: 0.5f64.to_radians(),
             direction_peaks: 3,
+            direction_lobes: 1,
+            lobe_separation_deg: 20,
             peak_halfwidth_rad: 3.0f64.to_radians(),
             min_direction_ratio: 1.5,
             distinct_m: 1.0,
@@ -109,6 +130,9 @@ impl Default for Params {
             conflict_weight: 10.0,
             min_agreement: 0.95,
             min_agree_cells: 60,
+            min_score: 200.0,
+            min_landmark_conflicts: 5,
+            max_landmark_conflict_share: 0.125,
             max_runner_up_ratio: 0.7,
             min_overlap_m2: 8.0,
             precision_probe_m: 0.4,
@@ -118,6 +142,7 @@ impl Default for Params {
             min_sharpness: 0.25,
             min_confidence: 0.3,
             rival_share: 0.2,
+            rival_agreement_slack: 0.03,
             large_map_m: 30.0,
         }
     }

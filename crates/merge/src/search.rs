@@ -27,10 +27,11 @@ pub const DIRECTION_BINS: usize = 8;
 
 /// The bin of a free-side direction, radians.
 pub fn direction_bin(normal_rad: f64) -> usize {
-    let b = (normal_rad.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU
-        * DIRECTION_BINS as f64)
-        .round() as usize;
-    b % DIRECTION_BINS
+    // Nearest bin, wrapped with a mask (the bin count is a power of two): no fmod and no
+    // rounding call, for the millions of points refinement scores.
+    const _: () = assert!(DIRECTION_BINS.is_power_of_two());
+    let t = normal_rad * (DIRECTION_BINS as f64 / std::f64::consts::TAU);
+    (crate::level::floor_i64(t + 0.5) & (DIRECTION_BINS as i64 - 1)) as usize
 }
 
 /// The score fields of one map, one per direction bin.
@@ -508,6 +509,27 @@ mod tests {
             *grid.get_mut(x, y).expect("in") = MapCell::Occupied;
         }
         Map::new(grid)
+    }
+
+    #[test]
+    fn direction_bins_are_nearest_and_wrap() {
+        use std::f64::consts::{FRAC_PI_4, PI};
+        for (rad, bin) in [
+            (0.0, 0),
+            (FRAC_PI_4, 1),
+            (-FRAC_PI_4, 7),
+            (PI, 4),
+            (-PI, 4),
+            (2.0 * PI - 0.01, 0),
+            (7.0 * PI, 4),
+            (0.3, 0),
+            (0.5, 1),
+        ] {
+            assert_eq!(direction_bin(rad), bin, "{rad}");
+        }
+        for x in [-2.5, -2.0, -0.1, 0.0, 0.1, 1.0, 3.7] {
+            assert_eq!(crate::level::floor_i64(x), x.floor() as i64, "{x}");
+        }
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! [`sharpness`] (does the score fall when the pose moves?) and [`nearby_alternative`] (is
 //! there a second optimum close by that explains the maps as well?).
 
-use crate::level::{Class, Level, Surface};
+use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};
 use crate::prepare::{Params, Prepared};
 use crate::search::{DIRECTION_BINS, Fields, direction_bin};
 use realms_core::{Point2, Pose2};
@@ -39,6 +39,16 @@ pub struct Evidence {
     pub overlap_radius_m: f64,
     /// `agree - conflict_weight * conflict`.
     pub score: f64,
+    /// Shape points (corners, rocks, rims; not straight walls) that agree, counted once
+    /// each, both maps.
+    pub shape_agree: usize,
+    /// Shape points that conflict, counted alike.
+    pub shape_conflict: usize,
+    /// Points on landmarks ([`crate::level::Level::landmark`]) that agree, counted once
+    /// each, both maps.
+    pub landmark_agree: usize,
+    /// Points on landmarks that conflict, counted alike.
+    pub landmark_conflict: usize,
 }
 
 impl Evidence {
@@ -95,10 +105,7 @@ fn field_score(
         .map(|s| {
             let q = t.apply(s.p);
             let k = direction_bin(s.normal_rad + target_from_source.yaw_rad);
-            let v = fields.bins[k].value(
-                (q.x_m / cell_m).floor() as i64,
-                (q.y_m / cell_m).floor() as i64,
-            );
+            let v = fields.bins[k].value(floor_i64(q.x_m / cell_m), floor_i64(q.y_m / cell_m));
             v as i64 * s.weight as i64
         })
         .sum()
@@ -225,9 +232,8 @@ pub fn nearby_alternative(
 fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
     let fx = p.x_m / level.cell_m - 0.5;
     let fy = p.y_m / level.cell_m - 0.5;
-    let (x0, y0) = (fx.floor(), fy.floor());
-    let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
-    let (x0, y0) = (x0 as i64, y0 as i64);
+    let (x0, y0) = (floor_i64(fx), floor_i64(fy));
+    let (tx, ty) = ((fx - x0 as f64) as f32, (fy - y0 as f64) as f32);
     let d00 = level.dist_at(x0, y0)?;
     let d10 = level.dist_at(x0 + 1, y0).unwrap_or(d00);
     let d01 = level.dist_at(x0, y0 + 1).unwrap_or(d00);
@@ -339,14 +345,25 @@ fn climb(
     pose
 }
 
-fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> (usize, usize) {
-    let (mut agree, mut conflict) = (0, 0);
+/// Tallies of one direction of verification.
+#[derive(Clone, Copy, Default)]
+struct Tally {
+    agree: usize,
+    conflict: usize,
+    shape_agree: usize,
+    shape_conflict: usize,
+    landmark_agree: usize,
+    landmark_conflict: usize,
+}
+
+fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> Tally {
+    let mut tally = Tally::default();
     let t = Rigid::new(target_from_source);
     for s in points {
         let q = t.apply(s.p);
         let (x, y) = (
-            (q.x_m / target.cell_m).floor() as i64,
-            (q.y_m / target.cell_m).floor() as i64,
+            floor_i64(q.x_m / target.cell_m),
+            floor_i64(q.y_m / target.cell_m),
         );
         let Some(d) = target.dist_at(x, y) else {
             continue;
@@ -363,13 +380,17 @@ fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2)
                 })
             });
             if facing {
-                agree += s.weight as usize;
+                tally.agree += s.weight as usize;
+                tally.shape_agree += usize::from(s.weight == SHAPE_WEIGHT);
+                tally.landmark_agree += usize::from(s.landmark);
             }
         } else if d > CONFLICT_CELLS && target.class_at(x, y) == Class::Free {
-            conflict += s.weight as usize;
+            tally.conflict += s.weight as usize;
+            tally.shape_conflict += usize::from(s.weight == SHAPE_WEIGHT);
+            tally.landmark_conflict += usize::from(s.landmark);
         }
     }
-    (agree, conflict)
+    tally
 }
 
 /// Which level verification reads.
@@ -389,25 +410,23 @@ pub fn verify(
     conflict_weight: f64,
     on: On,
 ) -> Evidence {
-    let (ag1, co1, ag2, co2) = match on {
-        On::Search => {
-            let (ag1, co1) = count_one_way(&b.search_points, &a.search, a_from_b);
-            let (ag2, co2) = count_one_way(&a.search_points, &b.search, &a_from_b.inverse());
-            (ag1, co1, ag2, co2)
-        }
-        On::Refine => {
-            let (ag1, co1) = count_one_way(&b.refine_points, &a.refine, a_from_b);
-            let (ag2, co2) = count_one_way(&a.refine_points, &b.refine, &a_from_b.inverse());
-            (ag1, co1, ag2, co2)
-        }
+    let (t1, t2) = match on {
+        On::Search => (
+            count_one_way(&b.search_points, &a.search, a_from_b),
+            count_one_way(&a.search_points, &b.search, &a_from_b.inverse()),
+        ),
+        On::Refine => (
+            count_one_way(&b.refine_points, &a.refine, a_from_b),
+            count_one_way(&a.refine_points, &b.refine, &a_from_b.inverse()),
+        ),
     };
     let t = Rigid::new(a_from_b);
     let (mut overlap_points, mut sx, mut sy, mut sq) = (0usize, 0.0, 0.0, 0.0);
     for p in &b.known_points {
         let q = t.apply(*p);
         let (x, y) = (
-            (q.x_m / a.search.cell_m).floor() as i64,
-            (q.y_m / a.search.cell_m).floor() as i64,
+            floor_i64(q.x_m / a.search.cell_m),
+            floor_i64(q.y_m / a.search.cell_m),
         );
         if a.search.class_at(x, y) != Class::Unknown {
             overlap_points += 1;
@@ -426,9 +445,13 @@ pub fn verify(
             (sq / n - cx * cx - cy * cy).max(0.0).sqrt(),
         )
     };
-    let agree = ag1 + ag2;
-    let conflict = co1 + co2;
+    let agree = t1.agree + t2.agree;
+    let conflict = t1.conflict + t2.conflict;
     Evidence {
+        shape_agree: t1.shape_agree + t2.shape_agree,
+        shape_conflict: t1.shape_conflict + t2.shape_conflict,
+        landmark_agree: t1.landmark_agree + t2.landmark_agree,
+        landmark_conflict: t1.landmark_conflict + t2.landmark_conflict,
         agree,
         conflict,
         overlap_m2: overlap_points as f64 * b.known_area_per_point_m2,
@@ -479,4 +502,52 @@ pub fn sharpness(
         .map(|p| verify(a, b, p, conflict_weight, On::Refine).score / evidence.score)
         .fold(0.0, f64::max);
     (1.0 - kept).clamp(0.0, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::{Map, MapCell};
+    use realms_core::{Grid, GridGeometry};
+
+    /// A room's corner (two walls) with rocks on open ground at `rocks` (cells).
+    fn corner(rocks: &[(usize, usize)]) -> Map {
+        let g = GridGeometry {
+            width: 120,
+            height: 80,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let mut grid = Grid::new(g, MapCell::Free);
+        for x in 0..120 {
+            *grid.get_mut(x, 0).expect("in") = MapCell::Occupied;
+        }
+        for y in 0..80 {
+            *grid.get_mut(0, y).expect("in") = MapCell::Occupied;
+        }
+        for &(rx, ry) in rocks {
+            for y in ry..ry + 4 {
+                for x in rx..rx + 4 {
+                    *grid.get_mut(x, y).expect("in") = MapCell::Occupied;
+                }
+            }
+        }
+        Map::new(grid)
+    }
+
+    #[test]
+    fn a_rock_on_open_ground_is_a_landmark_conflict() {
+        let params = Params::default();
+        let a = Prepared::new(&corner(&[(40, 30), (80, 50)]), &params);
+        let same = Prepared::new(&corner(&[(40, 30), (80, 50)]), &params);
+        let moved = Prepared::new(&corner(&[(40, 30), (80, 20)]), &params);
+        let here = Pose2::new(0.0, 0.0, 0.0);
+        let e = verify(&a, &same, &here, params.conflict_weight, On::Refine);
+        assert!(e.landmark_agree >= 16, "{e:?}");
+        assert_eq!(e.landmark_conflict, 0, "{e:?}");
+        // The walls agree as well as before; one rock of each map lands on open ground.
+        let e = verify(&a, &moved, &here, params.conflict_weight, On::Refine);
+        assert!(e.landmark_conflict >= 8, "{e:?}");
+        assert!(e.landmark_agree >= 8, "{e:?}");
+    }
 }
