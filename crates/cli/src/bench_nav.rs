@@ -227,6 +227,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                         rovers_hear_each_other: !args.no_peer_messages,
                         // The targets are set for ideal communication.
                         ideal_comms: true,
+                        ..MissionOptions::default()
                     };
                     let mut mission = Mission::with_options(World::new(&s), options);
                     let end = Time::from_secs_f64(limit_s);

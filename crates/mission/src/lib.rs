@@ -32,8 +32,11 @@ use slam_record::RoverSlamRecord;
 /// twice the default floor undulation, so the floor ahead rising does not count as a rock.
 pub const GROUND_CLEARANCE_M: f64 = 0.12;
 
-/// Rovers stand still this long at the start to measure their gyro's bias.
-pub const GYRO_CALIBRATION: Duration = Duration::from_secs(5);
+/// Rovers stand still this long at the start to measure their gyro's bias. A minute, as on
+/// real rovers: SLAM holds a match's heading to the gyro's, and the bias left after 5 s
+/// (about 0.6 deg a minute) turned whole maps; after 60 s it is a quarter of that
+/// (BENCHMARKS.md, on-board SLAM).
+pub const GYRO_CALIBRATION: Duration = Duration::from_secs(60);
 
 /// How often each rover publishes its map.
 pub const MAP_PERIOD: Duration = Duration::from_secs(60);
@@ -57,6 +60,9 @@ pub struct MissionOptions {
     /// Messages between nodes arrive at once and intact, as on one computer; otherwise they
     /// cross the simulated mesh and ground link of the scenario's `[network]`.
     pub ideal_comms: bool,
+    /// How long the rovers stand still at the start measuring their gyro's bias
+    /// ([`GYRO_CALIBRATION`] by default; short tests may take less and get a worse gyro).
+    pub gyro_calibration: Duration,
 }
 
 impl Default for MissionOptions {
@@ -64,6 +70,7 @@ impl Default for MissionOptions {
         MissionOptions {
             rovers_hear_each_other: true,
             ideal_comms: false,
+            gyro_calibration: GYRO_CALIBRATION,
         }
     }
 }
@@ -155,7 +162,7 @@ impl Mission {
                     mapper: rover_mapper_config(),
                     map_period: MAP_PERIOD,
                     delta_period: MAP_DELTA_PERIOD,
-                    gyro_calibration: GYRO_CALIBRATION,
+                    gyro_calibration: options.gyro_calibration,
                     depth_rot: base_from_optical.rot,
                     depth_origin_m: base_from_optical.origin,
                     traversability: TraversabilityConfig {

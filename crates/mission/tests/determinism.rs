@@ -2,9 +2,9 @@
 //! different arena and mission.
 
 use realms_core::Time;
-use realms_mission::Mission;
 use realms_mission::report::write_results;
-use realms_sim::Scenario;
+use realms_mission::{Mission, MissionOptions};
+use realms_sim::{Scenario, World};
 use std::path::{Path, PathBuf};
 
 fn small() -> Scenario {
@@ -16,7 +16,12 @@ fn run(scenario: &Scenario, name: &str, wall_s: f64) -> PathBuf {
     let dir =
         std::env::temp_dir().join(format!("realms-determinism-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let mut mission = Mission::new(scenario);
+    let options = MissionOptions {
+        // The test is timed from the rovers' start: a short gyro calibration.
+        gyro_calibration: realms_core::Duration::from_secs(5),
+        ..MissionOptions::default()
+    };
+    let mut mission = Mission::with_options(World::new(scenario), options);
     mission.run_until(Time::from_secs_f64(60.0));
     write_results(&mission, &dir, "small", wall_s).expect("results written");
     dir

@@ -80,6 +80,7 @@ fn rovers_that_hear_nothing_from_each_other_still_explore_it_all() {
     let options = MissionOptions {
         rovers_hear_each_other: false,
         ideal_comms: true,
+        ..MissionOptions::default()
     };
     let mut mission = Mission::with_options(World::new(&s), options);
     run_to_completion(&mut mission, 1800.0);
@@ -162,7 +163,12 @@ fn a_goal_behind_a_boulder_field_is_reached_without_touching_a_rock() {
 
 #[test]
 fn a_goal_inside_a_rock_is_refused_once_and_not_retried() {
-    let mut mission = Mission::with_world(boulder_field());
+    let options = MissionOptions {
+        // The test is timed from the rovers' start: a short gyro calibration.
+        gyro_calibration: realms_core::Duration::from_secs(5),
+        ..MissionOptions::default()
+    };
+    let mut mission = Mission::with_options(boulder_field(), options);
     // Let the rover see the field first, so the rock is on its map.
     mission.run_until(Time::from_secs_f64(8.0));
     send_goal(&mut mission, Some(Point2::new(6.0, 1.3)));

@@ -35,7 +35,7 @@ fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
     t.add_crater(crater);
     t.add_boulder(rock);
     t.rover_starts = vec![Pose2::new(4.5, 10.0, 0.0)];
-    // The rover stands still for its first 5 s (measuring the gyro), looking at both.
+    // The rover stands still for its first minute (measuring the gyro), looking at both.
     let mut mission = Mission::with_world(World::with_terrain(&s, t));
     mission.run_until(Time::from_secs_f64(4.5));
     mission.finish();
