@@ -15,6 +15,10 @@ pub struct GroundLinkConfig {
     pub loss: f64,
     /// Windows with no link at all, `[start_s, end_s]` of mission time.
     pub blackouts_s: Vec<[f64; 2]>,
+    /// Copies of each map packet sent back to back. Resending a lost packet costs a round
+    /// trip (2 s here), which alone would break the ground's 6 s map-age budget; a second
+    /// copy of the few kilobytes a map update takes costs almost nothing on this link.
+    pub map_copies: u32,
 }
 
 impl Default for GroundLinkConfig {
@@ -24,6 +28,7 @@ impl Default for GroundLinkConfig {
             bandwidth_bps: 1_000_000.0,
             loss: 0.01,
             blackouts_s: Vec::new(),
+            map_copies: 2,
         }
     }
 }

@@ -13,7 +13,7 @@
 use crate::airtime::{OVERHEAD_US, should_switch};
 use crate::config::NetworkConfig;
 use crate::packet::{HEADER_BYTES, NodeAddr, Packet};
-use crate::qos::{Qos, Reliability};
+use crate::qos::{Priority, Qos, Reliability};
 use crate::queue::{DropReason, TxQueue};
 use crate::radio::LinkQuality;
 use crate::stats::NetStats;
@@ -774,25 +774,40 @@ impl SimNetwork {
                 continue;
             }
             let tx = Duration::from_secs_f64(p.wire_bytes() as f64 * 8.0 / bandwidth_bps);
-            let arrival = start + tx + delay;
-            let in_dark = self
-                .cfg
-                .ground
-                .dark_during(start.as_secs_f64(), arrival.as_secs_f64());
-            let lost = in_dark || self.draw() < self.cfg.ground.loss;
-            self.stats.transmit(
-                from,
-                to,
-                start.as_secs_f64().max(0.0) as u64,
-                p.wire_bytes(),
-            );
+            let copies = if p.qos.priority == Priority::Map {
+                self.cfg.ground.map_copies.max(1)
+            } else {
+                1
+            };
+            // Each copy takes the link in turn; the first to get through is the one that
+            // lands (the receiver drops the others as duplicates).
+            let mut sent_until = start;
+            let mut arrival = None;
+            for _ in 0..copies {
+                let landing = sent_until + tx + delay;
+                let in_dark = self
+                    .cfg
+                    .ground
+                    .dark_during(sent_until.as_secs_f64(), landing.as_secs_f64());
+                let lost = in_dark || self.draw() < self.cfg.ground.loss;
+                self.stats.transmit(
+                    from,
+                    to,
+                    sent_until.as_secs_f64().max(0.0) as u64,
+                    p.wire_bytes(),
+                );
+                sent_until += tx;
+                if !lost && arrival.is_none() {
+                    arrival = Some(landing);
+                }
+            }
             let dir = self.ground_direction(up);
-            dir.free_at = start + tx;
-            if !lost {
+            dir.free_at = sent_until;
+            if let Some(arrival) = arrival {
                 dir.in_flight.push((arrival, p));
             } else if p.qos.reliability == Reliability::Reliable {
                 // Noticed missing after a round trip (selective repeat: the rest goes on).
-                dir.resend.push((start + tx + delay + delay, p));
+                dir.resend.push((sent_until + delay + delay, p));
             } else {
                 self.dropped(p, DropReason::LinkLoss);
             }

@@ -613,6 +613,13 @@ impl Scenario {
                 ));
             }
         }
+        if !(1..=8).contains(&net.ground.map_copies) {
+            return Err(err(
+                "network.ground.map_copies",
+                "from 1 to 8",
+                net.ground.map_copies.to_string(),
+            ));
+        }
         positive("network.route_interval_s", net.route_interval_s)?;
         positive("network.radio.goodput_fraction", net.radio.goodput_fraction)?;
         if net.radio.mcs.is_empty() {
