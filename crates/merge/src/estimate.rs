@@ -179,9 +179,7 @@ pub fn estimate_with_prior(
         .compose(&prior)
         .compose(&b.frame_from_grid);
     let n = (window.angular_rad / params.yaw_step_rad).ceil() as i64;
-    let yaws: Vec<f64> = (-n..=n)
-        .map(|k| normalize_angle_rad(grid_prior.yaw_rad + k as f64 * params.yaw_step_rad))
-        .collect();
+    let yaws = yaws_around(grid_prior.yaw_rad, n, params.yaw_step_rad);
     let search_window = Window {
         centroid_at: grid_prior.transform_point(b.centroid),
         half_m: window.linear_m,
@@ -237,9 +235,7 @@ fn rescan(
     params: &Params,
 ) -> Pose2 {
     let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
-    let yaws: Vec<f64> = (-n..=n)
-        .map(|k| normalize_angle_rad(start.yaw_rad + k as f64 * params.yaw_step_rad))
-        .collect();
+    let yaws = yaws_around(start.yaw_rad, n, params.yaw_step_rad);
     let window = Window {
         centroid_at: start.transform_point(b.centroid),
         half_m: 2.0 * a.global.cell_m,
@@ -537,4 +533,11 @@ fn run(
         hypotheses,
         verified: verified.iter().map(|(p, e)| (to_frames(p), *e)).collect(),
     }
+}
+
+/// `2n + 1` headings `step_rad` apart centred on `center_rad`.
+fn yaws_around(center_rad: f64, n: i64, step_rad: f64) -> Vec<f64> {
+    (-n..=n)
+        .map(|k| normalize_angle_rad(center_rad + k as f64 * step_rad))
+        .collect()
 }
