@@ -255,6 +255,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                             })
                             .collect(),
                     };
+                    let worst = run.worst_slam();
                     eprintln!(
                         "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, SLAM worst {:.2} m ({:.2} m aligned), {:.0} s wall",
                         run.rovers,
@@ -264,8 +265,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                         if run.complete { " (complete)" } else { "" },
                         run.collisions,
                         run.hazard_entries,
-                        run.worst_slam().0,
-                        run.worst_slam().1,
+                        worst.0,
+                        worst.1,
                         run.wall_s
                     );
                     runs.lock().expect("no worker panics holding it").push(run);
@@ -282,6 +283,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let minutes = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{:.1} min", t / 60.0));
     for r in &runs {
+        let worst = r.worst_slam();
         println!(
             "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.2} m ({:.2} m) | {:.0} s |",
             r.seed,
@@ -294,8 +296,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             r.collisions,
             r.hazard_entries,
             r.stuck,
-            r.worst_slam().0,
-            r.worst_slam().1,
+            worst.0,
+            worst.1,
             r.wall_s
         );
     }

@@ -453,11 +453,6 @@ impl Mission {
         &self.downlink
     }
 
-    /// The node of the `index`-th rover.
-    pub fn rover_node(&self, index: usize) -> Option<&realms_node::rover::RoverNode> {
-        self.nodes.get(index)?.as_rover()
-    }
-
     /// The network's counters, unless communication is ideal.
     pub fn network(&self) -> Option<&SimNetwork> {
         self.net.as_ref()

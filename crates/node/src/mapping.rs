@@ -151,11 +151,6 @@ impl Mapping {
         self.mapper.trajectory()
     }
 
-    /// Loop closures accepted so far.
-    pub fn closures(&self) -> usize {
-        self.mapper.closures
-    }
-
     /// Takes a wheel odometry reading. Its translation is kept; its heading is replaced by
     /// the gyro's once the gyro has been heard (skid steering makes wheel headings poor: a few
     /// per cent of every turn, and more when the wheels slip).
