@@ -130,6 +130,91 @@ pub fn plan(args: BenchPlanArgs) -> Result<()> {
         crate::bench::median(all_ratio),
         args.trials
     );
+    frontiers(&map)
+}
+
+/// Frontier detection as a rover explores: the ground truth revealed disc by disc along a
+/// serpentine across the arena, and after each disc the frontiers found by the incremental
+/// tracker and by a full detection, timed in the same run (the costmap is built untimed).
+fn frontiers(truth: &Grid<i8>) -> Result<()> {
+    const SENSING_RADIUS_M: f64 = 5.0;
+    const STEP_M: f64 = 2.5;
+    let geo = *truth.geometry();
+    let mut map = Grid::new(geo, -1i8);
+    let (w, h) = (geo.width_m(), geo.height_m());
+    let mut stops = Vec::new();
+    let mut row = 0;
+    let mut y = 3.0;
+    while y < h {
+        let xs: Vec<f64> = (0..)
+            .map(|k| 3.0 + k as f64 * STEP_M)
+            .take_while(|x| *x < w)
+            .collect();
+        let ordered: Vec<f64> = if row % 2 == 0 {
+            xs
+        } else {
+            xs.into_iter().rev().collect()
+        };
+        stops.extend(ordered.into_iter().map(|x| Point2::new(x, y)));
+        y += 2.0 * SENSING_RADIUS_M;
+        row += 1;
+    }
+    let cfg = CostmapConfig::default();
+    let min_cells = realms_nav::explore::ExploreConfig::default().min_frontier_cells;
+    let mut tracker = realms_nav::frontier::FrontierTracker::new();
+    let (mut full_ms, mut tracked_ms, mut examined) = (Vec::new(), Vec::new(), Vec::new());
+    let r_cells = (SENSING_RADIUS_M / geo.resolution_m).ceil() as i64;
+    for stop in &stops {
+        let c = geo.world_to_cell(*stop).context("a stop off the map")?;
+        for dy in -r_cells..=r_cells {
+            for dx in -r_cells..=r_cells {
+                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+                if dx * dx + dy * dy > r_cells * r_cells || x < 0 || y < 0 {
+                    continue;
+                }
+                if let (Some(t), Some(m)) = (
+                    truth.get(x as usize, y as usize).copied(),
+                    map.get_mut(x as usize, y as usize),
+                ) {
+                    *m = t;
+                }
+            }
+        }
+        let costmap = Costmap::from_map(&map, &cfg);
+        let t = Instant::now();
+        let full = realms_nav::frontier::detect(&map, &costmap, min_cells, None);
+        full_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        let tracked = tracker.update(&map, &costmap, min_cells, None);
+        tracked_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        examined.push(tracker.last_examined() as f64);
+        if tracked != full {
+            bail!("the tracker and full detection disagree at {stop:?}");
+        }
+    }
+    // The first update examines every cell; the rest are the incremental case.
+    let (full_ms, tracked_ms, examined) = (&full_ms[1..], &tracked_ms[1..], &examined[1..]);
+    let ratios: Vec<f64> = full_ms.iter().zip(tracked_ms).map(|(f, t)| f / t).collect();
+    println!();
+    println!(
+        "frontier detection over {} map updates ({} m discs revealed every {STEP_M} m along a serpentine, {} x {} cells):",
+        full_ms.len(),
+        SENSING_RADIUS_M,
+        geo.width,
+        geo.height
+    );
+    println!(
+        "| full detection median | incremental median | full / incremental (median of per-update ratios) | cells examined per update, median |"
+    );
+    println!("| --- | --- | --- | --- |");
+    println!(
+        "| {:.2} ms | {:.2} ms | {:.1}x | {:.0} of {} |",
+        crate::bench::median(full_ms.to_vec()),
+        crate::bench::median(tracked_ms.to_vec()),
+        crate::bench::median(ratios),
+        crate::bench::median(examined.to_vec()),
+        geo.len()
+    );
     Ok(())
 }
 

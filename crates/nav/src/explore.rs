@@ -8,9 +8,8 @@
 //! allocator. Rovers that hear nothing from their peers still explore, only less well
 //! (they may duplicate work). Targets the rover failed to reach are blacklisted.
 
-use crate::costmap::Costmap;
-use crate::frontier::{Frontier, detect};
-use realms_core::{Cell, Grid, Point2};
+use crate::frontier::Frontier;
+use realms_core::{Cell, GridGeometry, Point2};
 
 /// Exploration tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,24 +82,22 @@ pub struct PeerClaim {
     pub target: Point2,
 }
 
-/// Candidate targets from the frontiers of `map`, best first, given the travel costs from the
-/// rover's position (the Dijkstra field of [`Planner::travel_costs`](crate::Planner::travel_costs)
-/// on `costmap`). Unreachable and blacklisted frontiers are left out, and so is unknown
-/// ground `seen_by_others` marks (per map cell: peers have mapped it).
+/// Candidate targets from `frontiers` (of a map with geometry `geo`, found by
+/// [`detect`](crate::frontier::detect) or a [`FrontierTracker`](crate::frontier::FrontierTracker)),
+/// best first, given the travel costs from the rover's position (the Dijkstra field of
+/// [`Planner::travel_costs`](crate::Planner::travel_costs) on the same map's costmap).
+/// Unreachable and blacklisted frontiers are left out.
 pub fn candidates(
-    map: &Grid<i8>,
-    costmap: &Costmap,
+    frontiers: &[Frontier],
+    geo: &GridGeometry,
     travel: &[f32],
     peers: &[PeerClaim],
-    seen_by_others: Option<&[bool]>,
     blacklist: &[Point2],
     cfg: &ExploreConfig,
 ) -> Vec<Candidate> {
-    let geo = *map.geometry();
-    let frontiers = detect(map, costmap, cfg.min_frontier_cells, seen_by_others);
     let mut out: Vec<Candidate> = frontiers
         .iter()
-        .filter_map(|f| score(f, &geo, travel, peers, blacklist, cfg))
+        .filter_map(|f| score(f, geo, travel, peers, blacklist, cfg))
         .collect();
     out.sort_by(|a, b| b.utility.total_cmp(&a.utility).then(a.cell.cmp(&b.cell)));
     out
@@ -108,7 +105,7 @@ pub fn candidates(
 
 fn score(
     f: &Frontier,
-    geo: &realms_core::GridGeometry,
+    geo: &GridGeometry,
     travel: &[f32],
     peers: &[PeerClaim],
     blacklist: &[Point2],
@@ -158,9 +155,23 @@ fn score(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::CostmapConfig;
+    use crate::frontier::detect;
     use crate::planner::{Planner, PlannerConfig};
-    use realms_core::GridGeometry;
+    use crate::{Costmap, CostmapConfig};
+    use realms_core::Grid;
+
+    /// The candidates of `map` with nobody's coverage to discount.
+    fn candidates_of(
+        map: &Grid<i8>,
+        cm: &Costmap,
+        travel: &[f32],
+        peers: &[PeerClaim],
+        blacklist: &[Point2],
+        cfg: &ExploreConfig,
+    ) -> Vec<Candidate> {
+        let frontiers = detect(map, cm, cfg.min_frontier_cells, None);
+        candidates(&frontiers, map.geometry(), travel, peers, blacklist, cfg)
+    }
 
     /// A 20 x 4 m corridor known in its middle third, open to the unknown at both ends; the
     /// rover stands left of centre.
@@ -188,15 +199,7 @@ mod tests {
     #[test]
     fn the_nearer_of_two_equal_frontiers_wins() {
         let (map, cm, travel) = corridor();
-        let c = candidates(
-            &map,
-            &cm,
-            &travel,
-            &[],
-            None,
-            &[],
-            &ExploreConfig::default(),
-        );
+        let c = candidates_of(&map, &cm, &travel, &[], &[], &ExploreConfig::default());
         assert_eq!(c.len(), 2);
         assert!((c[0].goal.x_m - 7.05).abs() < 1e-9, "{c:?}");
         assert!((c[1].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
@@ -207,9 +210,9 @@ mod tests {
     fn a_peer_s_claim_sends_the_rover_the_other_way() {
         let (map, cm, travel) = corridor();
         let cfg = ExploreConfig::default();
-        let mine = candidates(&map, &cm, &travel, &[], None, &[], &cfg)[0];
+        let mine = candidates_of(&map, &cm, &travel, &[], &[], &cfg)[0];
         let peer = PeerClaim { target: mine.goal };
-        let c = candidates(&map, &cm, &travel, &[peer], None, &[], &cfg);
+        let c = candidates_of(&map, &cm, &travel, &[peer], &[], &cfg);
         assert!((c[0].goal.x_m - 12.95).abs() < 1e-9, "{c:?}");
         assert_ne!(c[0].goal, peer.target);
     }
@@ -217,12 +220,11 @@ mod tests {
     #[test]
     fn a_blacklisted_target_is_not_offered_again() {
         let (map, cm, travel) = corridor();
-        let c = candidates(
+        let c = candidates_of(
             &map,
             &cm,
             &travel,
             &[],
-            None,
             &[Point2::new(7.05, 2.05)],
             &ExploreConfig::default(),
         );

@@ -2,6 +2,7 @@
 //! known free cells beside unknown ones, where driving up and looking adds to the map.
 //! Frontier cells the rover cannot stand on (inscribed in the costmap) are left out, and
 //! 8-connected frontier cells are grouped so each group is one candidate target.
+//! [`FrontierTracker`] finds the same frontiers map after map, examining only what changed.
 
 use crate::costmap::{Costmap, MAX_PASSABLE, OCCUPIED_THRESHOLD};
 use realms_core::{Cell, Grid, GridGeometry, Point2};
@@ -25,6 +26,9 @@ impl Frontier {
 /// Every frontier of `map` (-1 unknown, 0..=100 occupancy) with at least `min_cells` cells,
 /// largest first; `costmap` must share the map's geometry. Unknown cells that `seen_by_others`
 /// (per map cell, if given) marks are not worth driving to: a peer has mapped them.
+///
+/// This examines every cell; [`FrontierTracker`] gives the same answer examining only what
+/// changed since its last call.
 pub fn detect(
     map: &Grid<i8>,
     costmap: &Costmap,
@@ -32,31 +36,76 @@ pub fn detect(
     seen_by_others: Option<&[bool]>,
 ) -> Vec<Frontier> {
     let geo = *map.geometry();
-    let (w, h) = (geo.width, geo.height);
-    let v = map.cells();
-    let costs = costmap.costs();
-    let open = |j: usize| v[j] < 0 && !seen_by_others.is_some_and(|s| s[j]);
-    let is_frontier = |i: usize| -> bool {
-        if !(0..OCCUPIED_THRESHOLD).contains(&v[i]) || costs[i] > MAX_PASSABLE {
+    let inputs = Inputs::new(map, costmap, seen_by_others);
+    let flags: Vec<bool> = (0..geo.len()).map(|i| inputs.is_frontier(i)).collect();
+    let mut visited = vec![false; geo.len()];
+    group(&geo, &flags, &mut visited, 0..geo.len(), min_cells)
+}
+
+/// What decides whether a cell is a frontier, borrowed from the caller.
+struct Inputs<'a> {
+    width: usize,
+    height: usize,
+    map: &'a [i8],
+    costs: &'a [u8],
+    seen: Option<&'a [bool]>,
+}
+
+impl<'a> Inputs<'a> {
+    fn new(map: &'a Grid<i8>, costmap: &'a Costmap, seen: Option<&'a [bool]>) -> Self {
+        let geo = map.geometry();
+        Inputs {
+            width: geo.width,
+            height: geo.height,
+            map: map.cells(),
+            costs: costmap.costs(),
+            seen,
+        }
+    }
+
+    /// Unknown, and no peer has mapped it.
+    fn open(&self, j: usize) -> bool {
+        self.map[j] < 0 && !self.seen.is_some_and(|s| s[j])
+    }
+
+    /// Known free, passable, and beside open ground (4-connected).
+    fn is_frontier(&self, i: usize) -> bool {
+        if !(0..OCCUPIED_THRESHOLD).contains(&self.map[i]) || self.costs[i] > MAX_PASSABLE {
             return false;
         }
+        let (w, h) = (self.width, self.height);
         let (x, y) = (i % w, i / w);
-        (x > 0 && open(i - 1))
-            || (x + 1 < w && open(i + 1))
-            || (y > 0 && open(i - w))
-            || (y + 1 < h && open(i + w))
-    };
-    let mut visited = vec![false; v.len()];
+        (x > 0 && self.open(i - 1))
+            || (x + 1 < w && self.open(i + 1))
+            || (y > 0 && self.open(i - w))
+            || (y + 1 < h && self.open(i + w))
+    }
+}
+
+/// Groups the cells `flags` marks into 8-connected frontiers of at least `min_cells`, largest
+/// first. `seeds` must hold every marked cell in increasing order (it may hold others), so
+/// each group is walked from its lowest cell whichever caller asks. `visited` (one per cell,
+/// all false) is scratch, left all false again.
+fn group(
+    geo: &GridGeometry,
+    flags: &[bool],
+    visited: &mut [bool],
+    seeds: impl Iterator<Item = usize>,
+    min_cells: usize,
+) -> Vec<Frontier> {
+    let (w, h) = (geo.width, geo.height);
+    let mut walked = Vec::new();
     let mut out = Vec::new();
     let mut stack = Vec::new();
-    for seed in 0..v.len() {
-        if visited[seed] || !is_frontier(seed) {
+    for seed in seeds {
+        if visited[seed] || !flags[seed] {
             continue;
         }
         visited[seed] = true;
         stack.push(seed);
         let mut cells = Vec::new();
         while let Some(i) = stack.pop() {
+            walked.push(i);
             let (x, y) = (i % w, i / w);
             cells.push(Cell { x, y });
             for dy in -1isize..=1 {
@@ -71,7 +120,7 @@ pub fn detect(
                         continue;
                     }
                     let j = ny as usize * w + nx as usize;
-                    if !visited[j] && is_frontier(j) {
+                    if !visited[j] && flags[j] {
                         visited[j] = true;
                         stack.push(j);
                     }
@@ -91,6 +140,9 @@ pub fn detect(
             });
         }
     }
+    for i in walked {
+        visited[i] = false;
+    }
     out.sort_by(|a, b| {
         b.cells
             .len()
@@ -98,6 +150,137 @@ pub fn detect(
             .then(a.cells[0].cmp(&b.cells[0]))
     });
     out
+}
+
+/// Frontier detection that carries its work from one map to the next, in the manner of
+/// the incremental detectors of Keidar and Kaminka ("Efficient frontier detection for robot
+/// exploration", IJRR 33, 2014): a cell's frontier flag is re-examined only where the map,
+/// the costmap or the peers' coverage changed under it or beside it, and grouping walks the
+/// frontier cells alone, never the whole map. A new map extent (the map grew) starts afresh.
+///
+/// The answer is always the one [`detect`] gives for the same inputs.
+#[derive(Clone, Debug, Default)]
+pub struct FrontierTracker {
+    geo: Option<GridGeometry>,
+    map: Vec<i8>,
+    costs: Vec<u8>,
+    seen: Vec<bool>,
+    /// All false: the peers' coverage when the caller gives none.
+    nobody: Vec<bool>,
+    flags: Vec<bool>,
+    /// Every flagged cell, and perhaps some no longer flagged (dropped when grouping).
+    listed: Vec<usize>,
+    on_list: Vec<bool>,
+    visited: Vec<bool>,
+    examined: usize,
+}
+
+impl FrontierTracker {
+    /// A tracker that has seen no map yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Cells whose frontier flag the last [`update`](Self::update) examined.
+    pub fn last_examined(&self) -> usize {
+        self.examined
+    }
+
+    /// The frontiers of `map` (as [`detect`] defines them), updating only what changed
+    /// since the previous call.
+    pub fn update(
+        &mut self,
+        map: &Grid<i8>,
+        costmap: &Costmap,
+        min_cells: usize,
+        seen_by_others: Option<&[bool]>,
+    ) -> Vec<Frontier> {
+        let geo = *map.geometry();
+        let inputs = Inputs::new(map, costmap, seen_by_others);
+        let n = geo.len();
+        if self.geo != Some(geo) {
+            self.geo = Some(geo);
+            self.map = inputs.map.to_vec();
+            self.costs = inputs.costs.to_vec();
+            self.nobody = vec![false; n];
+            self.seen = seen_by_others.map_or_else(|| self.nobody.clone(), <[bool]>::to_vec);
+            self.flags = (0..n).map(|i| inputs.is_frontier(i)).collect();
+            self.listed = (0..n).filter(|&i| self.flags[i]).collect();
+            self.on_list = self.flags.clone();
+            self.visited = vec![false; n];
+            self.examined = n;
+        } else {
+            let seen = seen_by_others.unwrap_or(&self.nobody);
+            let w = geo.width;
+            let mut examined = 0;
+            // Whole runs of unchanged cells are passed over by comparing slices, which the
+            // compiler turns into block compares; only a run with a change is walked.
+            const RUN: usize = 64;
+            for start in (0..n).step_by(RUN) {
+                let r = start..(start + RUN).min(n);
+                if inputs.map[r.clone()] == self.map[r.clone()]
+                    && inputs.costs[r.clone()] == self.costs[r.clone()]
+                    && seen[r.clone()] == self.seen[r.clone()]
+                {
+                    continue;
+                }
+                for i in r {
+                    let (m, c, s) = (inputs.map[i], inputs.costs[i], seen[i]);
+                    let own = m != self.map[i] || c != self.costs[i];
+                    let was_open = self.map[i] < 0 && !self.seen[i];
+                    let neighbours = was_open != (m < 0 && !s);
+                    if !own && !neighbours {
+                        continue;
+                    }
+                    self.map[i] = m;
+                    self.costs[i] = c;
+                    self.seen[i] = s;
+                    // A cell's flag depends on its own state and on whether its four
+                    // neighbours are open; a change of openness touches their flags.
+                    let (x, y) = (i % w, i / w);
+                    let mut touch = |j: usize| {
+                        examined += 1;
+                        let f = inputs.is_frontier(j);
+                        self.flags[j] = f;
+                        if f && !self.on_list[j] {
+                            self.on_list[j] = true;
+                            self.listed.push(j);
+                        }
+                    };
+                    touch(i);
+                    if neighbours {
+                        if x > 0 {
+                            touch(i - 1);
+                        }
+                        if x + 1 < w {
+                            touch(i + 1);
+                        }
+                        if y > 0 {
+                            touch(i - w);
+                        }
+                        if y + 1 < geo.height {
+                            touch(i + w);
+                        }
+                    }
+                }
+            }
+            self.examined = examined;
+        }
+        let flags = &self.flags;
+        let on_list = &mut self.on_list;
+        self.listed.retain(|&i| {
+            on_list[i] = flags[i];
+            flags[i]
+        });
+        self.listed.sort_unstable();
+        group(
+            &geo,
+            &self.flags,
+            &mut self.visited,
+            self.listed.iter().copied(),
+            min_cells,
+        )
+    }
 }
 
 /// The map coarsened `factor` times: a coarse cell is known where at least half its cells

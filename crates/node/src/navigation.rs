@@ -17,6 +17,7 @@ use realms_core::msgs::ExploredArea;
 use realms_core::{Duration, Grid, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
+use realms_nav::frontier::FrontierTracker;
 use realms_nav::planner::{PlannerConfig, smooth};
 use realms_nav::{Costmap, CostmapConfig, Planner};
 use std::collections::{BTreeMap, VecDeque};
@@ -139,6 +140,8 @@ pub struct Navigator {
     planner: Planner,
     follower: Follower,
     costmap: Option<Costmap>,
+    /// Frontiers carried from one map to the next.
+    frontiers: FrontierTracker,
     goal: Option<Goal>,
     operator_goal: Option<Point2>,
     blacklist: Vec<Point2>,
@@ -176,6 +179,7 @@ impl Navigator {
             follower: Follower::new(cfg.follower),
             cfg,
             costmap: None,
+            frontiers: FrontierTracker::new(),
             goal: None,
             operator_goal: None,
             blacklist: Vec::new(),
@@ -365,12 +369,17 @@ impl Navigator {
         if self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous {
             let claims = self.claims(now, current);
             let seen = self.seen_by_peers(now, map);
-            let options = candidates(
+            let frontiers = self.frontiers.update(
                 map,
                 &costmap,
+                self.cfg.explore.min_frontier_cells,
+                seen.as_deref(),
+            );
+            let options = candidates(
+                &frontiers,
+                &geo,
                 &field,
                 &claims,
-                seen.as_deref(),
                 &self.blacklist,
                 &self.cfg.explore,
             );
