@@ -42,6 +42,12 @@ pub struct MergeArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// The maps share one frame (rovers started from known places): check each against the
+    /// first near where its YAML origin puts it, within 3 m and 10 deg, instead of searching
+    /// every pose. A map the first shares too little structure with to confirm a pose is
+    /// placed as given, marked unconfirmed; one that contradicts it is refused.
+    #[arg(long)]
+    pub known_start: bool,
 }
 
 /// `realms slam`.

@@ -1,12 +1,13 @@
 //! `realms merge A.yaml B.yaml [C.yaml ...] --out merged.yaml [--json]`: merges ROS
 //! map_server maps taken from unknown relative poses, prints where each later map's frame
 //! lies in the first map's frame (or why it was refused) and writes the merged map, plus a
-//! PNG of which map contributed each cell.
+//! PNG of which map contributed each cell. With `--known-start` the maps share one frame
+//! and each is checked where it is instead of searched for.
 
 use crate::cli::MergeArgs;
 use anyhow::{Context, Result};
-use realms_merge::compose::{self, Merged};
-use realms_merge::{MapCell, Params};
+use realms_merge::compose::{self, KnownStartMerged, Merged};
+use realms_merge::{MapCell, Params, PriorWindow};
 use serde_json::json;
 
 /// Colours of the contribution image, by map index (cycled).
@@ -26,14 +27,14 @@ pub fn run(args: MergeArgs) -> Result<()> {
         .iter()
         .map(|p| realms_merge::io::read(p).with_context(|| format!("reading {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
-    let merged = compose::merge(&maps, &Params::default())?;
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    if args.known_start {
+        let merged =
+            compose::merge_known_start(&maps, &Params::default(), &PriorWindow::default())?;
+        return report_known_start(&args, &merged);
     }
-    let yaml = realms_merge::io::write(&merged.grid, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    let merged = compose::merge(&maps, &Params::default())?;
+    let yaml = write_merged(&args, &merged.grid, &merged.contribution)?;
     let png = args.out.with_extension("contributions.png");
-    write_contributions(&merged, &png)?;
     if args.json {
         println!(
             "{}",
@@ -86,6 +87,90 @@ pub fn run(args: MergeArgs) -> Result<()> {
     Ok(())
 }
 
+/// Writes the merged map and prints each map's check, as text or JSON.
+fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()> {
+    let yaml = write_merged(args, &merged.grid, &merged.contribution)?;
+    let entries: Vec<serde_json::Value> = args.maps[1..]
+        .iter()
+        .zip(&merged.checks)
+        .map(|(path, c)| {
+            let name = path.display().to_string();
+            match c.placed {
+                Some(pose) => json!({
+                    "map": name,
+                    "x_m": pose.x_m,
+                    "y_m": pose.y_m,
+                    "yaw_rad": pose.yaw_rad,
+                    "confidence": if c.confirmed { c.estimate.confidence } else { 0.0 },
+                    "confirmed": c.confirmed,
+                    "drifted": c.confirmed && c.drifted,
+                    "drift_m": c.drift_m,
+                }),
+                None => json!({
+                    "map": name,
+                    "refused": c.refusal.clone().unwrap_or_else(|| "not placed".into()),
+                }),
+            }
+        })
+        .collect();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({ "maps": entries }))?
+        );
+        return Ok(());
+    }
+    for (path, c) in args.maps[1..].iter().zip(&merged.checks) {
+        let name = path.display();
+        match (c.placed, &c.refusal) {
+            (Some(p), _) if c.confirmed => println!(
+                "{name}: confirmed at x_m {:.3} y_m {:.3} yaw_rad {:.4} ({:.2} deg), confidence {:.2}, {:.2} m from its known start{}",
+                p.x_m,
+                p.y_m,
+                p.yaw_rad,
+                p.yaw_rad.to_degrees(),
+                c.estimate.confidence,
+                c.drift_m,
+                if c.drifted { " (drifted)" } else { "" }
+            ),
+            (Some(_), _) => println!(
+                "{name}: placed at its known start, unconfirmed ({})",
+                c.estimate.refusal.as_deref().unwrap_or("no pose confirmed")
+            ),
+            (None, why) => println!(
+                "{name}: refused: {}",
+                why.as_deref().unwrap_or("not placed")
+            ),
+        }
+    }
+    let placed = 1 + merged.checks.iter().filter(|c| c.placed.is_some()).count();
+    println!(
+        "merged {placed} of {} maps into {}",
+        args.maps.len(),
+        yaml.display()
+    );
+    Ok(())
+}
+
+/// Writes the merged map's YAML + PGM and the contribution PNG beside it; returns the YAML.
+fn write_merged(
+    args: &MergeArgs,
+    grid: &realms_core::Grid<MapCell>,
+    contribution: &realms_core::Grid<u64>,
+) -> Result<std::path::PathBuf> {
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let yaml = realms_merge::io::write(grid, &args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    write_contributions(
+        grid,
+        contribution,
+        &args.out.with_extension("contributions.png"),
+    )?;
+    Ok(yaml)
+}
+
 /// `{"maps": [...]}`, one entry per map after the first.
 fn report_json(args: &MergeArgs, merged: &Merged) -> serde_json::Value {
     let entries: Vec<serde_json::Value> = args
@@ -113,10 +198,14 @@ fn report_json(args: &MergeArgs, merged: &Merged) -> serde_json::Value {
     json!({ "maps": entries })
 }
 
-fn write_contributions(merged: &Merged, path: &std::path::Path) -> Result<()> {
-    let cells = merged.grid.cells();
-    let contributions = merged.contribution.cells();
-    let image = merged.contribution.map(|_| [0u8; 3]);
+fn write_contributions(
+    grid: &realms_core::Grid<MapCell>,
+    contribution: &realms_core::Grid<u64>,
+    path: &std::path::Path,
+) -> Result<()> {
+    let cells = grid.cells();
+    let contributions = contribution.cells();
+    let image = contribution.map(|_| [0u8; 3]);
     let colours: Vec<[u8; 3]> = cells
         .iter()
         .zip(contributions)

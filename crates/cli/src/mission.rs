@@ -199,6 +199,12 @@ pub fn run(args: MissionArgs) -> Result<()> {
     if let Some(m) = &report.merge {
         for l in &m.maps {
             match (&l.pose, &l.refused) {
+                (Some(_), _) if !l.confirmed => println!(
+                    "  merge: {} placed at its known start, unconfirmed (too little shared structure; {:.0} % of its obstacles within 0.5 m of {}'s)",
+                    l.rover,
+                    100.0 * l.agreement_at_start,
+                    m.reference
+                ),
                 (Some(p), _) => println!(
                     "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}{}",
                     l.rover,

@@ -227,3 +227,73 @@ fn merge_refuses_maps_that_share_nothing_and_reports_bad_files() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `yaml` (a map_server YAML) written again as `out` with its grid moved by `moved`, a pose
+/// in the frame the YAML's origin is given in.
+fn moved_yaml(yaml: &Path, out: &Path, moved: realms_core::Pose2) {
+    let text = std::fs::read_to_string(yaml).expect("the YAML");
+    let map = realms_merge::io::read(yaml).expect("the map");
+    let o = map.cells.geometry().origin;
+    let p = moved.compose(&realms_core::Pose2::new(o.x_m, o.y_m, map.origin_yaw_rad));
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("origin:") {
+                format!("origin: [{}, {}, {}]", p.x_m, p.y_m, p.yaw_rad)
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    std::fs::write(out, lines.join("\n") + "\n").expect("write");
+}
+
+#[test]
+fn merge_from_a_known_start_confirms_a_map_in_the_shared_frame_and_refuses_a_contradicting_one() {
+    let dir = std::env::temp_dir().join(format!("realms-cli-merge-ks-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (a, b, truth) = merge_case(&dir, 0.5, 33);
+    // B's grid where it truly lies in A's frame, and the same turned 30 degrees about A's
+    // origin (beyond the 10 degree window: a known start that is wrong).
+    let in_frame = dir.join("b_in_frame.yaml");
+    moved_yaml(&b, &in_frame, truth);
+    let wrong = dir.join("b_wrong.yaml");
+    moved_yaml(
+        &b,
+        &wrong,
+        realms_core::Pose2::new(0.0, 0.0, 30f64.to_radians()).compose(&truth),
+    );
+    let o = realms()
+        .arg("merge")
+        .arg(&a)
+        .arg(&in_frame)
+        .arg(&wrong)
+        .arg("--known-start")
+        .arg("--out")
+        .arg(dir.join("ks.yaml"))
+        .arg("--json")
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let confirmed = &json["maps"][0];
+    assert_eq!(confirmed["confirmed"], true, "{json}");
+    let (x, y, yaw) = (
+        confirmed["x_m"].as_f64().expect("x_m"),
+        confirmed["y_m"].as_f64().expect("y_m"),
+        confirmed["yaw_rad"].as_f64().expect("yaw_rad"),
+    );
+    assert!(x.hypot(y) < 0.15 && yaw.abs() < 1f64.to_radians(), "{json}");
+    assert!(
+        json["maps"][1]["refused"]
+            .as_str()
+            .is_some_and(|r| r.contains("contradict the known start")),
+        "{json}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -8,7 +8,7 @@
 //! saw; a stale free cell only costs a detour. The contribution layer records, per cell,
 //! which maps observed it (bit `i` for map `i`), which the mission report colours.
 
-use crate::estimate::{Estimate, estimate};
+use crate::estimate::{Estimate, PriorCheck, PriorWindow, estimate, estimate_with_prior};
 use crate::map::{Map, MapCell};
 use crate::prepare::{Params, Prepared};
 use realms_core::geometry::normalize_angle_rad;
@@ -110,6 +110,55 @@ pub fn merge(maps: &[Map], params: &Params) -> Result<Merged, MergeError> {
         placements,
         links,
         inconsistencies,
+        grid,
+        contribution,
+    })
+}
+
+/// A known-start merge: each map after the first checked against the first at its prior.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KnownStartMerged {
+    /// One check per map after the first, in input order.
+    pub checks: Vec<PriorCheck>,
+    /// The merged map, axis-aligned in the reference map's frame.
+    pub grid: Grid<MapCell>,
+    /// Per merged cell, bit `i` set when map `i` observed it.
+    pub contribution: Grid<u64>,
+}
+
+/// Merges maps whose frames are known to coincide with the first's (rovers that started
+/// from known places and map in one shared frame): each is refined against the first
+/// within `window` ([`estimate_with_prior`]), placed where the check puts it, and drawn.
+pub fn merge_known_start(
+    maps: &[Map],
+    params: &Params,
+    window: &PriorWindow,
+) -> Result<KnownStartMerged, MergeError> {
+    if maps.is_empty() {
+        return Err(MergeError::NoMaps);
+    }
+    if maps.len() > MAX_MAPS {
+        return Err(MergeError::TooManyMaps(maps.len()));
+    }
+    let reference = Prepared::new(&maps[0], params);
+    let checks: Vec<PriorCheck> = maps[1..]
+        .iter()
+        .map(|m| {
+            estimate_with_prior(
+                &reference,
+                &Prepared::new(m, params),
+                Pose2::IDENTITY,
+                window,
+                params,
+            )
+        })
+        .collect();
+    let poses: Vec<Option<Pose2>> = std::iter::once(Some(Pose2::IDENTITY))
+        .chain(checks.iter().map(|c| c.placed))
+        .collect();
+    let (grid, contribution) = compose(maps, &poses);
+    Ok(KnownStartMerged {
+        checks,
         grid,
         contribution,
     })

@@ -138,6 +138,18 @@ pub struct PriorCheck {
     /// Whether the maps confirm a pose that differs from the prior by more than the
     /// tolerances.
     pub drifted: bool,
+    /// Share of obstacle points within the contradiction tolerance of the other map's
+    /// structure at the prior pose, among those and the ones on its open ground farther
+    /// off ([`verify::loose_agreement`]).
+    pub loose_agreement: f64,
+    /// Where the second map goes: the confirmed pose, or the prior when the maps share too
+    /// little structure to confirm any pose but nothing in them contradicts the prior.
+    /// `None` when they contradict it.
+    pub placed: Option<Pose2>,
+    /// Whether `placed` was confirmed by the maps (false: it is the prior, unchecked).
+    pub confirmed: bool,
+    /// Why the map was left out, if it was.
+    pub refusal: Option<String>,
 }
 
 /// How far from a prior to look, and how far counts as drift.
@@ -151,6 +163,14 @@ pub struct PriorWindow {
     pub drift_tolerance_m: f64,
     /// ... or turned more than this, radians.
     pub drift_tolerance_rad: f64,
+    /// When no pose is confirmed, the prior is still taken unless at least this many
+    /// obstacle points of either map land on the other's open ground farther than
+    /// `contradiction_tolerance_m` from its structure ...
+    pub contradiction_cells: usize,
+    /// ... and they are more than this share of those and the ones within it.
+    pub contradiction_agreement: f64,
+    /// Drift a map placed unconfirmed may carry, metres.
+    pub contradiction_tolerance_m: f64,
 }
 
 impl Default for PriorWindow {
@@ -160,12 +180,21 @@ impl Default for PriorWindow {
             angular_rad: 10f64.to_radians(),
             drift_tolerance_m: 0.3,
             drift_tolerance_rad: 2f64.to_radians(),
+            contradiction_cells: 100,
+            contradiction_agreement: 0.8,
+            contradiction_tolerance_m: 0.5,
         }
     }
 }
 
 /// Known-start mode: refines `prior` (pose of the second map's frame in the first's) within
 /// `window` and reports whether the maps have drifted from it.
+///
+/// Rovers that split the work share little structure, and what they share they see from
+/// different sides (rover 1 the lander's east face, rover 2 its north face), so often no
+/// pose can be confirmed. The known start is then evidence enough, and the map is placed at
+/// the prior, marked unconfirmed, unless the maps contradict it there: many obstacles of
+/// one on the other's open ground, farther from its structure than drift would put them.
 pub fn estimate_with_prior(
     a: &Prepared,
     b: &Prepared,
@@ -193,11 +222,36 @@ pub fn estimate_with_prior(
             .distance_m(found.transform_point(centre));
         drift_rad = normalize_angle_rad(found.yaw_rad - prior.yaw_rad).abs();
     }
+    let (near, far) = verify::loose_agreement(a, b, &grid_prior, window.contradiction_tolerance_m);
+    let loose = if near + far == 0 {
+        1.0
+    } else {
+        near as f64 / (near + far) as f64
+    };
+    let contradicted = far >= window.contradiction_cells && loose < window.contradiction_agreement;
+    let (placed, confirmed, refusal) = match estimate.accepted() {
+        Some(found) => (Some(found), true, None),
+        None if contradicted => (
+            None,
+            false,
+            Some(format!(
+                "the maps contradict the known start: {:.0} % of the obstacles lie within {} m of the other map's there, {far} lie on its open ground farther off ({})",
+                100.0 * loose,
+                window.contradiction_tolerance_m,
+                estimate.refusal.as_deref().unwrap_or("no pose confirmed")
+            )),
+        ),
+        None => (Some(prior), false, None),
+    };
     PriorCheck {
         drifted: drift_m > window.drift_tolerance_m || drift_rad > window.drift_tolerance_rad,
         estimate,
         drift_m,
         drift_rad,
+        loose_agreement: loose,
+        placed,
+        confirmed,
+        refusal,
     }
 }
 

@@ -75,6 +75,8 @@ pub struct Surface {
     /// Whether the point lies on a landmark ([`Level::landmark`]): a rock, a boulder, a
     /// crater, a piece of furniture, rather than a wall.
     pub landmark: bool,
+    /// Whether the point lies on a hazard (seen by a depth camera, not by a lidar).
+    pub hazard: bool,
 }
 
 /// Weight of a point on a straight run of structure.
@@ -256,6 +258,7 @@ impl Level {
                         normal_rad: self.normal[i] as f64,
                         weight: if line { LINE_WEIGHT } else { SHAPE_WEIGHT },
                         landmark: self.landmark[i],
+                        hazard: c == Class::Hazard,
                     });
                 }
             }

@@ -393,6 +393,43 @@ fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2)
     tally
 }
 
+/// Obstacle points (hazards aside) of each map that land within `tolerance_m` of the other
+/// map's structure, and those that land on its free ground farther than that from any:
+/// whether two maps agree on a pose up to the drift the tolerance allows. Hazards are left
+/// out because when the maps come from rovers, one rover's hazard may lie where the other's
+/// lidar passed over and its depth camera never looked, which its map calls free.
+pub fn loose_agreement(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    tolerance_m: f64,
+) -> (usize, usize) {
+    let one_way = |points: &[Surface], target: &Level, t: &Pose2| {
+        let t = Rigid::new(t);
+        let tolerance_cells = (tolerance_m / target.cell_m) as f32;
+        let (mut near, mut far) = (0, 0);
+        for s in points.iter().filter(|s| !s.hazard) {
+            let q = t.apply(s.p);
+            let (x, y) = (
+                floor_i64(q.x_m / target.cell_m),
+                floor_i64(q.y_m / target.cell_m),
+            );
+            let Some(d) = target.dist_at(x, y) else {
+                continue;
+            };
+            if d <= tolerance_cells {
+                near += 1;
+            } else if target.class_at(x, y) == Class::Free {
+                far += 1;
+            }
+        }
+        (near, far)
+    };
+    let (n1, f1) = one_way(&b.refine_points, &a.refine, a_from_b);
+    let (n2, f2) = one_way(&a.refine_points, &b.refine, &a_from_b.inverse());
+    (n1 + n2, f1 + f2)
+}
+
 /// Which level verification reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum On {

@@ -264,6 +264,11 @@ pub struct MergeLinkSummary {
     pub pose: Option<[f64; 3]>,
     /// Confidence, 0..1.
     pub confidence: f64,
+    /// Whether the maps confirmed the pose (false: placed at the known start, unchecked).
+    pub confirmed: bool,
+    /// Share of obstacle points at the known start within 0.5 m of the other map's
+    /// structure (among those and the ones on its open ground farther off).
+    pub agreement_at_start: f64,
     /// Why it was left out.
     pub refused: Option<String>,
     /// Whether its map has drifted from the known start (beyond 0.3 m or 2 deg).
@@ -283,6 +288,8 @@ fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
                 rover: l.rover.to_string(),
                 pose: l.reference_from_map.map(|p| [p.x_m, p.y_m, p.yaw_rad]),
                 confidence: l.confidence,
+                confirmed: l.confirmed,
+                agreement_at_start: l.agreement_at_start,
                 refused: l.refused.clone(),
                 drifted: l.drifted,
                 drift_m: l.drift_m,

@@ -1,11 +1,13 @@
 //! The lander's merging job: every rover's rebuilt map brought into one, in the frame of the
 //! first rover's map. Rovers start beside the lander at known places, so each map's frame is
 //! expected to coincide with the first's; the known-start mode of `realms-merge` refines that
-//! prior, notices a map that has drifted from it, and refuses rather than merge wrong.
+//! prior and notices a map that has drifted from it. A map the others share too little
+//! structure with to confirm any pose is placed at its known start, marked unconfirmed; one
+//! that contradicts its known start is left out rather than merged wrong.
 
 use realms_core::{Grid, Pose2, RoverId};
-use realms_merge::compose::compose;
-use realms_merge::{Map, MapCell, Params, Prepared, PriorWindow, estimate_with_prior};
+use realms_merge::compose::merge_known_start;
+use realms_merge::{Map, MapCell, Params, PriorWindow};
 
 /// How one rover's map joined the merged map.
 #[derive(Clone, Debug, PartialEq)]
@@ -14,8 +16,13 @@ pub struct MergeLink {
     pub rover: RoverId,
     /// Pose of its map's frame in the reference map's frame, if the merge was accepted.
     pub reference_from_map: Option<Pose2>,
-    /// Confidence, 0..1.
+    /// Confidence, 0..1 (0 for a map placed at its known start unconfirmed).
     pub confidence: f64,
+    /// Whether the maps confirmed the pose (false: the known start, unchecked).
+    pub confirmed: bool,
+    /// How well the maps agree at the known start, allowing for drift
+    /// ([`realms_merge::PriorCheck::loose_agreement`]).
+    pub agreement_at_start: f64,
     /// Why it was left out, if it was.
     pub refused: Option<String>,
     /// Whether the maps agree on a pose away from the known start (drift).
@@ -48,37 +55,31 @@ pub fn to_merge_map(grid: &Grid<i8>) -> Map {
 /// frame assumed to be the reference's, refined and checked.
 pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap> {
     let (reference, _) = maps.first()?;
-    let params = Params::default();
-    let window = PriorWindow::default();
     let converted: Vec<Map> = maps.iter().map(|(_, g)| to_merge_map(g)).collect();
-    let prepared_ref = Prepared::new(&converted[0], &params);
-    let mut placements = vec![Some(Pose2::IDENTITY)];
-    let mut links = Vec::new();
-    for ((rover, _), map) in maps.iter().zip(&converted).skip(1) {
-        let check = estimate_with_prior(
-            &prepared_ref,
-            &Prepared::new(map, &params),
-            Pose2::IDENTITY,
-            &window,
-            &params,
-        );
-        let accepted = check.estimate.accepted();
-        placements.push(accepted);
-        links.push(MergeLink {
+    let merged = merge_known_start(&converted, &Params::default(), &PriorWindow::default()).ok()?;
+    let links = maps[1..]
+        .iter()
+        .zip(&merged.checks)
+        .map(|((rover, _), check)| MergeLink {
             rover: *rover,
-            reference_from_map: accepted,
-            confidence: check.estimate.confidence,
-            refused: check.estimate.refusal.clone(),
-            drifted: accepted.is_some() && check.drifted,
+            reference_from_map: check.placed,
+            confidence: if check.confirmed {
+                check.estimate.confidence
+            } else {
+                0.0
+            },
+            confirmed: check.confirmed,
+            agreement_at_start: check.loose_agreement,
+            refused: check.refusal.clone(),
+            drifted: check.confirmed && check.drifted,
             drift_m: check.drift_m,
-        });
-    }
-    let (cells, contribution) = compose(&converted, &placements);
+        })
+        .collect();
     Some(MergedMap {
         reference: *reference,
         links,
-        cells,
-        contribution,
+        cells: merged.grid,
+        contribution: merged.contribution,
         rovers: maps.iter().map(|(r, _)| *r).collect(),
     })
 }
@@ -151,5 +152,71 @@ mod tests {
         // Every rover's bit is in the contribution layer.
         let all = merged.contribution.cells().iter().fold(0, |acc, b| acc | b);
         assert_eq!(all, 0b111);
+    }
+
+    /// `map` with every cell whose centre lies outside `keep` (an x range, metres) unknown.
+    fn only(map: &Grid<i8>, keep: std::ops::Range<f64>) -> Grid<i8> {
+        let geo = *map.geometry();
+        let cells = map
+            .iter()
+            .map(|(cell, v)| {
+                if keep.contains(&geo.cell_center(cell).x_m) {
+                    *v
+                } else {
+                    OccupancyGrid::UNKNOWN
+                }
+            })
+            .collect();
+        Grid::from_cells(geo, cells).expect("one value per cell")
+    }
+
+    /// `map` turned by `yaw_rad` about the origin of its frame (nearest cell).
+    fn turned(map: &Grid<i8>, yaw_rad: f64) -> Grid<i8> {
+        let geo = *map.geometry();
+        let back = Pose2::new(0.0, 0.0, -yaw_rad);
+        let cells = map
+            .iter()
+            .map(|(cell, _)| {
+                let p = back.transform_point(geo.cell_center(cell));
+                map.at_world(p).copied().unwrap_or(OccupancyGrid::UNKNOWN)
+            })
+            .collect();
+        Grid::from_cells(geo, cells).expect("one value per cell")
+    }
+
+    #[test]
+    fn maps_sharing_no_structure_sit_at_the_known_start_and_a_contradicting_one_is_left_out() {
+        let hall = hall(0.0);
+        // Rover 1 mapped the west of the hall, rover 2 the east: no structure in common.
+        let west = only(&hall, -1.0..9.0);
+        let east = only(&hall, 11.0..21.0);
+        // Rover 3's map is turned by 25 degrees: its walls cross rover 1's open ground.
+        let wrong = turned(&hall, 25f64.to_radians());
+        let merged = merge_from_known_start(&[
+            (RoverId(1), &west),
+            (RoverId(2), &east),
+            (RoverId(3), &wrong),
+        ])
+        .expect("three maps");
+        let placed = &merged.links[0];
+        assert_eq!(
+            placed.reference_from_map,
+            Some(Pose2::IDENTITY),
+            "{placed:?}"
+        );
+        assert!(!placed.confirmed && placed.refused.is_none(), "{placed:?}");
+        assert_eq!(placed.confidence, 0.0);
+        let refused = &merged.links[1];
+        assert_eq!(refused.reference_from_map, None, "{refused:?}");
+        assert!(
+            refused
+                .refused
+                .as_deref()
+                .is_some_and(|why| why.contains("contradict the known start")),
+            "{refused:?}"
+        );
+        // Rover 2's cells are in the merged map, rover 3's are not.
+        let all = merged.contribution.cells().iter().fold(0, |acc, b| acc | b);
+        assert_eq!(all, 0b011);
     }
 }
