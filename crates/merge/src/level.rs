@@ -266,6 +266,14 @@ impl Level {
         thin(pts, max_points)
     }
 
+    /// The cell (possibly outside) holding grid-local point `q`.
+    pub fn cell_under(&self, q: Point2) -> (i64, i64) {
+        (
+            floor_i64(q.x_m / self.cell_m),
+            floor_i64(q.y_m / self.cell_m),
+        )
+    }
+
     /// Direction bin ([`crate::search::direction_bin`]) of the cell's normal; `None`
     /// outside or where there is none.
     pub fn bin_at(&self, x: i64, y: i64) -> Option<usize> {

@@ -361,10 +361,7 @@ fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2)
     let t = Rigid::new(target_from_source);
     for s in points {
         let q = t.apply(s.p);
-        let (x, y) = (
-            floor_i64(q.x_m / target.cell_m),
-            floor_i64(q.y_m / target.cell_m),
-        );
+        let (x, y) = target.cell_under(q);
         let Some(d) = target.dist_at(x, y) else {
             continue;
         };
@@ -410,10 +407,7 @@ pub fn loose_agreement(
         let (mut near, mut far) = (0, 0);
         for s in points.iter().filter(|s| !s.hazard) {
             let q = t.apply(s.p);
-            let (x, y) = (
-                floor_i64(q.x_m / target.cell_m),
-                floor_i64(q.y_m / target.cell_m),
-            );
+            let (x, y) = target.cell_under(q);
             let Some(d) = target.dist_at(x, y) else {
                 continue;
             };
@@ -461,10 +455,7 @@ pub fn verify(
     let (mut overlap_points, mut sx, mut sy, mut sq) = (0usize, 0.0, 0.0, 0.0);
     for p in &b.known_points {
         let q = t.apply(*p);
-        let (x, y) = (
-            floor_i64(q.x_m / a.search.cell_m),
-            floor_i64(q.y_m / a.search.cell_m),
-        );
+        let (x, y) = a.search.cell_under(q);
         if a.search.class_at(x, y) != Class::Unknown {
             overlap_points += 1;
             sx += p.x_m;
