@@ -4,7 +4,7 @@
 //! graded against the simulator's ground truth, hazards included.
 
 use realms_core::msgs::{LocalisationState, OccupancyGrid};
-use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, Time};
+use realms_core::{Cell, Duration, Grid, GridGeometry, Point2, Pose2, Time};
 use realms_sim::{GroundTruth, TruthCell};
 use serde::Serialize;
 
@@ -206,7 +206,16 @@ pub struct MapGrade {
     /// Of those, the fraction the map marks as hazard or obstacle: the rest it would let the
     /// rover drive into.
     pub true_hazards_flagged: f64,
+    /// True hazard cells within [`PATH_REACH_M`] of where the rover truly drove, known to
+    /// the map or not: the ground the depth camera had to see.
+    pub path_hazards: usize,
+    /// Of those, the fraction the map marks as hazard or obstacle.
+    pub path_hazards_flagged: f64,
 }
+
+/// How near the rover's path a true hazard must lie to count in
+/// [`MapGrade::path_hazards`], metres.
+pub const PATH_REACH_M: f64 = 1.5;
 
 /// A published map as a grid of its cell values; `None` if its size does not match its data.
 pub fn map_grid(map: &OccupancyGrid) -> Option<Grid<i8>> {
@@ -233,8 +242,8 @@ fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> b
     })
 }
 
-/// Grades `map` (in the arena frame) against `truth`.
-pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
+/// Grades `map` (in the arena frame) against `truth`; `path` is where the rover truly was.
+pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> MapGrade {
     let Some(grid) = map_grid(map) else {
         // A map whose size does not match its data grades as empty.
         return MapGrade::default();
@@ -297,7 +306,53 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth) -> MapGrade {
         }
     }
     g.true_hazards_flagged = flagged as f64 / g.true_hazards_known.max(1) as f64;
+    let near = near_path(truth.traversability.geometry(), path, PATH_REACH_M);
+    let mut path_flagged = 0usize;
+    for ((c, t), near) in truth.traversability.iter().zip(&near) {
+        if *t != TruthCell::Hazard || !near {
+            continue;
+        }
+        g.path_hazards += 1;
+        let v = grid.at_world(truth.traversability.geometry().cell_center(c));
+        path_flagged += usize::from(
+            v.is_some_and(|v| *v == OccupancyGrid::HAZARD || *v == OccupancyGrid::OCCUPIED),
+        );
+    }
+    g.path_hazards_flagged = path_flagged as f64 / g.path_hazards.max(1) as f64;
     g
+}
+
+/// Per cell of `geo`, whether it lies within `reach_m` of a point of `path`. Points closer
+/// than a cell to the last one stamped add nothing and are skipped.
+fn near_path(geo: &GridGeometry, path: &[Point2], reach_m: f64) -> Vec<bool> {
+    let mut near = vec![false; geo.len()];
+    let r = (reach_m / geo.resolution_m).ceil() as i64;
+    let mut last: Option<Point2> = None;
+    for p in path {
+        if last.is_some_and(|q| q.distance_m(*p) < geo.resolution_m) {
+            continue;
+        }
+        last = Some(*p);
+        let Some(c) = geo.world_to_cell(*p) else {
+            continue;
+        };
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+                if x < 0 || y < 0 || x >= geo.width as i64 || y >= geo.height as i64 {
+                    continue;
+                }
+                let cell = Cell {
+                    x: x as usize,
+                    y: y as usize,
+                };
+                if geo.cell_center(cell).distance_m(*p) <= reach_m {
+                    near[geo.index(cell)] = true;
+                }
+            }
+        }
+    }
+    near
 }
 
 /// One rover's SLAM in `mission.json`.
@@ -335,7 +390,10 @@ impl RoverSlamRecord {
             odometry_error: errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
             checks: self.checks.len(),
             localisation: self.changes.clone(),
-            map: self.map.as_ref().map(|m| grade_map(m, truth)),
+            map: self.map.as_ref().map(|m| {
+                let path: Vec<Point2> = self.checks.iter().map(|c| c.truth.position()).collect();
+                grade_map(m, truth, &path)
+            }),
             map_png,
         }
     }
@@ -344,6 +402,44 @@ impl RoverSlamRecord {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cells_near_a_path_are_those_within_reach_of_one_of_its_points() {
+        let geo = GridGeometry {
+            width: 10,
+            height: 10,
+            resolution_m: 0.1,
+            origin: Point2::new(0.0, 0.0),
+        };
+        // At the centre of cell (0, 0), 0.11 m reaches its two side neighbours (0.1 m) but
+        // not the diagonal one (0.14 m); a second point at the centre of (5, 5) adds its
+        // cross of 5.
+        let path = [
+            Point2::new(0.05, 0.05),
+            Point2::new(0.05, 0.05),
+            Point2::new(0.55, 0.55),
+        ];
+        let near = near_path(&geo, &path, 0.11);
+        let cells: Vec<(usize, usize)> = near
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n)
+            .map(|(i, _)| (i % 10, i / 10))
+            .collect();
+        assert_eq!(
+            cells,
+            vec![
+                (0, 0),
+                (1, 0),
+                (0, 1),
+                (5, 4),
+                (4, 5),
+                (5, 5),
+                (6, 5),
+                (5, 6)
+            ]
+        );
+    }
 
     #[test]
     fn aligned_error_ignores_a_rigid_motion_and_keeps_a_change_of_shape() {
