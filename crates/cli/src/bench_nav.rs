@@ -204,7 +204,7 @@ fn frontiers(truth: &Grid<i8>) -> Result<()> {
         geo.height
     );
     println!(
-        "| full detection median | incremental median | full / incremental (median of per-update ratios) | cells examined per update, median |"
+        "| full detection median | incremental median | full / incremental (median of per-update ratios) | flag examinations per update, median |"
     );
     println!("| --- | --- | --- | --- |");
     println!(

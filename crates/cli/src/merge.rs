@@ -103,8 +103,10 @@ fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()>
                     "yaw_rad": pose.yaw_rad,
                     "confidence": if c.confirmed { c.estimate.confidence } else { 0.0 },
                     "confirmed": c.confirmed,
-                    "drifted": c.confirmed && c.drifted,
-                    "drift_m": c.drift_m,
+                    "drifted": c.confirmed.then_some(c.drifted),
+                    "drift_m": c.confirmed.then_some(c.drift_m),
+                    "agreement_at_start": c.loose_agreement,
+                    "unconfirmed_because": (!c.confirmed).then(|| c.estimate.refusal.clone()).flatten(),
                 }),
                 None => json!({
                     "map": name,

@@ -200,10 +200,12 @@ pub fn run(args: MissionArgs) -> Result<()> {
         for l in &m.maps {
             match (&l.pose, &l.refused) {
                 (Some(_), _) if !l.confirmed => println!(
-                    "  merge: {} placed at its known start, unconfirmed (too little shared structure; {:.0} % of its obstacles within 0.5 m of {}'s)",
+                    "  merge: {} placed at its known start, unconfirmed ({}); {:.0} % of the two maps' obstacles lie within 0.5 m of the other's",
                     l.rover,
-                    100.0 * l.agreement_at_start,
-                    m.reference
+                    l.unconfirmed_because
+                        .as_deref()
+                        .unwrap_or("no pose confirmed"),
+                    100.0 * l.agreement_at_start.unwrap_or(0.0),
                 ),
                 (Some(p), _) => println!(
                     "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}{}",

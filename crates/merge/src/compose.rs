@@ -129,6 +129,7 @@ pub struct KnownStartMerged {
 /// Merges maps whose frames are known to coincide with the first's (rovers that started
 /// from known places and map in one shared frame): each is refined against the first
 /// within `window` ([`estimate_with_prior`]), placed where the check puts it, and drawn.
+/// Each map is checked against the first only, not against the others.
 pub fn merge_known_start(
     maps: &[Map],
     params: &Params,

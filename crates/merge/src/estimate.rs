@@ -140,8 +140,9 @@ pub struct PriorCheck {
     pub drifted: bool,
     /// Share of obstacle points within the contradiction tolerance of the other map's
     /// structure at the prior pose, among those and the ones on its open ground farther
-    /// off ([`verify::loose_agreement`]).
-    pub loose_agreement: f64,
+    /// off ([`verify::loose_agreement`]); `None` when no obstacle point of either map lands
+    /// on the other's known ground.
+    pub loose_agreement: Option<f64>,
     /// Where the second map goes: the confirmed pose, or the prior when the maps share too
     /// little structure to confirm any pose but nothing in them contradicts the prior.
     /// `None` when they contradict it.
@@ -164,10 +165,11 @@ pub struct PriorWindow {
     /// ... or turned more than this, radians.
     pub drift_tolerance_rad: f64,
     /// When no pose is confirmed, the prior is still taken unless at least this many
-    /// obstacle points of either map land on the other's open ground farther than
-    /// `contradiction_tolerance_m` from its structure ...
-    pub contradiction_cells: usize,
-    /// ... and they are more than this share of those and the ones within it.
+    /// obstacle points (surface points, thinned) of either map land on the other's open
+    /// ground farther than `contradiction_tolerance_m` from its structure ...
+    pub contradiction_points: usize,
+    /// ... and the points within that tolerance are less than this share of those and
+    /// the ones farther off.
     pub contradiction_agreement: f64,
     /// Drift a map placed unconfirmed may carry, metres.
     pub contradiction_tolerance_m: f64,
@@ -180,7 +182,7 @@ impl Default for PriorWindow {
             angular_rad: 10f64.to_radians(),
             drift_tolerance_m: 0.3,
             drift_tolerance_rad: 2f64.to_radians(),
-            contradiction_cells: 100,
+            contradiction_points: 100,
             contradiction_agreement: 0.8,
             contradiction_tolerance_m: 0.5,
         }
@@ -193,8 +195,11 @@ impl Default for PriorWindow {
 /// Rovers that split the work share little structure, and what they share they see from
 /// different sides (rover 1 the lander's east face, rover 2 its north face), so often no
 /// pose can be confirmed. The known start is then evidence enough, and the map is placed at
-/// the prior, marked unconfirmed, unless the maps contradict it there: many obstacles of
-/// one on the other's open ground, farther from its structure than drift would put them.
+/// the prior, marked unconfirmed (whatever the estimator's reason for not confirming, kept
+/// in `estimate.refusal`), unless the maps contradict it there: many obstacles of one on
+/// the other's open ground, farther from its structure than drift would put them. A map
+/// none of whose obstacles land on the other's known ground (or the other way round) has
+/// nothing to check the prior against and is refused.
 pub fn estimate_with_prior(
     a: &Prepared,
     b: &Prepared,
@@ -223,20 +228,26 @@ pub fn estimate_with_prior(
         drift_rad = normalize_angle_rad(found.yaw_rad - prior.yaw_rad).abs();
     }
     let (near, far) = verify::loose_agreement(a, b, &grid_prior, window.contradiction_tolerance_m);
-    let loose = if near + far == 0 {
-        1.0
-    } else {
-        near as f64 / (near + far) as f64
-    };
-    let contradicted = far >= window.contradiction_cells && loose < window.contradiction_agreement;
+    let loose = (near + far > 0).then(|| near as f64 / (near + far) as f64);
+    let contradicted = loose.is_some_and(|share| {
+        far >= window.contradiction_points && share < window.contradiction_agreement
+    });
     let (placed, confirmed, refusal) = match estimate.accepted() {
         Some(found) => (Some(found), true, None),
+        None if loose.is_none() => (
+            None,
+            false,
+            Some(format!(
+                "nothing to check the known start against: no obstacle of either map lies on the other's known ground there ({})",
+                estimate.refusal.as_deref().unwrap_or("no pose confirmed")
+            )),
+        ),
         None if contradicted => (
             None,
             false,
             Some(format!(
                 "the maps contradict the known start: {:.0} % of the obstacles lie within {} m of the other map's there, {far} lie on its open ground farther off ({})",
-                100.0 * loose,
+                100.0 * loose.unwrap_or(0.0),
                 window.contradiction_tolerance_m,
                 estimate.refusal.as_deref().unwrap_or("no pose confirmed")
             )),

@@ -266,9 +266,12 @@ pub struct MergeLinkSummary {
     pub confidence: f64,
     /// Whether the maps confirmed the pose (false: placed at the known start, unchecked).
     pub confirmed: bool,
-    /// Share of obstacle points at the known start within 0.5 m of the other map's
-    /// structure (among those and the ones on its open ground farther off).
-    pub agreement_at_start: f64,
+    /// Share of obstacle points (both maps) at the known start within 0.5 m of the other
+    /// map's structure, among those and the ones on its open ground farther off; `None`
+    /// with nothing to compare.
+    pub agreement_at_start: Option<f64>,
+    /// Why the maps could not confirm a pose, for a map placed at its known start.
+    pub unconfirmed_because: Option<String>,
     /// Why it was left out.
     pub refused: Option<String>,
     /// Whether its map has drifted from the known start (beyond 0.3 m or 2 deg).
@@ -290,6 +293,7 @@ fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
                 confidence: l.confidence,
                 confirmed: l.confirmed,
                 agreement_at_start: l.agreement_at_start,
+                unconfirmed_because: l.unconfirmed_because.clone(),
                 refused: l.refused.clone(),
                 drifted: l.drifted,
                 drift_m: l.drift_m,

@@ -181,7 +181,8 @@ impl FrontierTracker {
         Self::default()
     }
 
-    /// Cells whose frontier flag the last [`update`](Self::update) examined.
+    /// Frontier-flag examinations the last [`update`](Self::update) made (a cell beside
+    /// several changes counts once for each).
     pub fn last_examined(&self) -> usize {
         self.examined
     }
@@ -229,12 +230,14 @@ impl FrontierTracker {
                     let own = m != self.map[i] || c != self.costs[i];
                     let was_open = self.map[i] < 0 && !self.seen[i];
                     let neighbours = was_open != (m < 0 && !s);
+                    // Kept even where it changes nothing (peers' coverage of known ground),
+                    // so the run compares equal next time.
+                    self.seen[i] = s;
                     if !own && !neighbours {
                         continue;
                     }
                     self.map[i] = m;
                     self.costs[i] = c;
-                    self.seen[i] = s;
                     // A cell's flag depends on its own state and on whether its four
                     // neighbours are open; a change of openness touches their flags.
                     let (x, y) = (i % w, i / w);

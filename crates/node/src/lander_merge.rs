@@ -21,8 +21,10 @@ pub struct MergeLink {
     /// Whether the maps confirmed the pose (false: the known start, unchecked).
     pub confirmed: bool,
     /// How well the maps agree at the known start, allowing for drift
-    /// ([`realms_merge::PriorCheck::loose_agreement`]).
-    pub agreement_at_start: f64,
+    /// ([`realms_merge::PriorCheck::loose_agreement`]); `None` with nothing to compare.
+    pub agreement_at_start: Option<f64>,
+    /// Why the maps could not confirm a pose, for a map placed at its known start.
+    pub unconfirmed_because: Option<String>,
     /// Why it was left out, if it was.
     pub refused: Option<String>,
     /// Whether the maps agree on a pose away from the known start (drift).
@@ -70,6 +72,11 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
             },
             confirmed: check.confirmed,
             agreement_at_start: check.loose_agreement,
+            unconfirmed_because: if check.placed.is_some() && !check.confirmed {
+                check.estimate.refusal.clone()
+            } else {
+                None
+            },
             refused: check.refusal.clone(),
             drifted: check.confirmed && check.drifted,
             drift_m: check.drift_m,
@@ -185,19 +192,23 @@ mod tests {
     }
 
     #[test]
-    fn maps_sharing_no_structure_sit_at_the_known_start_and_a_contradicting_one_is_left_out() {
+    fn maps_too_unlike_to_confirm_sit_at_the_known_start_unless_contradicted_or_unchecked() {
         let hall = hall(0.0);
-        // Rover 1 mapped the west of the hall, rover 2 the east: no structure in common.
-        let west = only(&hall, -1.0..9.0);
-        let east = only(&hall, 11.0..21.0);
+        // Rover 1 mapped the west of the hall, rover 2 the east, overlapping in a 2 m strip
+        // where both see only the same two stretches of wall: no pose can be confirmed.
+        let west = only(&hall, -1.0..11.0);
+        let east = only(&hall, 9.0..21.0);
         // Rover 3's map is turned by 25 degrees: its walls cross rover 1's open ground.
         let wrong = turned(&hall, 25f64.to_radians());
+        // Rover 4 mapped only the far east, nowhere near rover 1's ground.
+        let far = only(&hall, 14.0..21.0);
         let merged = merge_from_known_start(&[
             (RoverId(1), &west),
             (RoverId(2), &east),
             (RoverId(3), &wrong),
+            (RoverId(4), &far),
         ])
-        .expect("three maps");
+        .expect("four maps");
         let placed = &merged.links[0];
         assert_eq!(
             placed.reference_from_map,
@@ -205,18 +216,28 @@ mod tests {
             "{placed:?}"
         );
         assert!(!placed.confirmed && placed.refused.is_none(), "{placed:?}");
-        assert_eq!(placed.confidence, 0.0);
-        let refused = &merged.links[1];
-        assert_eq!(refused.reference_from_map, None, "{refused:?}");
+        assert!(placed.unconfirmed_because.is_some(), "{placed:?}");
         assert!(
-            refused
-                .refused
-                .as_deref()
-                .is_some_and(|why| why.contains("contradict the known start")),
-            "{refused:?}"
+            placed.agreement_at_start.is_some_and(|a| a > 0.9),
+            "{placed:?}"
         );
-        // Rover 2's cells are in the merged map, rover 3's are not.
+        assert_eq!(placed.confidence, 0.0);
+        let refuse_reason = |l: &MergeLink| {
+            assert_eq!(l.reference_from_map, None, "{l:?}");
+            l.refused.clone().unwrap_or_default()
+        };
+        assert!(
+            refuse_reason(&merged.links[1]).contains("contradict the known start"),
+            "{:?}",
+            merged.links[1]
+        );
+        assert!(
+            refuse_reason(&merged.links[2]).contains("nothing to check the known start against"),
+            "{:?}",
+            merged.links[2]
+        );
+        // Rover 2's cells are in the merged map, rover 3's and rover 4's are not.
         let all = merged.contribution.cells().iter().fold(0, |acc, b| acc | b);
-        assert_eq!(all, 0b011);
+        assert_eq!(all, 0b0011);
     }
 }
