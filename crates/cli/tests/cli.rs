@@ -140,18 +140,13 @@ fn merge_case(
     (a, b, pair.a_from_b)
 }
 
-#[test]
-fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
-    let dir = std::env::temp_dir().join(format!("realms-cli-merge-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let (a, b, truth) = merge_case(&dir, 0.5, 31);
-    let out = dir.join("out/merged.yaml");
+/// `realms merge ARGS --out OUT --json`, which must succeed; its one JSON object.
+fn merge_json(args: &[&std::ffi::OsStr], out: &Path) -> serde_json::Value {
     let o = realms()
         .arg("merge")
-        .arg(&a)
-        .arg(&b)
+        .args(args)
         .arg("--out")
-        .arg(&out)
+        .arg(out)
         .arg("--json")
         .output()
         .expect("runs");
@@ -161,7 +156,16 @@ fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
         "{stdout}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let json: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    serde_json::from_str(&stdout).expect("one JSON object")
+}
+
+#[test]
+fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
+    let dir = std::env::temp_dir().join(format!("realms-cli-merge-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (a, b, truth) = merge_case(&dir, 0.5, 31);
+    let out = dir.join("out/merged.yaml");
+    let json = merge_json(&[a.as_os_str(), b.as_os_str()], &out);
     let maps = json["maps"].as_array().expect("maps");
     assert_eq!(maps.len(), 1);
     let m = &maps[0];
@@ -263,24 +267,15 @@ fn merge_from_a_known_start_confirms_a_map_in_the_shared_frame_and_refuses_a_con
         &wrong,
         realms_core::Pose2::new(0.0, 0.0, 30f64.to_radians()).compose(&truth),
     );
-    let o = realms()
-        .arg("merge")
-        .arg(&a)
-        .arg(&in_frame)
-        .arg(&wrong)
-        .arg("--known-start")
-        .arg("--out")
-        .arg(dir.join("ks.yaml"))
-        .arg("--json")
-        .output()
-        .expect("runs");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
+    let json = merge_json(
+        &[
+            a.as_os_str(),
+            in_frame.as_os_str(),
+            wrong.as_os_str(),
+            "--known-start".as_ref(),
+        ],
+        &dir.join("ks.yaml"),
     );
-    let json: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
     let confirmed = &json["maps"][0];
     assert_eq!(confirmed["confirmed"], true, "{json}");
     let (x, y, yaw) = (
