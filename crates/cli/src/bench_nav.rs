@@ -163,22 +163,9 @@ fn frontiers(truth: &Grid<i8>) -> Result<()> {
     let min_cells = realms_nav::explore::ExploreConfig::default().min_frontier_cells;
     let mut tracker = realms_nav::frontier::FrontierTracker::new();
     let (mut full_ms, mut tracked_ms, mut examined) = (Vec::new(), Vec::new(), Vec::new());
-    let r_cells = (SENSING_RADIUS_M / geo.resolution_m).ceil() as i64;
     for stop in &stops {
-        let c = geo.world_to_cell(*stop).context("a stop off the map")?;
-        for dy in -r_cells..=r_cells {
-            for dx in -r_cells..=r_cells {
-                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
-                if dx * dx + dy * dy > r_cells * r_cells || x < 0 || y < 0 {
-                    continue;
-                }
-                if let (Some(t), Some(m)) = (
-                    truth.get(x as usize, y as usize).copied(),
-                    map.get_mut(x as usize, y as usize),
-                ) {
-                    *m = t;
-                }
-            }
+        for cell in geo.cells_within(*stop, SENSING_RADIUS_M) {
+            map.cells_mut()[geo.index(cell)] = truth.cells()[geo.index(cell)];
         }
         let costmap = Costmap::from_map(&map, &cfg);
         let t = Instant::now();

@@ -101,12 +101,12 @@ fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()>
                     "x_m": pose.x_m,
                     "y_m": pose.y_m,
                     "yaw_rad": pose.yaw_rad,
-                    "confidence": if c.confirmed { c.estimate.confidence } else { 0.0 },
+                    "confidence": c.confidence(),
                     "confirmed": c.confirmed,
                     "drifted": c.confirmed.then_some(c.drifted),
                     "drift_m": c.confirmed.then_some(c.drift_m),
                     "agreement_at_start": c.loose_agreement,
-                    "unconfirmed_because": (!c.confirmed).then(|| c.estimate.refusal.clone()).flatten(),
+                    "unconfirmed_because": c.unconfirmed_because(),
                 }),
                 None => json!({
                     "map": name,
@@ -137,7 +137,7 @@ fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()>
             ),
             (Some(_), _) => println!(
                 "{name}: placed at its known start, unconfirmed ({})",
-                c.estimate.refusal.as_deref().unwrap_or("no pose confirmed")
+                c.unconfirmed_because().unwrap_or("no pose confirmed")
             ),
             (None, why) => println!(
                 "{name}: refused: {}",

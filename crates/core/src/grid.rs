@@ -77,6 +77,23 @@ impl GridGeometry {
     pub fn index(&self, c: Cell) -> usize {
         c.y * self.width + c.x
     }
+
+    /// The cells of the grid whose centres lie within `reach_m` of `p`, row by row.
+    pub fn cells_within(&self, p: Point2, reach_m: f64) -> impl Iterator<Item = Cell> + '_ {
+        // Index range of the square around the disc, clipped to the grid (a range that
+        // misses the grid comes out empty).
+        let span = |o: f64, lo_m: f64, n: usize| {
+            let first = ((lo_m - reach_m - o) / self.resolution_m).floor().max(0.0);
+            let last = ((lo_m + reach_m - o) / self.resolution_m)
+                .floor()
+                .min(n as f64 - 1.0);
+            first as usize..(last + 1.0).max(first) as usize
+        };
+        let xs = span(self.origin.x_m, p.x_m, self.width);
+        let ys = span(self.origin.y_m, p.y_m, self.height);
+        ys.flat_map(move |y| xs.clone().map(move |x| Cell { x, y }))
+            .filter(move |c| self.cell_center(*c).distance_m(p) <= reach_m)
+    }
 }
 
 /// A raster of `T` over a [`GridGeometry`], stored row-major from the bottom row up.
@@ -247,6 +264,21 @@ mod tests {
             resolution_m: 0.5,
             origin: Point2::new(-1.0, 2.0),
         }
+    }
+
+    #[test]
+    fn cells_within_reach_are_clipped_to_the_grid() {
+        let g = geom();
+        // Cell (0, 0) has its centre at (-0.75, 2.25); from the grid's corner 0.4 m reaches
+        // that centre (0.35 m) and no other.
+        let near: Vec<Cell> = g.cells_within(Point2::new(-1.0, 2.0), 0.4).collect();
+        assert_eq!(near, vec![Cell { x: 0, y: 0 }]);
+        // From the centre of (1, 1), 0.55 m reaches it and its four side neighbours.
+        let cross: Vec<Cell> = g.cells_within(Point2::new(-0.25, 2.75), 0.55).collect();
+        assert_eq!(cross.len(), 5);
+        // Far off the grid: nothing.
+        assert_eq!(g.cells_within(Point2::new(50.0, -50.0), 1.0).count(), 0);
+        assert_eq!(g.cells_within(Point2::new(-50.0, 50.0), 1.0).count(), 0);
     }
 
     #[test]

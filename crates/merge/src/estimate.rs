@@ -105,11 +105,7 @@ pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
         let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
         for p in &peaks {
             for base in [p.to_radians(), p.to_radians() + PI] {
-                groups.push(
-                    (-n..=n)
-                        .map(|k| normalize_angle_rad(base + k as f64 * params.yaw_step_rad))
-                        .collect(),
-                );
+                groups.push(yaws_around(base, n, params.yaw_step_rad));
             }
         }
     } else {
@@ -151,6 +147,27 @@ pub struct PriorCheck {
     pub confirmed: bool,
     /// Why the map was left out, if it was.
     pub refusal: Option<String>,
+}
+
+impl PriorCheck {
+    /// Confidence in the placement: the estimate's when confirmed, 0 for a map placed at
+    /// its prior unchecked (or refused).
+    pub fn confidence(&self) -> f64 {
+        if self.confirmed {
+            self.estimate.confidence
+        } else {
+            0.0
+        }
+    }
+
+    /// Why no pose could be confirmed, for a map placed at its prior anyway.
+    pub fn unconfirmed_because(&self) -> Option<&str> {
+        if self.placed.is_some() && !self.confirmed {
+            self.estimate.refusal.as_deref()
+        } else {
+            None
+        }
+    }
 }
 
 /// How far from a prior to look, and how far counts as drift.

@@ -4,7 +4,7 @@
 //! graded against the simulator's ground truth, hazards included.
 
 use realms_core::msgs::{LocalisationState, OccupancyGrid};
-use realms_core::{Cell, Duration, Grid, GridGeometry, Point2, Pose2, Time};
+use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, Time};
 use realms_sim::{GroundTruth, TruthCell};
 use serde::Serialize;
 
@@ -289,35 +289,29 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> M
     }
     g.explorable_known = known as f64 / explorable.max(1) as f64;
     g.hazard_correct = hazard_ok as f64 / g.hazard_cells.max(1) as f64;
-    let mut flagged = 0usize;
-    for (c, t) in truth.traversability.iter() {
+    // One pass over the true hazards grades both: those the map knows anywhere, and all of
+    // those near the path.
+    let near = near_path(truth.traversability.geometry(), path, PATH_REACH_M);
+    let (mut flagged, mut path_flagged) = (0usize, 0usize);
+    for ((c, t), near) in truth.traversability.iter().zip(&near) {
         if *t != TruthCell::Hazard {
             continue;
         }
-        match grid
+        let v = grid
             .at_world(truth.traversability.geometry().cell_center(c))
             .copied()
-        {
-            None | Some(OccupancyGrid::UNKNOWN) => {}
-            Some(v) => {
-                g.true_hazards_known += 1;
-                flagged += usize::from(v == OccupancyGrid::HAZARD || v == OccupancyGrid::OCCUPIED);
-            }
+            .unwrap_or(OccupancyGrid::UNKNOWN);
+        let marked = usize::from(v == OccupancyGrid::HAZARD || v == OccupancyGrid::OCCUPIED);
+        if v != OccupancyGrid::UNKNOWN {
+            g.true_hazards_known += 1;
+            flagged += marked;
+        }
+        if *near {
+            g.path_hazards += 1;
+            path_flagged += marked;
         }
     }
     g.true_hazards_flagged = flagged as f64 / g.true_hazards_known.max(1) as f64;
-    let near = near_path(truth.traversability.geometry(), path, PATH_REACH_M);
-    let mut path_flagged = 0usize;
-    for ((c, t), near) in truth.traversability.iter().zip(&near) {
-        if *t != TruthCell::Hazard || !near {
-            continue;
-        }
-        g.path_hazards += 1;
-        let v = grid.at_world(truth.traversability.geometry().cell_center(c));
-        path_flagged += usize::from(
-            v.is_some_and(|v| *v == OccupancyGrid::HAZARD || *v == OccupancyGrid::OCCUPIED),
-        );
-    }
     g.path_hazards_flagged = path_flagged as f64 / g.path_hazards.max(1) as f64;
     g
 }
@@ -326,30 +320,14 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> M
 /// than a cell to the last one stamped add nothing and are skipped.
 fn near_path(geo: &GridGeometry, path: &[Point2], reach_m: f64) -> Vec<bool> {
     let mut near = vec![false; geo.len()];
-    let r = (reach_m / geo.resolution_m).ceil() as i64;
     let mut last: Option<Point2> = None;
     for p in path {
         if last.is_some_and(|q| q.distance_m(*p) < geo.resolution_m) {
             continue;
         }
         last = Some(*p);
-        let Some(c) = geo.world_to_cell(*p) else {
-            continue;
-        };
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
-                if x < 0 || y < 0 || x >= geo.width as i64 || y >= geo.height as i64 {
-                    continue;
-                }
-                let cell = Cell {
-                    x: x as usize,
-                    y: y as usize,
-                };
-                if geo.cell_center(cell).distance_m(*p) <= reach_m {
-                    near[geo.index(cell)] = true;
-                }
-            }
+        for cell in geo.cells_within(*p, reach_m) {
+            near[geo.index(cell)] = true;
         }
     }
     near

@@ -65,18 +65,10 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
         .map(|((rover, _), check)| MergeLink {
             rover: *rover,
             reference_from_map: check.placed,
-            confidence: if check.confirmed {
-                check.estimate.confidence
-            } else {
-                0.0
-            },
+            confidence: check.confidence(),
             confirmed: check.confirmed,
             agreement_at_start: check.loose_agreement,
-            unconfirmed_because: if check.placed.is_some() && !check.confirmed {
-                check.estimate.refusal.clone()
-            } else {
-                None
-            },
+            unconfirmed_because: check.unconfirmed_because().map(str::to_string),
             refused: check.refusal.clone(),
             drifted: check.confirmed && check.drifted,
             drift_m: check.drift_m,
