@@ -28,7 +28,31 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::NetRelay(args) => crate::bench_net::run(args),
         crate::cli::BenchCommand::NetSim(args) => crate::bench_net::net_sim(args),
         crate::cli::BenchCommand::Merge(args) => crate::bench_merge::run(args),
+        crate::cli::BenchCommand::Slip(args) => crate::bench_slip::run(args),
     }
+}
+
+/// `f` over every job on `workers` threads, results in the order of `jobs` finishing.
+pub(crate) fn in_parallel<J: Sync, R: Send>(
+    jobs: &[J],
+    workers: usize,
+    f: impl Fn(&J) -> R + Sync,
+) -> Vec<R> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..workers.max(1) {
+            scope.spawn(|| {
+                while let Some(job) =
+                    jobs.get(next.fetch_add(1, std::sync::atomic::Ordering::SeqCst))
+                {
+                    let r = f(job);
+                    results.lock().expect("no worker panics holding it").push(r);
+                }
+            });
+        }
+    });
+    results.into_inner().expect("workers are done")
 }
 
 pub(crate) fn median(mut v: Vec<f64>) -> f64 {

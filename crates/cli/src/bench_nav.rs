@@ -18,8 +18,6 @@ use realms_mission::{Mission, MissionOptions};
 use realms_nav::costmap::{Costmap, CostmapConfig};
 use realms_nav::planner::{Planner, PlannerConfig, smooth};
 use realms_sim::{TruthCell, World};
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// The nearest cell to `p` that costs nothing (free and clear of every obstacle's gradient).
@@ -281,72 +279,64 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         crate::bench::machine()
     );
     println!();
-    let next = AtomicUsize::new(0);
-    let runs = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..workers.max(1) {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(&(n, seed)) = jobs.get(i) else { break };
-                    let mut s = base.clone();
-                    s.seed = seed;
-                    s.rovers.count = n;
-                    s.faults.clear();
-                    s.duration_s = limit_s;
-                    let t0 = Instant::now();
-                    let options = MissionOptions {
-                        rovers_hear_each_other: !args.no_peer_messages,
-                        // The targets are set for ideal communication.
-                        ideal_comms: true,
-                        ..MissionOptions::default()
-                    };
-                    let mut mission = Mission::with_options(World::new(&s), options);
-                    let end = Time::from_secs_f64(limit_s);
-                    while mission.now() < end && !mission.exploration_over() {
-                        let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);
-                        mission.run_until(step);
-                    }
-                    mission.finish();
-                    let bodies: Vec<_> = mission.world().rovers().collect();
-                    let run = Run {
-                        rovers: n,
-                        seed,
-                        series: mission.coverage().series().to_vec(),
-                        end_s: mission.now().as_secs_f64(),
-                        complete: mission.exploration_over(),
-                        collisions: bodies.iter().map(|b| b.stats.collisions).sum(),
-                        hazard_entries: bodies.iter().map(|b| b.stats.hazard_entries).sum(),
-                        stuck: bodies.iter().filter(|b| b.stuck).count() as u32,
-                        wall_s: t0.elapsed().as_secs_f64(),
-                        slam: mission
-                            .slam_records()
-                            .iter()
-                            .filter_map(|r| {
-                                Some((r.trajectory_error()?.rmse_m, r.trajectory_error_aligned_m()?))
-                            })
-                            .collect(),
-                    };
-                    let worst = run.worst_slam();
-                    eprintln!(
-                        "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, SLAM worst {:.2} m ({:.2} m aligned), {:.0} s wall",
-                        run.rovers,
-                        run.seed,
-                        100.0 * run.series.last().map_or(0.0, |s| s.1),
-                        run.end_s / 60.0,
-                        if run.complete { " (complete)" } else { "" },
-                        run.collisions,
-                        run.hazard_entries,
-                        worst.0,
-                        worst.1,
-                        run.wall_s
-                    );
-                    runs.lock().expect("no worker panics holding it").push(run);
-                }
-            });
+    let mut runs = crate::bench::in_parallel(&jobs, workers, |&(n, seed)| {
+        let mut s = base.clone();
+        s.seed = seed;
+        s.rovers.count = n;
+        s.faults.clear();
+        s.duration_s = limit_s;
+        let t0 = Instant::now();
+        let options = MissionOptions {
+            rovers_hear_each_other: !args.no_peer_messages,
+            // The targets are set for ideal communication.
+            ideal_comms: true,
+            ..MissionOptions::default()
+        };
+        let mut mission = Mission::with_options(World::new(&s), options);
+        let end = Time::from_secs_f64(limit_s);
+        while mission.now() < end && !mission.exploration_over() {
+            let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);
+            mission.run_until(step);
         }
+        mission.finish();
+        let bodies: Vec<_> = mission.world().rovers().collect();
+        let run = Run {
+            rovers: n,
+            seed,
+            series: mission.coverage().series().to_vec(),
+            end_s: mission.now().as_secs_f64(),
+            complete: mission.exploration_over(),
+            collisions: bodies.iter().map(|b| b.stats.collisions).sum(),
+            hazard_entries: bodies.iter().map(|b| b.stats.hazard_entries).sum(),
+            stuck: bodies.iter().filter(|b| b.stuck).count() as u32,
+            wall_s: t0.elapsed().as_secs_f64(),
+            slam: mission
+                .slam_records()
+                .iter()
+                .filter_map(|r| {
+                    Some((
+                        r.trajectory_error()?.rmse_m,
+                        r.trajectory_error_aligned_m()?,
+                    ))
+                })
+                .collect(),
+        };
+        let worst = run.worst_slam();
+        eprintln!(
+            "{} rovers, seed {}: {:.1} % at {:.0} min{}, {} collisions, {} hazard entries, SLAM worst {:.2} m ({:.2} m aligned), {:.0} s wall",
+            run.rovers,
+            run.seed,
+            100.0 * run.series.last().map_or(0.0, |s| s.1),
+            run.end_s / 60.0,
+            if run.complete { " (complete)" } else { "" },
+            run.collisions,
+            run.hazard_entries,
+            worst.0,
+            worst.1,
+            run.wall_s
+        );
+        run
     });
-    let mut runs = runs.into_inner().expect("workers are done");
     runs.sort_by_key(|r| (r.rovers, r.seed));
 
     println!(

@@ -150,6 +150,31 @@ pub enum BenchCommand {
     NetSim(BenchNetSimArgs),
     /// Map merging on generated pairs with a known answer: success, wrong merges, refusals, time.
     Merge(BenchMergeArgs),
+    /// Slip bursts during whole missions: how soon they are reported, false alarms, the pose after.
+    Slip(BenchSlipArgs),
+}
+
+/// `realms bench slip`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchSlipArgs {
+    /// Missions, one per seed.
+    #[arg(long, default_value_t = 4)]
+    pub seeds: u64,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub first_seed: u64,
+    /// Time limit per mission (it ends sooner once the arena is explored), e.g. `40m`.
+    #[arg(long, default_value = "40m")]
+    pub duration: String,
+    /// Mean time between one rover's slip bursts, seconds.
+    #[arg(long, default_value_t = 120.0)]
+    pub period_s: f64,
+    /// Missions run at once (default: one per core).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
 }
 
 /// `realms bench net-sim`.

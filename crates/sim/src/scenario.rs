@@ -326,7 +326,7 @@ impl Default for Scenario {
                 Fault {
                     kind: FaultKind::SlipBurst,
                     rover: "rover1".into(),
-                    at_s: 1800.0,
+                    at_s: 400.0,
                     duration_s: 8.0,
                     sensor: None,
                 },

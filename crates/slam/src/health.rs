@@ -13,6 +13,10 @@
 
 use realms_core::Pose2;
 
+/// Matches the wheels moved less than this from the previous one (turning in place,
+/// creeping) say nothing about slip along the track, metres.
+const MIN_STEP_M: f64 = 0.005;
+
 pub use realms_core::msgs::LocalisationState;
 
 /// Thresholds.
@@ -20,10 +24,10 @@ pub use realms_core::msgs::LocalisationState;
 pub struct HealthConfig {
     /// Odometry is compared with scan matching over this much time, seconds.
     pub window_s: f64,
-    /// Odometry is unreliable when its distance differs from the matched distance by more
+    /// Odometry is unreliable when scan matching falls short of the wheels' travel by more
     /// than this (metres) ...
     pub slip_min_m: f64,
-    /// ... and by more than this fraction of the larger of the two.
+    /// ... and by more than this fraction of the wheels' travel.
     pub slip_fraction: f64,
     /// ... for at least this long without a break, seconds.
     pub confirm_s: f64,
@@ -41,9 +45,9 @@ impl Default for HealthConfig {
     fn default() -> Self {
         HealthConfig {
             window_s: 2.0,
-            slip_min_m: 0.15,
-            slip_fraction: 0.3,
-            confirm_s: 0.5,
+            slip_min_m: 0.1,
+            slip_fraction: 0.5,
+            confirm_s: 0.3,
             recover_after_s: 3.0,
             poor_score: 0.35,
             poor_matches_to_lose: 5,
@@ -80,7 +84,12 @@ pub struct Transition {
 pub struct HealthMonitor {
     cfg: HealthConfig,
     state: LocalisationState,
-    recent: std::collections::VecDeque<(f64, Pose2, Pose2)>,
+    /// Per recent matched scan: its time, the wheels' travel since the previous matched
+    /// scan, and how far the match fell short of it along the wheels' direction.
+    recent: std::collections::VecDeque<(f64, f64, f64)>,
+    /// Motion by odometry and as tracked since the last matched scan (scans the motion filter
+    /// skipped are not matched: they follow odometry, and the next match corrects them all).
+    unmatched: (Pose2, Pose2),
     poor_in_a_row: usize,
     agreeing_since_s: Option<f64>,
     disagreeing_since_s: Option<f64>,
@@ -94,6 +103,7 @@ impl HealthMonitor {
             cfg,
             state: LocalisationState::Tracking,
             recent: std::collections::VecDeque::new(),
+            unmatched: (Pose2::IDENTITY, Pose2::IDENTITY),
             poor_in_a_row: 0,
             agreeing_since_s: None,
             disagreeing_since_s: None,
@@ -116,6 +126,7 @@ impl HealthMonitor {
     /// The mapper relocalised: tracking again, with a fresh history.
     pub fn relocalised(&mut self, reason: String) -> Option<Transition> {
         self.recent.clear();
+        self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
         self.poor_in_a_row = 0;
         self.agreeing_since_s = None;
         self.go(LocalisationState::Tracking, reason)
@@ -151,10 +162,25 @@ impl HealthMonitor {
                 ),
             );
         }
-        // Net motion over the window by each source, composed from the per-scan deltas:
-        // jitter of a standing robot cancels out instead of adding up.
-        self.recent
-            .push_back((scan.time_s, scan.odom_delta, scan.matched_delta));
+        // Slipping wheels report travel the scans do not see, on every match while it lasts;
+        // a match that jumps (a correction after a loop closure, a new submap) does so once.
+        // Each match's shortfall along the wheels' direction is therefore capped at the
+        // wheels' travel since the previous match, so no single match can make the window
+        // disagree.
+        self.unmatched.0 = self.unmatched.0 * scan.odom_delta;
+        self.unmatched.1 = self.unmatched.1 * scan.matched_delta;
+        if scan.score.is_some() {
+            let (wheels, matched) = (self.unmatched.0.position(), self.unmatched.1.position());
+            self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
+            let step_m = wheels.x_m.hypot(wheels.y_m);
+            let shortfall_m = if step_m > MIN_STEP_M {
+                let along = (matched.x_m * wheels.x_m + matched.y_m * wheels.y_m) / step_m;
+                (step_m - along).clamp(-step_m, step_m)
+            } else {
+                0.0
+            };
+            self.recent.push_back((scan.time_s, step_m, shortfall_m));
+        }
         while self
             .recent
             .front()
@@ -162,17 +188,12 @@ impl HealthMonitor {
         {
             self.recent.pop_front();
         }
-        let (odom, matched) = self
+        let (odom_m, short_m) = self
             .recent
             .iter()
-            .fold((Pose2::IDENTITY, Pose2::IDENTITY), |(a, b), (_, o, m)| {
-                (a * *o, b * *m)
-            });
-        let odom_m = odom.x_m.hypot(odom.y_m);
-        let matched_m = matched.x_m.hypot(matched.y_m);
-        let differ = (odom.x_m - matched.x_m).hypot(odom.y_m - matched.y_m);
-        let disagree =
-            differ > self.cfg.slip_min_m && differ > self.cfg.slip_fraction * odom_m.max(matched_m);
+            .fold((0.0, 0.0), |(a, b), (_, step, short)| (a + step, b + short));
+        let matched_m = odom_m - short_m;
+        let disagree = short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m;
         if !disagree {
             self.disagreeing_since_s = None;
         }
@@ -185,8 +206,8 @@ impl HealthMonitor {
             return self.go(
                 LocalisationState::OdometryUnreliable,
                 format!(
-                    "over the last {:.0} s wheel odometry moved {odom_m:.2} m, scan matching \
-                     {matched_m:.2} m; they differ by {differ:.2} m",
+                    "over the last {:.0} s the wheels drove {odom_m:.2} m but scan matching \
+                     saw {matched_m:.2} m",
                     self.cfg.window_s
                 ),
             );
@@ -251,6 +272,47 @@ mod tests {
             let wobble = if k % 2 == 0 { 0.004 } else { -0.004 };
             assert_eq!(m.observe(&scan(t, 0.033, 0.03 + wobble, 0.7)), None, "{t}");
         }
+    }
+
+    #[test]
+    fn a_match_that_jumps_once_is_not_slip() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 0..100 {
+            let t = k as f64 * 0.1;
+            // A loop closure moved the map under the rover: one match corrects the pose by
+            // half a metre, backwards along the track.
+            let matched = if k == 50 { 0.03 - 0.5 } else { 0.03 };
+            assert_eq!(m.observe(&scan(t, 0.03, matched, 0.7)), None, "{t}");
+        }
+    }
+
+    #[test]
+    fn slip_is_seen_when_only_every_third_scan_is_matched() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        let mut noticed = None;
+        for k in 0..100 {
+            let t = k as f64 * 0.1;
+            // The wheels creep at 0.1 m/s and the motion filter matches every third scan:
+            // the scans between follow odometry and the match takes back all of their travel.
+            let slipping = t >= 5.0;
+            let matched_now = k % 3 == 0;
+            let (matched, score) = match (matched_now, slipping) {
+                (false, _) => (0.01, None),
+                (true, false) => (0.01, Some(0.8)),
+                (true, true) => (0.01 - 0.03, Some(0.8)),
+            };
+            if let Some(tr) = m.observe(&TrackedScan {
+                time_s: t,
+                odom_delta: Pose2::new(0.01, 0.0, 0.0),
+                matched_delta: Pose2::new(matched, 0.0, 0.0),
+                score,
+            }) {
+                noticed.get_or_insert((t, tr.state));
+            }
+        }
+        let (t, state) = noticed.expect("the slip was noticed");
+        assert_eq!(state, LocalisationState::OdometryUnreliable);
+        assert!((5.0..7.5).contains(&t), "noticed at {t}");
     }
 
     #[test]
