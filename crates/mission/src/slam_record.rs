@@ -211,7 +211,15 @@ pub struct MapGrade {
     pub path_hazards: usize,
     /// Of those, the fraction the map marks as hazard or obstacle.
     pub path_hazards_flagged: f64,
+    /// Of those, the fraction with a hazard or obstacle cell of the map within
+    /// [`NEAR_FLAG_M`] (per axis): a miss there is the map's offset (the SLAM error, the
+    /// hazard layer's coarser cells), not ground the rover failed to judge.
+    pub path_hazards_flagged_nearby: f64,
 }
+
+/// How near a true hazard a marked cell must lie for
+/// [`MapGrade::path_hazards_flagged_nearby`], metres.
+pub const NEAR_FLAG_M: f64 = 0.25;
 
 /// How near the rover's path a true hazard must lie to count in
 /// [`MapGrade::path_hazards`], metres.
@@ -292,7 +300,7 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> M
     // One pass over the true hazards grades both: those the map knows anywhere, and all of
     // those near the path.
     let near = near_path(truth.traversability.geometry(), path, PATH_REACH_M);
-    let (mut flagged, mut path_flagged) = (0usize, 0usize);
+    let (mut flagged, mut path_flagged, mut path_nearby) = (0usize, 0usize, 0usize);
     for ((c, t), near) in truth.traversability.iter().zip(&near) {
         if *t != TruthCell::Hazard {
             continue;
@@ -309,10 +317,20 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> M
         if *near {
             g.path_hazards += 1;
             path_flagged += marked;
+            path_nearby += usize::from(
+                marked == 1
+                    || any_within(
+                        &grid,
+                        truth.traversability.geometry().cell_center(c),
+                        NEAR_FLAG_M,
+                        |v| *v == OccupancyGrid::HAZARD || *v == OccupancyGrid::OCCUPIED,
+                    ),
+            );
         }
     }
     g.true_hazards_flagged = flagged as f64 / g.true_hazards_known.max(1) as f64;
     g.path_hazards_flagged = path_flagged as f64 / g.path_hazards.max(1) as f64;
+    g.path_hazards_flagged_nearby = path_nearby as f64 / g.path_hazards.max(1) as f64;
     g
 }
 
@@ -416,6 +434,53 @@ mod tests {
                 (6, 5),
                 (5, 6)
             ]
+        );
+    }
+
+    #[test]
+    fn a_hazard_marked_a_little_off_counts_as_nearby_but_not_as_flagged() {
+        let geo = GridGeometry {
+            width: 40,
+            height: 40,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        // The truth: a crater interior of 4 x 4 cells at cells 10..14, and a second one at
+        // 30..34 the map never marks.
+        let mut traversability = Grid::new(geo, TruthCell::Free);
+        let mut map = vec![OccupancyGrid::FREE; geo.width * geo.height];
+        for y in 10..14 {
+            for x in 10..14 {
+                *traversability.get_mut(x, y).expect("inside") = TruthCell::Hazard;
+                *traversability.get_mut(x + 20, y + 20).expect("inside") = TruthCell::Hazard;
+                // The map marks the first 0.1 m east of where it is.
+                map[y * geo.width + x + 2] = OccupancyGrid::HAZARD;
+            }
+        }
+        let truth = GroundTruth {
+            traversability,
+            lidar_obstacles: Grid::new(geo, false),
+            explorable: Grid::new(geo, true),
+            explorable_area_m2: 4.0,
+        };
+        let msg = OccupancyGrid {
+            info: realms_core::msgs::MapMetaData {
+                resolution_m: 0.05,
+                width: 40,
+                height: 40,
+                ..Default::default()
+            },
+            data: map,
+            ..Default::default()
+        };
+        let g = grade_map(&msg, &truth, &[Point2::new(1.0, 1.0)]);
+        assert_eq!(g.path_hazards, 32);
+        // Half of the first block is under the shifted mark; all of it has one within
+        // 0.25 m; the second block has none.
+        assert!((g.path_hazards_flagged - 8.0 / 32.0).abs() < 1e-12, "{g:?}");
+        assert!(
+            (g.path_hazards_flagged_nearby - 16.0 / 32.0).abs() < 1e-12,
+            "{g:?}"
         );
     }
 
