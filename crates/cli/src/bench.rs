@@ -55,6 +55,22 @@ pub(crate) fn in_parallel<J: Sync, R: Send>(
     results.into_inner().expect("workers are done")
 }
 
+/// Runs a mission of `scenario` until its rovers have explored the arena or `limit_s` has
+/// passed, and lets the nodes publish their final products.
+pub(crate) fn explore_to_end(
+    scenario: &realms_sim::scenario::Scenario,
+    options: realms_mission::MissionOptions,
+    limit_s: f64,
+) -> realms_mission::Mission {
+    let mut mission = realms_mission::Mission::with_options(World::new(scenario), options);
+    let end = Time::from_secs_f64(limit_s);
+    while mission.now() < end && !mission.exploration_over() {
+        mission.run_until((mission.now() + Duration::from_secs(30)).min(end));
+    }
+    mission.finish();
+    mission
+}
+
 pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     if v.is_empty() {

@@ -11,10 +11,10 @@
 use crate::cli::{BenchExploreArgs, BenchPlanArgs};
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
-use realms_core::{Cell, Grid, Point2, Time};
+use realms_core::{Cell, Grid, Point2};
+use realms_mission::MissionOptions;
 use realms_mission::chart::{Series, coverage_chart};
 use realms_mission::report::ROVER_COLORS;
-use realms_mission::{Mission, MissionOptions};
 use realms_nav::costmap::{Costmap, CostmapConfig};
 use realms_nav::planner::{Planner, PlannerConfig, smooth};
 use realms_sim::{TruthCell, World};
@@ -292,13 +292,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             ideal_comms: true,
             ..MissionOptions::default()
         };
-        let mut mission = Mission::with_options(World::new(&s), options);
-        let end = Time::from_secs_f64(limit_s);
-        while mission.now() < end && !mission.exploration_over() {
-            let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);
-            mission.run_until(step);
-        }
-        mission.finish();
+        let mission = crate::bench::explore_to_end(&s, options, limit_s);
         let bodies: Vec<_> = mission.world().rovers().collect();
         let run = Run {
             rovers: n,

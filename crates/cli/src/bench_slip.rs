@@ -18,11 +18,9 @@ use crate::cli::BenchSlipArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
-use realms_core::Time;
 use realms_core::msgs::LocalisationState;
+use realms_mission::MissionOptions;
 use realms_mission::slam_record::RoverSlamRecord;
-use realms_mission::{Mission, MissionOptions};
-use realms_sim::World;
 use realms_sim::scenario::{Fault, FaultKind};
 use std::time::Instant;
 
@@ -161,18 +159,18 @@ fn false_alarm(record: &RoverSlamRecord, t_s: f64) -> FalseAlarm {
 
 /// Grades one rover's reports against its bursts; returns the bursts and the false alarms.
 fn grade(record: &RoverSlamRecord, faults: &[&Fault], end_s: f64) -> (Vec<Burst>, Vec<FalseAlarm>) {
-    let alarms: Vec<f64> = record
-        .changes
-        .iter()
-        .filter(|c| c.state == LocalisationState::OdometryUnreliable)
-        .map(|c| c.t_s)
-        .collect();
-    let clears: Vec<f64> = record
-        .changes
-        .iter()
-        .filter(|c| c.state == LocalisationState::Tracking)
-        .map(|c| c.t_s)
-        .collect();
+    let entered = |state: LocalisationState| -> Vec<f64> {
+        record
+            .changes
+            .iter()
+            .filter(|c| c.state == state)
+            .map(|c| c.t_s)
+            .collect()
+    };
+    let (alarms, clears) = (
+        entered(LocalisationState::OdometryUnreliable),
+        entered(LocalisationState::Tracking),
+    );
     let belongs = |f: &Fault, t: f64| t >= f.at_s && t <= f.at_s + f.duration_s + LATE_S;
     let false_alarms: Vec<FalseAlarm> = alarms
         .iter()
@@ -238,13 +236,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             ideal_comms: true,
             ..MissionOptions::default()
         };
-        let mut mission = Mission::with_options(World::new(&s), options);
-        let end = Time::from_secs_f64(limit_s);
-        while mission.now() < end && !mission.exploration_over() {
-            let step = (mission.now() + realms_core::Duration::from_secs(30)).min(end);
-            mission.run_until(step);
-        }
-        mission.finish();
+        let mission = crate::bench::explore_to_end(&s, options, limit_s);
         let end_s = mission.now().as_secs_f64();
         let mut run = Run {
             seed,
