@@ -212,8 +212,9 @@ pub struct MapGrade {
     /// Of those, the fraction the map marks as hazard or obstacle.
     pub path_hazards_flagged: f64,
     /// Of those, the fraction with a hazard or obstacle cell of the map within
-    /// [`NEAR_FLAG_M`] (per axis): a miss there is the map's offset (the SLAM error, the
-    /// hazard layer's coarser cells), not ground the rover failed to judge.
+    /// [`NEAR_FLAG_M`] (per axis, whole map cells): what the map marks there is mostly the
+    /// same hazard a little off (the SLAM error, the hazard layer's coarser cells), though it
+    /// may be a neighbouring one, such as a marked rim beside an unmarked interior.
     pub path_hazards_flagged_nearby: f64,
 }
 

@@ -163,10 +163,10 @@ impl HealthMonitor {
             );
         }
         // Slipping wheels report travel the scans do not see, on every match while it lasts;
-        // a match that jumps (a correction after a loop closure, a new submap) does so once.
-        // Each match's shortfall along the wheels' direction is therefore capped at the
-        // wheels' travel since the previous match, so no single match can make the window
-        // disagree.
+        // a match that jumps (onto a new submap, or onto one a loop closure has moved) does
+        // so once. Each match's shortfall along the wheels' direction is therefore capped at
+        // the wheels' travel since the previous match, and at half the alarm's floor (a match
+        // after a long unmatched stretch), so no single match can make the window disagree.
         self.unmatched.0 = self.unmatched.0 * scan.odom_delta;
         self.unmatched.1 = self.unmatched.1 * scan.matched_delta;
         if scan.score.is_some() {
@@ -175,7 +175,8 @@ impl HealthMonitor {
             let step_m = wheels.x_m.hypot(wheels.y_m);
             let shortfall_m = if step_m > MIN_STEP_M {
                 let along = (matched.x_m * wheels.x_m + matched.y_m * wheels.y_m) / step_m;
-                (step_m - along).clamp(-step_m, step_m)
+                let cap = step_m.min(self.cfg.slip_min_m / 2.0);
+                (step_m - along).clamp(-cap, cap)
             } else {
                 0.0
             };
@@ -279,10 +280,35 @@ mod tests {
         let mut m = HealthMonitor::new(HealthConfig::default());
         for k in 0..100 {
             let t = k as f64 * 0.1;
-            // A loop closure moved the map under the rover: one match corrects the pose by
-            // half a metre, backwards along the track.
+            // The rover tracks onto a submap that disagrees with the last one: one match
+            // corrects the pose by half a metre, backwards along the track.
             let matched = if k == 50 { 0.03 - 0.5 } else { 0.03 };
             assert_eq!(m.observe(&scan(t, 0.03, matched, 0.7)), None, "{t}");
+        }
+    }
+
+    #[test]
+    fn one_match_after_a_long_unmatched_stretch_is_not_slip() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 0..40 {
+            let t = k as f64 * 0.1;
+            // Nothing to match against for a second (too few points), then one match that
+            // puts the rover back by more than the 0.33 m the wheels drove meanwhile.
+            let (matched, score) = match k {
+                20..=29 => (0.03, None),
+                30 => (0.03 - 0.45, Some(0.7)),
+                _ => (0.03, Some(0.7)),
+            };
+            assert_eq!(
+                m.observe(&TrackedScan {
+                    time_s: t,
+                    odom_delta: Pose2::new(0.03, 0.0, 0.0),
+                    matched_delta: Pose2::new(matched, 0.0, 0.0),
+                    score,
+                }),
+                None,
+                "{t}"
+            );
         }
     }
 
