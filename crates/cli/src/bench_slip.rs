@@ -18,6 +18,7 @@ use crate::cli::BenchSlipArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
+use realms_core::RoverId;
 use realms_core::msgs::LocalisationState;
 use realms_mission::MissionOptions;
 use realms_mission::slam_record::{PoseCheck, RoverSlamRecord};
@@ -40,7 +41,8 @@ struct Burst {
     start_s: f64,
     /// Wheel odometry's travel during the burst, metres.
     odometry_travel_m: f64,
-    /// When it was reported, after its start, seconds.
+    /// How long after it showed (see [`visible_from`]) it was reported, seconds; `None` if
+    /// it never was.
     latency_s: Option<f64>,
     /// Position error of the published pose just before the burst and once it was over
     /// (the first check after the all-clear or, without one, [`LATE_S`] after its end).
@@ -53,6 +55,16 @@ impl Burst {
     fn caught(&self) -> bool {
         self.latency_s.is_some_and(|l| l <= DEADLINE_S)
     }
+
+    /// How much the burst moved the pose error, metres.
+    fn growth_m(&self) -> f64 {
+        self.error_after_m - self.error_before_m
+    }
+}
+
+/// The smallest shortfall the rovers' slip detector reports, metres.
+fn detector_floor_m() -> f64 {
+    realms_slam::health::HealthConfig::default().slip_min_m
 }
 
 /// One mission's outcome.
@@ -75,7 +87,7 @@ fn schedule(seed: u64, rovers: u8, limit_s: f64, period_s: f64) -> Vec<Fault> {
         while t < limit_s {
             faults.push(Fault {
                 kind: FaultKind::SlipBurst,
-                rover: format!("rover{r}"),
+                rover: RoverId(r).to_string(),
                 at_s: t,
                 duration_s: rng.random_range(3.0..8.0),
                 sensor: None,
@@ -115,7 +127,7 @@ fn checks_spanning(record: &RoverSlamRecord, from_s: f64, to_s: f64) -> &[PoseCh
 /// ordinary driving is included and the moment comes early rather than late): before that no
 /// detector could tell. `None` if it never did by `to_s`.
 fn visible_from(record: &RoverSlamRecord, from_s: f64, to_s: f64) -> Option<f64> {
-    let floor_m = realms_slam::health::HealthConfig::default().slip_min_m;
+    let floor_m = detector_floor_m();
     let checks = checks_spanning(record, from_s, to_s);
     let first = checks.first()?;
     let (mut odometry_m, mut truth_m) = (0.0, 0.0);
@@ -289,7 +301,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             wall_s: 0.0,
         };
         for (r, record) in mission.slam_records().iter().enumerate() {
-            let name = format!("rover{}", r + 1);
+            let name = RoverId(r as u8 + 1).to_string();
             let mine: Vec<&Fault> = s.faults.iter().filter(|f| f.rover == name).collect();
             let (bursts, false_alarms) = grade(record, &mine, end_s);
             run.bursts.extend(bursts);
@@ -324,12 +336,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             r.false_alarms.len(),
             r.false_alarms.len() as f64 / r.rover_hours,
             median(r.bursts.iter().map(|b| b.error_after_m).collect()),
-            median(
-                r.bursts
-                    .iter()
-                    .map(|b| b.error_after_m - b.error_before_m)
-                    .collect()
-            ),
+            median(r.bursts.iter().map(Burst::growth_m).collect()),
             r.wall_s
         );
     }
@@ -340,10 +347,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         .iter()
         .flat_map(|r| r.false_alarms.iter().copied())
         .collect();
-    let growth: Vec<f64> = all
-        .iter()
-        .map(|b| b.error_after_m - b.error_before_m)
-        .collect();
+    let growth: Vec<f64> = all.iter().map(|b| b.growth_m()).collect();
     let within = |v: f64| all.iter().filter(|b| b.error_after_m <= v).count();
     println!();
     println!(
@@ -381,7 +385,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         .flat_map(|r| {
             r.bursts
                 .iter()
-                .filter(|b| b.error_after_m - b.error_before_m > 0.2)
+                .filter(|b| b.growth_m() > 0.2)
                 .map(move |b| {
                     format!(
                         "seed {} {} at {:.0} s ({:.2} to {:.2} m)",
@@ -391,7 +395,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         })
         .collect();
     if !false_alarms.is_empty() {
-        let floor_m = realms_slam::health::HealthConfig::default().slip_min_m;
+        let floor_m = detector_floor_m();
         let wheels = false_alarms
             .iter()
             .filter(|a| a.odometry_off_m >= floor_m)

@@ -87,6 +87,29 @@ pub fn run(args: MergeArgs) -> Result<()> {
     Ok(())
 }
 
+/// A map's entry in `--json` output when it was placed: the pose of its frame in the first
+/// map's frame, and how sure the merge is.
+fn placed_entry(
+    name: String,
+    pose: realms_core::Pose2,
+    confidence: f64,
+) -> serde_json::Map<String, serde_json::Value> {
+    let mut entry = serde_json::Map::new();
+    entry.extend([
+        ("map".into(), json!(name)),
+        ("x_m".into(), json!(pose.x_m)),
+        ("y_m".into(), json!(pose.y_m)),
+        ("yaw_rad".into(), json!(pose.yaw_rad)),
+        ("confidence".into(), json!(confidence)),
+    ]);
+    entry
+}
+
+/// A map's entry in `--json` output when it was left out, with why.
+fn refused_entry(name: String, refusal: Option<&str>) -> serde_json::Value {
+    json!({ "map": name, "refused": refusal.unwrap_or("not placed") })
+}
+
 /// Writes the merged map and prints each map's check, as text or JSON.
 fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()> {
     let yaml = write_merged(args, &merged.grid, &merged.contribution)?;
@@ -96,22 +119,18 @@ fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()>
         .map(|(path, c)| {
             let name = path.display().to_string();
             match c.placed {
-                Some(pose) => json!({
-                    "map": name,
-                    "x_m": pose.x_m,
-                    "y_m": pose.y_m,
-                    "yaw_rad": pose.yaw_rad,
-                    "confidence": c.confidence(),
-                    "confirmed": c.confirmed,
-                    "drifted": c.confirmed.then_some(c.drifted),
-                    "drift_m": c.confirmed.then_some(c.drift_m),
-                    "agreement_at_start": c.loose_agreement,
-                    "unconfirmed_because": c.unconfirmed_because(),
-                }),
-                None => json!({
-                    "map": name,
-                    "refused": c.refusal.clone().unwrap_or_else(|| "not placed".into()),
-                }),
+                Some(pose) => {
+                    let mut entry = placed_entry(name, pose, c.confidence());
+                    entry.extend([
+                        ("confirmed".into(), json!(c.confirmed)),
+                        ("drifted".into(), json!(c.confirmed.then_some(c.drifted))),
+                        ("drift_m".into(), json!(c.confirmed.then_some(c.drift_m))),
+                        ("agreement_at_start".into(), json!(c.loose_agreement)),
+                        ("unconfirmed_because".into(), json!(c.unconfirmed_because())),
+                    ]);
+                    entry.into()
+                }
+                None => refused_entry(name, c.refusal.as_deref()),
             }
         })
         .collect();
@@ -183,17 +202,8 @@ fn report_json(args: &MergeArgs, merged: &Merged) -> serde_json::Value {
         .map(|(path, p)| {
             let name = path.display().to_string();
             match p.reference_from_map {
-                Some(pose) => json!({
-                    "map": name,
-                    "x_m": pose.x_m,
-                    "y_m": pose.y_m,
-                    "yaw_rad": pose.yaw_rad,
-                    "confidence": p.confidence,
-                }),
-                None => json!({
-                    "map": name,
-                    "refused": p.refusal.clone().unwrap_or_else(|| "not placed".into()),
-                }),
+                Some(pose) => placed_entry(name, pose, p.confidence).into(),
+                None => refused_entry(name, p.refusal.as_deref()),
             }
         })
         .collect();

@@ -18,8 +18,7 @@ fn repo(path: &str) -> String {
 
 #[test]
 fn mission_writes_its_results_folder_and_says_where() {
-    let out = std::env::temp_dir().join(format!("realms-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
+    let out = fresh_dir("realms-cli");
     let o = realms()
         .args([
             "mission",
@@ -159,10 +158,16 @@ fn merge_json(args: &[&std::ffi::OsStr], out: &Path) -> serde_json::Value {
     serde_json::from_str(&stdout).expect("one JSON object")
 }
 
+/// An empty directory of this test process's own under the system's temporary directory.
+fn fresh_dir(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
 #[test]
 fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
-    let dir = std::env::temp_dir().join(format!("realms-cli-merge-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("realms-cli-merge");
     let (a, b, truth) = merge_case(&dir, 0.5, 31);
     let out = dir.join("out/merged.yaml");
     let json = merge_json(&[a.as_os_str(), b.as_os_str()], &out);
@@ -191,8 +196,7 @@ fn merge_prints_each_pose_as_json_and_writes_the_merged_map() {
 
 #[test]
 fn merge_refuses_maps_that_share_nothing_and_reports_bad_files() {
-    let dir = std::env::temp_dir().join(format!("realms-cli-merge-bad-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("realms-cli-merge-bad");
     let (a, b, _) = merge_case(&dir, 0.0, 32);
     let o = realms()
         .arg("merge")
@@ -254,8 +258,7 @@ fn moved_yaml(yaml: &Path, out: &Path, moved: realms_core::Pose2) {
 
 #[test]
 fn merge_from_a_known_start_confirms_a_map_in_the_shared_frame_and_refuses_a_contradicting_one() {
-    let dir = std::env::temp_dir().join(format!("realms-cli-merge-ks-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("realms-cli-merge-ks");
     let (a, b, truth) = merge_case(&dir, 0.5, 33);
     // B's grid where it truly lies in A's frame, and the same turned 30 degrees about A's
     // origin (beyond the 10 degree window: a known start that is wrong).

@@ -79,14 +79,23 @@ pub struct Transition {
     pub reason: String,
 }
 
+/// What one matched scan says about the wheels.
+#[derive(Clone, Copy, Debug)]
+struct MatchedStep {
+    time_s: f64,
+    /// The wheels' travel since the previous matched scan, metres.
+    wheels_m: f64,
+    /// How far the match fell short of it along the wheels' direction (capped), metres.
+    shortfall_m: f64,
+}
+
 /// The monitor.
 #[derive(Clone, Debug)]
 pub struct HealthMonitor {
     cfg: HealthConfig,
     state: LocalisationState,
-    /// Per recent matched scan: its time, the wheels' travel since the previous matched
-    /// scan, and how far the match fell short of it along the wheels' direction.
-    recent: std::collections::VecDeque<(f64, f64, f64)>,
+    /// The matched scans within the window.
+    recent: std::collections::VecDeque<MatchedStep>,
     /// Motion by odometry and as tracked since the last matched scan (scans the motion filter
     /// skipped are not matched: they follow odometry, and the next match corrects them all).
     unmatched: (Pose2, Pose2),
@@ -180,19 +189,23 @@ impl HealthMonitor {
             } else {
                 0.0
             };
-            self.recent.push_back((scan.time_s, step_m, shortfall_m));
+            self.recent.push_back(MatchedStep {
+                time_s: scan.time_s,
+                wheels_m: step_m,
+                shortfall_m,
+            });
         }
         while self
             .recent
             .front()
-            .is_some_and(|(t, _, _)| *t < scan.time_s - self.cfg.window_s)
+            .is_some_and(|m| m.time_s < scan.time_s - self.cfg.window_s)
         {
             self.recent.pop_front();
         }
         let (odom_m, short_m) = self
             .recent
             .iter()
-            .fold((0.0, 0.0), |(a, b), (_, step, short)| (a + step, b + short));
+            .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
         let matched_m = odom_m - short_m;
         let disagree = short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m;
         if !disagree {
