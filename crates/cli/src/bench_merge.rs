@@ -266,17 +266,22 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     }
                     let e = &est.evidence;
                     eprintln!(
-                        "{kind} {overlap_pct}% #{i}: {verdict} (best {}) err {:.2} m {:.2} deg; agree {} conflict {} ({:.2}) overlap {:.0} m2 score {:.0} runner-up {:.0} sharp {:.2} conf {:.2}; {} headings {} nodes; {:.0} ms ({:.0} preparing){}",
+                        "{kind} {overlap_pct}% #{i}: {verdict} (best {}) err {:.2} m {:.2} deg; agree {} conflict {} ({:.2}; shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0} runner-up {:.0} sharp {:.2} off-walls {:.2} conf {:.2}; {} headings {} nodes; {:.0} ms ({:.0} preparing){}",
                         if correct { "right" } else { "wrong" },
                         err_m,
                         err_rad.to_degrees(),
                         e.agree,
                         e.conflict,
                         e.agreement(),
+                        e.shape_agree,
+                        e.shape_conflict,
+                        e.landmark_agree,
+                        e.landmark_conflict,
                         e.overlap_m2,
                         e.score,
                         est.runner_up_score,
                         est.sharpness,
+                        est.off_two_walls,
                         est.confidence,
                         est.stats.headings,
                         est.stats.nodes,

@@ -384,6 +384,7 @@ mod tests {
             evidence: Default::default(),
             runner_up_score: 0.0,
             sharpness: 1.0,
+            off_two_walls: 1.0,
             refusal: None,
             stats: Default::default(),
             hypotheses: Vec::new(),

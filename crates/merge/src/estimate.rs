@@ -12,8 +12,9 @@
 //! 4. each refined and verified on the fine level ([`crate::verify`]);
 //! 5. the best verified hypothesis is accepted only if enough structure agrees, little
 //!    conflicts, the maps overlap enough and the runner-up (the best clearly different
-//!    pose) scores clearly lower, no landmark lands on open ground, and no pose close by
-//!    explains the maps as well. Refusing is always preferred to merging wrong.
+//!    pose) scores clearly lower, no landmark lands on open ground, more agrees than a
+//!    corner of two walls (with no prior), and no pose close by explains the maps as
+//!    well. Refusing is always preferred to merging wrong.
 
 use crate::map::Map;
 use crate::prepare::{Params, Prepared};
@@ -38,6 +39,10 @@ pub struct Estimate {
     pub runner_up_score: f64,
     /// How sharply verification singles out the pose, 0..1 ([`verify::sharpness`]).
     pub sharpness: f64,
+    /// Share of the agreeing structure off the two walls carrying most of it
+    /// ([`verify::off_two_walls`]); worked out only for a pose that passed every check
+    /// before it (0 otherwise).
+    pub off_two_walls: f64,
     /// Why the merge was refused; `None` if accepted.
     pub refusal: Option<String>,
     /// What the global search cost.
@@ -67,6 +72,7 @@ impl Estimate {
             evidence: Evidence::default(),
             runner_up_score: 0.0,
             sharpness: 0.0,
+            off_two_walls: 0.0,
             refusal: Some(reason),
             stats: SearchStats::default(),
             hypotheses: Vec::new(),
@@ -536,6 +542,10 @@ fn run(
             params.precision_share,
         )
     };
+    // Worked out only for a pose every cheaper check has let through, and only with no
+    // prior: a window around a known start already rules out the other corners.
+    let off_walls_cell = std::cell::OnceCell::new();
+    let off_walls = || *off_walls_cell.get_or_init(|| verify::off_two_walls(a, b, &best_pose));
     let refusal = if evidence.overlap_m2 < params.min_overlap_m2 {
         Some(format!(
             "the maps overlap by only {:.1} m^2 at the best pose (at least {:.1} needed)",
@@ -591,6 +601,12 @@ fn run(
         ))
     } else if confidence < params.min_confidence {
         Some(format!("confidence {confidence:.2} is too low"))
+    } else if window.is_none() && off_walls() < params.min_off_two_walls {
+        Some(format!(
+            "only two walls agree: {:.0} % of the agreeing structure lies off them (at least {:.0} % needed); any corner of a rectangular room fits that as well",
+            100.0 * off_walls(),
+            100.0 * params.min_off_two_walls
+        ))
     } else if let Some((pose, e)) = nearby() {
         Some(format!(
             "imprecise: a pose {:.2} m and {:.1} deg away explains the maps as well ({:.0} % of the score)",
@@ -610,6 +626,7 @@ fn run(
         evidence,
         runner_up_score,
         sharpness,
+        off_two_walls: off_walls_cell.get().copied().unwrap_or(0.0),
         refusal,
         stats,
         hypotheses,

@@ -356,38 +356,171 @@ struct Tally {
     landmark_conflict: usize,
 }
 
+/// What one structure point says about a pose.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Verdict {
+    /// It lands on the other map's structure facing the same way.
+    Agree,
+    /// It lands on the other map's free space, far from any structure.
+    Conflict,
+    /// Anything else (unknown ground, structure facing another way, near structure).
+    Neither,
+}
+
+/// Where `s` lands on `target` under `t` (whose heading is `yaw_rad`), and what it says.
+#[inline]
+fn judge(s: &Surface, target: &Level, t: &Rigid, yaw_rad: f64) -> (Point2, Verdict) {
+    let q = t.apply(s.p);
+    let (x, y) = target.cell_under(q);
+    let Some(d) = target.dist_at(x, y) else {
+        return (q, Verdict::Neither);
+    };
+    if d <= AGREE_CELLS {
+        // A surface facing the same way (within a direction bin) within a cell.
+        let n = direction_bin(s.normal_rad + yaw_rad);
+        let facing = (-1..=1).any(|dy| {
+            (-1..=1).any(|dx| {
+                target.bin_at(x + dx, y + dy).is_some_and(|m| {
+                    let d = m.abs_diff(n);
+                    d.min(DIRECTION_BINS - d) <= 1
+                })
+            })
+        });
+        let verdict = if facing {
+            Verdict::Agree
+        } else {
+            Verdict::Neither
+        };
+        (q, verdict)
+    } else if d > CONFLICT_CELLS && target.class_at(x, y) == Class::Free {
+        (q, Verdict::Conflict)
+    } else {
+        (q, Verdict::Neither)
+    }
+}
+
 fn count_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> Tally {
     let mut tally = Tally::default();
     let t = Rigid::new(target_from_source);
     for s in points {
-        let q = t.apply(s.p);
-        let (x, y) = target.cell_under(q);
-        let Some(d) = target.dist_at(x, y) else {
-            continue;
-        };
-        if d <= AGREE_CELLS {
-            // A surface facing the same way (within a direction bin) within a cell.
-            let n = direction_bin(s.normal_rad + target_from_source.yaw_rad);
-            let facing = (-1..=1).any(|dy| {
-                (-1..=1).any(|dx| {
-                    target.bin_at(x + dx, y + dy).is_some_and(|m| {
-                        let d = m.abs_diff(n);
-                        d.min(DIRECTION_BINS - d) <= 1
-                    })
-                })
-            });
-            if facing {
+        match judge(s, target, &t, target_from_source.yaw_rad).1 {
+            Verdict::Agree => {
                 tally.agree += s.weight as usize;
                 tally.shape_agree += usize::from(s.weight == SHAPE_WEIGHT);
                 tally.landmark_agree += usize::from(s.landmark);
             }
-        } else if d > CONFLICT_CELLS && target.class_at(x, y) == Class::Free {
-            tally.conflict += s.weight as usize;
-            tally.shape_conflict += usize::from(s.weight == SHAPE_WEIGHT);
-            tally.landmark_conflict += usize::from(s.landmark);
+            Verdict::Conflict => {
+                tally.conflict += s.weight as usize;
+                tally.shape_conflict += usize::from(s.weight == SHAPE_WEIGHT);
+                tally.landmark_conflict += usize::from(s.landmark);
+            }
+            Verdict::Neither => {}
         }
     }
     tally
+}
+
+/// Share of the agreeing structure (both maps, by weight) that lies off the two straight
+/// walls carrying most of it. Near 0 when all the maps agree on is a corner of two walls:
+/// every corner of a rectangular arena or room fits that as well, a quarter or half turn
+/// away, so such evidence cannot single out a pose however much of it there is, and in
+/// sparse terrain the rest of the maps often has nothing to contradict the wrong corner.
+/// Walls are found by sampling pairs of agreeing points seen from the same side (the
+/// two-point line hypotheses of RANSAC, Fischler and Bolles 1981), on a fixed sequence so
+/// that the answer is repeatable.
+pub fn off_two_walls(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
+    // Agreeing points in the first map's grid-local frame: position, direction bin, weight.
+    let mut points: Vec<(Point2, usize, f64)> = Vec::new();
+    let forward = Rigid::new(a_from_b);
+    for s in &b.refine_points {
+        let (q, v) = judge(s, &a.refine, &forward, a_from_b.yaw_rad);
+        if v == Verdict::Agree {
+            let bin = direction_bin(s.normal_rad + a_from_b.yaw_rad);
+            points.push((q, bin, s.weight as f64));
+        }
+    }
+    let b_from_a = a_from_b.inverse();
+    let backward = Rigid::new(&b_from_a);
+    for s in &a.refine_points {
+        if judge(s, &b.refine, &backward, b_from_a.yaw_rad).1 == Verdict::Agree {
+            points.push((s.p, direction_bin(s.normal_rad), s.weight as f64));
+        }
+    }
+    let total: f64 = points.iter().map(|p| p.2).sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    let tolerance_m = AGREE_CELLS as f64 * a.refine.cell_m;
+    let mut on_walls = 0.0;
+    for _wall in 0..2 {
+        let Some(inliers) = strongest_wall(&points, tolerance_m) else {
+            break;
+        };
+        on_walls += inliers.iter().map(|&i| points[i].2).sum::<f64>();
+        let mut keep = vec![true; points.len()];
+        for i in inliers {
+            keep[i] = false;
+        }
+        let mut k = keep.iter();
+        points.retain(|_| *k.next().unwrap_or(&true));
+    }
+    (1.0 - on_walls / total).max(0.0)
+}
+
+/// The indices of the points on the straight wall with the most weight: points within
+/// `tolerance_m` of a line through two sampled points seen from the same side at least a
+/// metre apart, facing within a direction bin of them. `None` with no such pair.
+fn strongest_wall(points: &[(Point2, usize, f64)], tolerance_m: f64) -> Option<Vec<usize>> {
+    const SAMPLES: u64 = 256;
+    let n = points.len() as u64;
+    if n < 2 {
+        return None;
+    }
+    // splitmix64: a fixed, well-spread sequence of indices.
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    // Whether `r` lies on the line through `p` with unit normal `(nx, ny)`, seen from the
+    // same side as points in `bin`.
+    let on_line = |r: &(Point2, usize, f64), p: Point2, nx: f64, ny: f64, bin: usize| {
+        let d = r.1.abs_diff(bin);
+        d.min(DIRECTION_BINS - d) <= 1
+            && ((r.0.x_m - p.x_m) * nx + (r.0.y_m - p.y_m) * ny).abs() <= tolerance_m
+    };
+    let mut best: Option<(f64, Point2, f64, f64, usize)> = None;
+    for _ in 0..SAMPLES {
+        let (i, j) = ((next() % n) as usize, (next() % n) as usize);
+        let (p, bin, _) = points[i];
+        let (q, other, _) = points[j];
+        let length = p.distance_m(q);
+        if other != bin || length < 1.0 {
+            continue;
+        }
+        // Unit normal of the line through p and q.
+        let (nx, ny) = (-(q.y_m - p.y_m) / length, (q.x_m - p.x_m) / length);
+        let weight: f64 = points
+            .iter()
+            .filter(|r| on_line(r, p, nx, ny, bin))
+            .map(|r| r.2)
+            .sum();
+        if best.is_none_or(|b| weight > b.0) {
+            best = Some((weight, p, nx, ny, bin));
+        }
+    }
+    let (_, p, nx, ny, bin) = best?;
+    Some(
+        points
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| on_line(r, p, nx, ny, bin))
+            .map(|(i, _)| i)
+            .collect(),
+    )
 }
 
 /// Obstacle points (hazards aside) of each map that land within `tolerance_m` of the other
@@ -577,5 +710,20 @@ mod tests {
         let e = verify(&a, &moved, &here, params.conflict_weight, On::Refine);
         assert!(e.landmark_conflict >= 8, "{e:?}");
         assert!(e.landmark_agree >= 8, "{e:?}");
+    }
+
+    #[test]
+    fn a_bare_corner_is_all_on_two_walls_and_rocks_lie_off_them() {
+        let params = Params::default();
+        let here = Pose2::new(0.0, 0.0, 0.0);
+        let bare = Prepared::new(&corner(&[]), &params);
+        let off = off_two_walls(&bare, &bare, &here);
+        assert!(off < 0.05, "a bare corner: {off}");
+        let rocky = Prepared::new(&corner(&[(40, 30), (80, 50)]), &params);
+        let off = off_two_walls(&rocky, &rocky, &here);
+        assert!(off > 0.15, "a corner with two rocks: {off}");
+        // Nothing agrees at all: nothing off the walls either.
+        let far = Pose2::new(100.0, 100.0, 0.0);
+        assert_eq!(off_two_walls(&rocky, &rocky, &far), 0.0);
     }
 }

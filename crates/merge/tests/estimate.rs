@@ -133,3 +133,76 @@ fn a_known_start_is_confirmed_or_found_drifted() {
     assert!(common::close(&found, &pair.a_from_b, &pair.b), "{found:?}");
     assert!(drifted.drifted && drifted.drift_m > 0.5, "{drifted:?}");
 }
+
+/// Two opposite corners of a 30 x 20 m arena that share no ground: the second map is a bare
+/// corner of two walls (8 m and 5 m), the first a larger corner with a few rocks along its
+/// walls. The second fits the first half a turn round, every wall on a wall and all free
+/// ground on free ground, and the rocks rule out every placement slid along a wall. Nothing
+/// in the maps tells that placement from the corner the second map really shows, so the
+/// merge must be refused (as a quarter-turn wrong merge of two lunar maps with no rock in
+/// their overlap was, in `realms bench merge`).
+#[test]
+fn a_bare_corner_is_not_merged_onto_another_corner() {
+    use realms_core::{Grid, GridGeometry, Point2};
+    use realms_merge::{Map, MapCell};
+    let rocks_m = [
+        (10.0, 2.0),
+        (14.0, 3.0),
+        (18.0, 1.5),
+        (2.0, 8.0),
+        (3.0, 11.0),
+        (1.5, 13.5),
+        (12.0, 10.0),
+    ];
+    let arena = |keep: &dyn Fn(usize, usize) -> bool, rocks_m: &[(f64, f64)]| {
+        let g = GridGeometry {
+            width: 600,
+            height: 400,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let mut grid = Grid::new(g, MapCell::Unknown);
+        for y in 0..400 {
+            for x in 0..600 {
+                if keep(x, y) {
+                    let wall = x < 2 || y < 2 || x >= 598 || y >= 398;
+                    let (xm, ym) = (x as f64 * 0.05, y as f64 * 0.05);
+                    let rock = rocks_m
+                        .iter()
+                        .any(|(rx, ry)| (xm - rx).abs() < 0.2 && (ym - ry).abs() < 0.2);
+                    *grid.get_mut(x, y).expect("in the grid") = if wall || rock {
+                        MapCell::Occupied
+                    } else {
+                        MapCell::Free
+                    };
+                }
+            }
+        }
+        Map::new(grid)
+    };
+    let a = arena(&|x, y| x < 400 && y < 300, &rocks_m);
+    let b = arena(&|x, y| x >= 440 && y >= 300, &[]);
+    let params = Params::default();
+    let (pa, pb) = (Prepared::new(&a, &params), Prepared::new(&b, &params));
+    let est = estimate(&pa, &pb, &params);
+    assert!(
+        est.accepted().is_none(),
+        "a bare corner merged at {:?} with confidence {:.2}",
+        est.a_from_b,
+        est.confidence
+    );
+    assert!(
+        est.refusal
+            .as_deref()
+            .is_some_and(|r| r.contains("two walls")),
+        "{:?}",
+        est.refusal
+    );
+    // Without the check, every other test of the pose passes: the corner is a trap.
+    let lax = Params {
+        min_off_two_walls: 0.0,
+        ..Params::default()
+    };
+    let est = estimate(&pa, &pb, &lax);
+    assert!(est.accepted().is_some(), "{:?}", est.refusal);
+}
