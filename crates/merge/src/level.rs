@@ -56,6 +56,9 @@ pub struct Level {
     /// For feature cells: whether their blob (8-connected feature cells) is a landmark,
     /// compact and not a straight line (see [`landmarks`]).
     pub landmark: Vec<bool>,
+    /// Summed-area table of the known cells, `(width + 1) x (height + 1)`: entry
+    /// `(x, y)` counts the known cells below and left of it (see [`Level::known_near`]).
+    known_sum: Vec<u32>,
 }
 
 /// No normal, in [`Level::bin`].
@@ -90,6 +93,19 @@ pub const SHAPE_WEIGHT: u8 = 8;
 pub fn floor_i64(x: f64) -> i64 {
     let i = x as i64;
     i - i64::from((i as f64) > x)
+}
+
+/// The summed-area table of the known cells of a `w x h` grid of classes (Crow 1984).
+fn summed_known(class: &[Class], w: usize, h: usize) -> Vec<u32> {
+    let mut sum = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0u32;
+        for x in 0..w {
+            row += u32::from(class[y * w + x] != Class::Unknown);
+            sum[(y + 1) * (w + 1) + x + 1] = sum[y * (w + 1) + x + 1] + row;
+        }
+    }
+    sum
 }
 
 /// The shape of the feature cells within `r` cells of `(x, y)` (their structure tensor):
@@ -144,29 +160,31 @@ fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
 impl Level {
     /// Reduces `map` to cells of `cell_m` metres (at least the map's own cell).
     pub fn build(map: &Map, cell_m: f64) -> Level {
-        let g = map.geometry();
+        Level::build_from(&Despeckled::of(map), cell_m)
+    }
+
+    /// [`Level::build`] from a map already despeckled (once for all of a map's levels).
+    pub fn build_from(despeckled: &Despeckled, cell_m: f64) -> Level {
+        let (g, fine) = (&despeckled.geometry, &despeckled.cells);
         let r = g.resolution_m;
         let cell_m = cell_m.max(r);
-        let fine = despeckled(map);
         let width = ((g.width as f64 * r / cell_m).ceil() as usize).max(1);
         let height = ((g.height as f64 * r / cell_m).ceil() as usize).max(1);
-        // Fine cell span of coarse index i: [span(i), span(i + 1)).
+        // Fine cell span of each coarse index: [start, end), at least one fine cell.
         let ratio = cell_m / r;
-        let span = |i: usize, n: usize| ((i as f64 * ratio).round() as usize).min(n);
+        let spans = |count: usize, n: usize| -> Vec<(usize, usize)> {
+            let edge = |i: usize| ((i as f64 * ratio).round() as usize).min(n);
+            (0..count)
+                .map(|i| (edge(i), edge(i + 1).max(edge(i) + 1).min(n)))
+                .collect()
+        };
+        let (x_spans, y_spans) = (spans(width, g.width), spans(height, g.height));
         let mut class = vec![Class::Unknown; width * height];
-        for cy in 0..height {
-            let (y0, y1) = (
-                span(cy, g.height),
-                span(cy + 1, g.height).max(span(cy, g.height) + 1),
-            );
-            for cx in 0..width {
-                let (x0, x1) = (
-                    span(cx, g.width),
-                    span(cx + 1, g.width).max(span(cx, g.width) + 1),
-                );
+        for (cy, &(y0, y1)) in y_spans.iter().enumerate() {
+            for (cx, &(x0, x1)) in x_spans.iter().enumerate() {
                 let (mut occ, mut haz, mut free, mut total) = (false, false, 0usize, 0usize);
-                for y in y0..y1.min(g.height) {
-                    for x in x0..x1.min(g.width) {
+                for y in y0..y1 {
+                    for x in x0..x1 {
                         total += 1;
                         match fine[y * g.width + x] {
                             MapCell::Occupied => occ = true,
@@ -200,6 +218,7 @@ impl Level {
             })
             .collect();
         let landmark = landmarks(&class, width, height, cell_m);
+        let known_sum = summed_known(&class, width, height);
         Level {
             width,
             height,
@@ -209,7 +228,20 @@ impl Level {
             normal,
             bin,
             landmark,
+            known_sum,
         }
+    }
+
+    /// Whether any cell within `r` cells of `(x, y)` (a square) is known.
+    pub fn known_near(&self, x: i64, y: i64, r: i64) -> bool {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let (x0, y0) = ((x - r).clamp(0, w), (y - r).clamp(0, h));
+        let (x1, y1) = ((x + r + 1).clamp(0, w), (y + r + 1).clamp(0, h));
+        if x0 >= x1 || y0 >= y1 {
+            return false;
+        }
+        let at = |x: i64, y: i64| self.known_sum[(y * (w + 1) + x) as usize];
+        at(x1, y1) + at(x0, y0) > at(x0, y1) + at(x1, y0)
     }
 
     /// The class at a cell, `Unknown` outside.
@@ -415,8 +447,23 @@ fn thin<T: Copy>(pts: Vec<T>, max_points: usize) -> Vec<T> {
         .collect()
 }
 
-/// The map's cells with lone feature cells (no feature among their 8 neighbours) made
+/// A map's cells with lone feature cells (no feature among their 8 neighbours) made
 /// unknown: speckle is neither evidence of an obstacle nor of free space.
+pub struct Despeckled {
+    geometry: realms_core::GridGeometry,
+    cells: Vec<MapCell>,
+}
+
+impl Despeckled {
+    /// Despeckles `map`.
+    pub fn of(map: &Map) -> Despeckled {
+        Despeckled {
+            geometry: *map.geometry(),
+            cells: despeckled(map),
+        }
+    }
+}
+
 fn despeckled(map: &Map) -> Vec<MapCell> {
     let g = map.geometry();
     let (w, h) = (g.width, g.height);

@@ -3,7 +3,7 @@
 //! bound pyramid, the finer refinement level with its distance field, structure and known
 //! points, and the line-direction histogram.
 
-use crate::level::{Class, Level, Surface};
+use crate::level::{Class, Despeckled, Level, Surface};
 use crate::map::Map;
 use crate::rotation::Directions;
 use crate::search::Fields;
@@ -205,6 +205,10 @@ impl Prepared {
 
     /// The search level's fields without the pyramid (built on first use).
     pub fn flat_fields(&self) -> &Fields {
+        // The full search fields' first level is the same field: no need to build it twice.
+        if let Some(fields) = self.fields.get() {
+            return fields;
+        }
         self.flat_fields
             .get_or_init(|| Fields::new(&self.search, self.free_penalty, 0))
     }
@@ -223,9 +227,10 @@ impl Prepared {
 
     /// Prepares `map` with `params`.
     pub fn new(map: &Map, params: &Params) -> Prepared {
-        let search = Level::build(map, params.search_cell_m);
-        let global = Level::build(map, 2.0 * params.search_cell_m);
-        let refine = Level::build(map, params.refine_cell_m);
+        let despeckled = Despeckled::of(map);
+        let search = Level::build_from(&despeckled, params.search_cell_m);
+        let global = Level::build_from(&despeckled, 2.0 * params.search_cell_m);
+        let refine = Level::build_from(&despeckled, params.refine_cell_m);
         let refine_points = refine.surfaces(params.max_refine_points);
         let step = refine_points
             .len()

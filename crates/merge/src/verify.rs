@@ -111,28 +111,142 @@ fn field_score(
         .sum()
 }
 
-/// Both maps' points on each other's fields: a pose that looks right one way but puts the
-/// other map's structure on free space scores low.
-fn symmetric_score(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> i64 {
-    match on {
-        On::Search => {
-            field_score(a.flat_fields(), a.search.cell_m, &b.search_points, a_from_b)
-                + field_score(
-                    b.flat_fields(),
-                    b.search.cell_m,
-                    &a.search_points,
-                    &a_from_b.inverse(),
-                )
+/// A landing cell scores nothing, in [`field_score`] or [`smooth_score`], unless the other
+/// map has known ground within this many cells: one for the fields' band beside structure,
+/// two for the smooth score's reach and one for its interpolation.
+const REACH_CELLS: f64 = 4.0;
+/// Points are picked again once the pose has moved them more than this (cells of the level
+/// they land on) from where they were picked.
+const MARGIN_CELLS: f64 = 4.0;
+
+/// The surface points of both maps that can score at poses near one pose: those landing
+/// within [`REACH_CELLS`] + [`MARGIN_CELLS`] of the other map's known ground. At small
+/// overlaps most points land far out on unknown ground and score nothing, so refinement
+/// skips them; every score stays exactly what it would be with all the points (a sum
+/// without some zero terms), because the points are picked again whenever a pose moves
+/// any of them farther than the margin.
+struct Relevant {
+    on: On,
+    /// The pose the points were picked at.
+    at: Pose2,
+    /// The second map's points that can land near the first's known ground, and the reverse.
+    b_points: Vec<Surface>,
+    a_points: Vec<Surface>,
+    /// Corners of the bounding boxes of all of each map's points: how far a change of pose
+    /// moves any point is largest at one of them (the motion is affine in the point).
+    b_corners: [Point2; 4],
+    a_corners: [Point2; 4],
+}
+
+/// The corners of the bounding box of `points`.
+fn box_corners(points: &[Surface]) -> [Point2; 4] {
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for s in points {
+        (x0, y0) = (x0.min(s.p.x_m), y0.min(s.p.y_m));
+        (x1, y1) = (x1.max(s.p.x_m), y1.max(s.p.y_m));
+    }
+    if x0 > x1 {
+        return [Point2::new(0.0, 0.0); 4];
+    }
+    [
+        Point2::new(x0, y0),
+        Point2::new(x1, y0),
+        Point2::new(x0, y1),
+        Point2::new(x1, y1),
+    ]
+}
+
+/// The farthest any of `corners` moves from pose `from` to pose `to`.
+fn largest_move(corners: &[Point2; 4], from: &Pose2, to: &Pose2) -> f64 {
+    let (f, t) = (Rigid::new(from), Rigid::new(to));
+    corners
+        .iter()
+        .map(|c| f.apply(*c).distance_m(t.apply(*c)))
+        .fold(0.0, f64::max)
+}
+
+impl Relevant {
+    /// The points and levels verification reads on `on`: each map's points, then the level
+    /// of the map they land on, for both ways.
+    fn parts<'p>(a: &'p Prepared, b: &'p Prepared, on: On) -> [(&'p [Surface], &'p Level); 2] {
+        match on {
+            On::Search => [(&b.search_points, &a.search), (&a.search_points, &b.search)],
+            On::Refine => [(&b.local_points, &a.refine), (&a.local_points, &b.refine)],
         }
-        On::Refine => {
-            field_score(a.local_fields(), a.refine.cell_m, &b.local_points, a_from_b)
-                + field_score(
-                    b.local_fields(),
-                    b.refine.cell_m,
-                    &a.local_points,
-                    &a_from_b.inverse(),
-                )
+    }
+
+    fn pick(a: &Prepared, b: &Prepared, on: On, at: Pose2) -> Relevant {
+        let [(b_all, a_level), (a_all, b_level)] = Relevant::parts(a, b, on);
+        let near = |points: &[Surface], target: &Level, t: &Pose2| -> Vec<Surface> {
+            let r = Rigid::new(t);
+            let reach = (REACH_CELLS + MARGIN_CELLS) as i64;
+            points
+                .iter()
+                .filter(|s| {
+                    let (x, y) = target.cell_under(r.apply(s.p));
+                    target.known_near(x, y, reach)
+                })
+                .copied()
+                .collect()
+        };
+        Relevant {
+            on,
+            at,
+            b_points: near(b_all, a_level, &at),
+            a_points: near(a_all, b_level, &at.inverse()),
+            b_corners: box_corners(b_all),
+            a_corners: box_corners(a_all),
         }
+    }
+
+    /// Picks the points again if `pose` moves any of them past the margin.
+    fn keep_near(&mut self, a: &Prepared, b: &Prepared, pose: &Pose2) {
+        let [(_, a_level), (_, b_level)] = Relevant::parts(a, b, self.on);
+        let far = largest_move(&self.b_corners, &self.at, pose) > MARGIN_CELLS * a_level.cell_m
+            || largest_move(&self.a_corners, &self.at.inverse(), &pose.inverse())
+                > MARGIN_CELLS * b_level.cell_m;
+        if far {
+            *self = Relevant::pick(a, b, self.on, *pose);
+        }
+    }
+
+    /// Both maps' points on each other's fields: a pose that looks right one way but puts
+    /// the other map's structure on free space scores low.
+    fn field_score(&mut self, a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> i64 {
+        self.keep_near(a, b, a_from_b);
+        let (a_fields, b_fields, cell_a, cell_b) = match self.on {
+            On::Search => (
+                a.flat_fields(),
+                b.flat_fields(),
+                a.search.cell_m,
+                b.search.cell_m,
+            ),
+            On::Refine => (
+                a.local_fields(),
+                b.local_fields(),
+                a.refine.cell_m,
+                b.refine.cell_m,
+            ),
+        };
+        field_score(a_fields, cell_a, &self.b_points, a_from_b)
+            + field_score(b_fields, cell_b, &self.a_points, &a_from_b.inverse())
+    }
+
+    /// Each point earns `1 - d / 2` for its distance `d` (fine cells) to the other map's
+    /// nearest structure, both maps' points: smooth, for the last fraction of a cell.
+    fn smooth_score(&mut self, a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f32 {
+        debug_assert!(self.on == On::Refine);
+        self.keep_near(a, b, a_from_b);
+        let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
+            let r = Rigid::new(t);
+            points
+                .iter()
+                .filter_map(|s| dist_interp(target, r.apply(s.p)))
+                .map(|d| (1.0 - d / 2.0).max(0.0))
+                .sum()
+        };
+        one(&self.b_points, &a.refine, a_from_b)
+            + one(&self.a_points, &b.refine, &a_from_b.inverse())
     }
 }
 
@@ -241,26 +355,13 @@ fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
     Some((d00 * (1.0 - tx) + d10 * tx) * (1.0 - ty) + (d01 * (1.0 - tx) + d11 * tx) * ty)
 }
 
-/// Each point earns `1 - d / 2` for its distance `d` (fine cells) to the other map's
-/// nearest structure, both maps' points: smooth, for the last fraction of a cell.
-fn smooth_score(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f32 {
-    let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
-        let r = Rigid::new(t);
-        points
-            .iter()
-            .filter_map(|s| dist_interp(target, r.apply(s.p)))
-            .map(|d| (1.0 - d / 2.0).max(0.0))
-            .sum()
-    };
-    one(&b.local_points, &a.refine, a_from_b) + one(&a.local_points, &b.refine, &a_from_b.inverse())
-}
-
-/// Coordinate ascent on [`smooth_score`] from half a cell and a quarter degree down.
+/// Coordinate ascent on [`Relevant::smooth_score`] from half a cell and a quarter degree down.
 fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
     let c = b.centroid;
     let (mut step_xy, mut step_yaw) = (fine / 2.0, 0.25 * deg);
     let mut pose = start;
-    let mut best = smooth_score(a, b, &pose);
+    let mut relevant = Relevant::pick(a, b, On::Refine, start);
+    let mut best = relevant.smooth_score(a, b, &pose);
     for _ in 0..60 {
         if step_xy < fine / 8.0 && step_yaw < 0.02 * deg {
             break;
@@ -274,7 +375,7 @@ fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose
             turned_about(&pose, c, step_yaw),
             turned_about(&pose, c, -step_yaw),
         ] {
-            let s = smooth_score(a, b, &m);
+            let s = relevant.smooth_score(a, b, &m);
             if s > best {
                 (best, pose, improved) = (s, m, true);
             }
@@ -307,15 +408,10 @@ fn climb(
     min_steps: (f64, f64),
 ) -> Pose2 {
     let c = b.centroid;
-    let turn = |p: &Pose2, dyaw: f64| {
-        let pc = p.transform_point(c);
-        let q = Pose2::new(p.x_m, p.y_m, p.yaw_rad + dyaw);
-        let qc = q.transform_point(c);
-        Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
-    };
     let (mut step_xy, mut step_yaw) = steps;
     let mut pose = start;
-    let mut best = symmetric_score(a, b, on, &pose);
+    let mut relevant = Relevant::pick(a, b, on, start);
+    let mut best = relevant.field_score(a, b, &pose);
     for _ in 0..100 {
         if step_xy < min_steps.0 && step_yaw < min_steps.1 {
             break;
@@ -325,12 +421,12 @@ fn climb(
             Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
             Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
             Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
-            turn(&pose, step_yaw),
-            turn(&pose, -step_yaw),
+            turned_about(&pose, c, step_yaw),
+            turned_about(&pose, c, -step_yaw),
         ];
         let mut improved = false;
         for m in moves {
-            let s = symmetric_score(a, b, on, &m);
+            let s = relevant.field_score(a, b, &m);
             if s > best {
                 best = s;
                 pose = m;
@@ -710,6 +806,78 @@ mod tests {
         let e = verify(&a, &moved, &here, params.conflict_weight, On::Refine);
         assert!(e.landmark_conflict >= 8, "{e:?}");
         assert!(e.landmark_agree >= 8, "{e:?}");
+    }
+
+    /// Every score with all the points, for comparison with [`Relevant`]'s.
+    fn full_scores(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> (i64, f32) {
+        let [(b_all, a_level), (a_all, b_level)] = Relevant::parts(a, b, on);
+        fn fields(p: &Prepared, on: On) -> &Fields {
+            match on {
+                On::Search => p.flat_fields(),
+                On::Refine => p.local_fields(),
+            }
+        }
+        let field = field_score(fields(a, on), a_level.cell_m, b_all, a_from_b)
+            + field_score(fields(b, on), b_level.cell_m, a_all, &a_from_b.inverse());
+        let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
+            let r = Rigid::new(t);
+            points
+                .iter()
+                .filter_map(|s| dist_interp(target, r.apply(s.p)))
+                .map(|d| (1.0 - d / 2.0).max(0.0))
+                .sum()
+        };
+        let smooth = one(b_all, a_level, a_from_b) + one(a_all, b_level, &a_from_b.inverse());
+        (field, smooth)
+    }
+
+    #[test]
+    fn refinement_skips_only_points_that_score_nothing() {
+        let params = Params::default();
+        // The first map known only up to column 60, with a rock right at that edge: points
+        // landing just beyond it, on unknown ground, still score.
+        let mut first = corner(&[(40, 30), (56, 50), (20, 60)]);
+        for y in 0..80 {
+            for x in 60..120 {
+                *first.cells.get_mut(x, y).expect("in") = MapCell::Unknown;
+            }
+        }
+        let a = Prepared::new(&first, &params);
+        let b = Prepared::new(&corner(&[(20, 20), (60, 10), (30, 40)]), &params);
+        // The second map partly off the first: many of its points land on unknown ground.
+        let picked_at = Pose2::new(2.0, 1.0, 0.1);
+        for on in [On::Search, On::Refine] {
+            let mut relevant = Relevant::pick(&a, &b, on, picked_at);
+            let all = b_points_count(&b, on) + b_points_count(&a, on);
+            let kept = relevant.b_points.len() + relevant.a_points.len();
+            assert!(kept < all, "{on:?}: nothing skipped ({kept} of {all})");
+            // Within the margin, beyond it (picked again), and back.
+            for pose in [
+                picked_at,
+                Pose2::new(1.7, 0.9, 0.1),
+                Pose2::new(2.2, 1.1, 0.11),
+                Pose2::new(0.5, 0.2, 0.0),
+                Pose2::new(2.05, 0.95, 0.1),
+            ] {
+                let (field, smooth) = full_scores(&a, &b, on, &pose);
+                assert_eq!(
+                    relevant.field_score(&a, &b, &pose),
+                    field,
+                    "{on:?} {pose:?}"
+                );
+                if on == On::Refine {
+                    let s = relevant.smooth_score(&a, &b, &pose);
+                    assert!((s - smooth).abs() < 1e-3, "{pose:?}: {s} vs {smooth}");
+                }
+            }
+        }
+    }
+
+    fn b_points_count(p: &Prepared, on: On) -> usize {
+        match on {
+            On::Search => p.search_points.len(),
+            On::Refine => p.local_points.len(),
+        }
     }
 
     #[test]
