@@ -155,6 +155,10 @@ impl Default for Params {
     }
 }
 
+/// Pyramid depth of the search level on large maps (blocks of 8 cells; see
+/// `Prepared::search_depth`).
+const WINDOW_PYRAMID_DEPTH: usize = 3;
+
 /// One map, ready for matching.
 #[derive(Clone, Debug)]
 pub struct Prepared {
@@ -178,6 +182,11 @@ pub struct Prepared {
     pub local_points: Vec<Surface>,
     free_penalty: i8,
     pyramid_depth: usize,
+    /// Pyramid depth of the search level's fields: the full depth where the global search
+    /// runs on that level; on large maps, whose global search runs on the coarser level, it
+    /// only serves searches in small windows (a rescan, a known start), and a shallower
+    /// pyramid, half as costly to build, prunes those as well.
+    search_depth: usize,
     /// Surface points for the global search.
     pub search_points: Vec<Surface>,
     /// The refinement level.
@@ -222,11 +231,12 @@ impl Prepared {
     /// The search fields (built on first use: only the fixed map of a pair needs them).
     pub fn fields(&self) -> &Fields {
         self.fields
-            .get_or_init(|| Fields::new(&self.search, self.free_penalty, self.pyramid_depth))
+            .get_or_init(|| Fields::new(&self.search, self.free_penalty, self.search_depth))
     }
 
     /// Prepares `map` with `params`.
     pub fn new(map: &Map, params: &Params) -> Prepared {
+        let extent_m = map.geometry().width_m().max(map.geometry().height_m());
         let despeckled = Despeckled::of(map);
         let search = Level::build_from(&despeckled, params.search_cell_m);
         let global = Level::build_from(&despeckled, 2.0 * params.search_cell_m);
@@ -253,7 +263,7 @@ impl Prepared {
             global_points: global.surfaces(params.max_search_points),
             global,
             global_fields: std::cell::OnceCell::new(),
-            extent_m: map.geometry().width_m().max(map.geometry().height_m()),
+            extent_m,
             known_points,
             known_area_per_point_m2,
             refine_points,
@@ -266,6 +276,11 @@ impl Prepared {
             local_points,
             free_penalty: params.free_penalty,
             pyramid_depth: params.pyramid_depth,
+            search_depth: if extent_m > params.large_map_m {
+                params.pyramid_depth.min(WINDOW_PYRAMID_DEPTH)
+            } else {
+                params.pyramid_depth
+            },
             search,
             refine,
         }
