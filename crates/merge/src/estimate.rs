@@ -401,32 +401,32 @@ fn run(
             .compose(p)
             .compose(&b.frame_from_grid.inverse())
     };
-    let mut screened: Vec<(usize, Pose2, Evidence)> = hyps
+    let mut screened: Vec<(usize, Pose2, f64)> = hyps
         .iter()
         .map(|(g, h)| {
-            let e = verify::verify(
+            let score = verify::score(
                 a,
                 b,
                 &h.fixed_from_moving,
                 params.conflict_weight,
                 On::Search,
             );
-            (*g, h.fixed_from_moving, e)
+            (*g, h.fixed_from_moving, score)
         })
         .collect();
     let hypotheses = hyps
         .iter()
         .zip(&screened)
-        .map(|((_, h), (_, _, e))| (to_frames(&h.fixed_from_moving), h.score, e.score))
+        .map(|((_, h), (_, _, score))| (to_frames(&h.fixed_from_moving), h.score, *score))
         .collect();
-    screened.sort_by(|x, y| y.2.score.total_cmp(&x.2.score));
+    screened.sort_by(|x, y| y.2.total_cmp(&x.2));
     // The best of every heading group goes on (so that a true heading outscored by walls
     // laid over walls at another heading is still verified, and seen as a rival), then the
     // best of the rest.
     let mut chosen: Vec<Pose2> = Vec::new();
     for g in 0..groups_seen {
-        if let Some((_, p, e)) = screened.iter().find(|(hg, _, _)| *hg == g)
-            && e.score > 0.0
+        if let Some((_, p, score)) = screened.iter().find(|(hg, _, _)| *hg == g)
+            && *score > 0.0
         {
             chosen.push(*p);
         }
@@ -466,10 +466,11 @@ fn run(
             // precise; refinement can).
             let pose = verify::refine(a, b, *start, params);
             let refined = verify::verify(a, b, &pose, params.conflict_weight, On::Refine);
-            let unrefined = verify::verify(a, b, start, params.conflict_weight, On::Refine);
-            if refined.score >= unrefined.score - 0.05 * unrefined.score.abs() {
+            let unrefined = verify::score(a, b, start, params.conflict_weight, On::Refine);
+            if refined.score >= unrefined - 0.05 * unrefined.abs() {
                 (pose, refined)
             } else {
+                let unrefined = verify::verify(a, b, start, params.conflict_weight, On::Refine);
                 (*start, unrefined)
             }
         })

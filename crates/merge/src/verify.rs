@@ -662,15 +662,9 @@ pub enum On {
     Refine,
 }
 
-/// Verifies grid-local `a_from_b` on level `on`.
-pub fn verify(
-    a: &Prepared,
-    b: &Prepared,
-    a_from_b: &Pose2,
-    conflict_weight: f64,
-    on: On,
-) -> Evidence {
-    let (t1, t2) = match on {
+/// Both ways of verification's tallies for grid-local `a_from_b` on level `on`.
+fn tallies(a: &Prepared, b: &Prepared, a_from_b: &Pose2, on: On) -> (Tally, Tally) {
+    match on {
         On::Search => (
             count_one_way(&b.search_points, &a.search, a_from_b),
             count_one_way(&a.search_points, &b.search, &a_from_b.inverse()),
@@ -679,7 +673,25 @@ pub fn verify(
             count_one_way(&b.refine_points, &a.refine, a_from_b),
             count_one_way(&a.refine_points, &b.refine, &a_from_b.inverse()),
         ),
-    };
+    }
+}
+
+/// [`verify`]'s score alone, without the overlap it also measures (the costlier part):
+/// all that screening hypotheses, or choosing between a refined pose and its start, reads.
+pub fn score(a: &Prepared, b: &Prepared, a_from_b: &Pose2, conflict_weight: f64, on: On) -> f64 {
+    let (t1, t2) = tallies(a, b, a_from_b, on);
+    (t1.agree + t2.agree) as f64 - conflict_weight * (t1.conflict + t2.conflict) as f64
+}
+
+/// Verifies grid-local `a_from_b` on level `on`.
+pub fn verify(
+    a: &Prepared,
+    b: &Prepared,
+    a_from_b: &Pose2,
+    conflict_weight: f64,
+    on: On,
+) -> Evidence {
+    let (t1, t2) = tallies(a, b, a_from_b, on);
     let t = Rigid::new(a_from_b);
     let (mut overlap_points, mut sx, mut sy, mut sq) = (0usize, 0.0, 0.0, 0.0);
     for p in &b.known_points {
