@@ -138,6 +138,24 @@ struct Relevant {
     a_corners: [Point2; 4],
 }
 
+/// [`Relevant::smooth_score`] of one map's points landing on the other's level.
+fn smooth_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> f32 {
+    let r = Rigid::new(target_from_source);
+    points
+        .iter()
+        .filter_map(|s| dist_interp(target, r.apply(s.p)))
+        .map(|d| (1.0 - d / 2.0).max(0.0))
+        .sum()
+}
+
+/// The fields refinement climbs on level `on` of `p`.
+fn fields_on(p: &Prepared, on: On) -> &Fields {
+    match on {
+        On::Search => p.flat_fields(),
+        On::Refine => p.local_fields(),
+    }
+}
+
 /// The corners of the bounding box of `points`.
 fn box_corners(points: &[Surface]) -> [Point2; 4] {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
@@ -214,22 +232,18 @@ impl Relevant {
     /// the other map's structure on free space scores low.
     fn field_score(&mut self, a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> i64 {
         self.keep_near(a, b, a_from_b);
-        let (a_fields, b_fields, cell_a, cell_b) = match self.on {
-            On::Search => (
-                a.flat_fields(),
-                b.flat_fields(),
-                a.search.cell_m,
-                b.search.cell_m,
-            ),
-            On::Refine => (
-                a.local_fields(),
-                b.local_fields(),
-                a.refine.cell_m,
-                b.refine.cell_m,
-            ),
-        };
-        field_score(a_fields, cell_a, &self.b_points, a_from_b)
-            + field_score(b_fields, cell_b, &self.a_points, &a_from_b.inverse())
+        let [(_, a_level), (_, b_level)] = Relevant::parts(a, b, self.on);
+        field_score(
+            fields_on(a, self.on),
+            a_level.cell_m,
+            &self.b_points,
+            a_from_b,
+        ) + field_score(
+            fields_on(b, self.on),
+            b_level.cell_m,
+            &self.a_points,
+            &a_from_b.inverse(),
+        )
     }
 
     /// Each point earns `1 - d / 2` for its distance `d` (fine cells) to the other map's
@@ -237,16 +251,8 @@ impl Relevant {
     fn smooth_score(&mut self, a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f32 {
         debug_assert!(self.on == On::Refine);
         self.keep_near(a, b, a_from_b);
-        let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
-            let r = Rigid::new(t);
-            points
-                .iter()
-                .filter_map(|s| dist_interp(target, r.apply(s.p)))
-                .map(|d| (1.0 - d / 2.0).max(0.0))
-                .sum()
-        };
-        one(&self.b_points, &a.refine, a_from_b)
-            + one(&self.a_points, &b.refine, &a_from_b.inverse())
+        smooth_one_way(&self.b_points, &a.refine, a_from_b)
+            + smooth_one_way(&self.a_points, &b.refine, &a_from_b.inverse())
     }
 }
 
@@ -823,23 +829,10 @@ mod tests {
     /// Every score with all the points, for comparison with [`Relevant`]'s.
     fn full_scores(a: &Prepared, b: &Prepared, on: On, a_from_b: &Pose2) -> (i64, f32) {
         let [(b_all, a_level), (a_all, b_level)] = Relevant::parts(a, b, on);
-        fn fields(p: &Prepared, on: On) -> &Fields {
-            match on {
-                On::Search => p.flat_fields(),
-                On::Refine => p.local_fields(),
-            }
-        }
-        let field = field_score(fields(a, on), a_level.cell_m, b_all, a_from_b)
-            + field_score(fields(b, on), b_level.cell_m, a_all, &a_from_b.inverse());
-        let one = |points: &[Surface], target: &Level, t: &Pose2| -> f32 {
-            let r = Rigid::new(t);
-            points
-                .iter()
-                .filter_map(|s| dist_interp(target, r.apply(s.p)))
-                .map(|d| (1.0 - d / 2.0).max(0.0))
-                .sum()
-        };
-        let smooth = one(b_all, a_level, a_from_b) + one(a_all, b_level, &a_from_b.inverse());
+        let field = field_score(fields_on(a, on), a_level.cell_m, b_all, a_from_b)
+            + field_score(fields_on(b, on), b_level.cell_m, a_all, &a_from_b.inverse());
+        let smooth = smooth_one_way(b_all, a_level, a_from_b)
+            + smooth_one_way(a_all, b_level, &a_from_b.inverse());
         (field, smooth)
     }
 
