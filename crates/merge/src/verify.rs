@@ -555,24 +555,21 @@ pub fn off_two_walls(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
     let tolerance_m = AGREE_CELLS as f64 * a.refine.cell_m;
     let mut on_walls = 0.0;
     for _wall in 0..2 {
-        let Some(inliers) = strongest_wall(&points, tolerance_m) else {
+        let Some(on_wall) = strongest_wall(&points, tolerance_m) else {
             break;
         };
-        on_walls += inliers.iter().map(|&i| points[i].2).sum::<f64>();
-        let mut keep = vec![true; points.len()];
-        for i in inliers {
-            keep[i] = false;
-        }
-        let mut k = keep.iter();
-        points.retain(|_| *k.next().unwrap_or(&true));
+        let (wall, rest): (Vec<_>, Vec<_>) =
+            points.into_iter().zip(on_wall).partition(|(_, on)| *on);
+        on_walls += wall.iter().map(|(p, _)| p.2).sum::<f64>();
+        points = rest.into_iter().map(|(p, _)| p).collect();
     }
     (1.0 - on_walls / total).max(0.0)
 }
 
-/// The indices of the points on the straight wall with the most weight: points within
+/// Which points lie on the straight wall with the most weight: points within
 /// `tolerance_m` of a line through two sampled points seen from the same side at least a
 /// metre apart, facing within a direction bin of them. `None` with no such pair.
-fn strongest_wall(points: &[(Point2, usize, f64)], tolerance_m: f64) -> Option<Vec<usize>> {
+fn strongest_wall(points: &[(Point2, usize, f64)], tolerance_m: f64) -> Option<Vec<bool>> {
     const SAMPLES: u64 = 256;
     let n = points.len() as u64;
     if n < 2 {
@@ -615,14 +612,7 @@ fn strongest_wall(points: &[(Point2, usize, f64)], tolerance_m: f64) -> Option<V
         }
     }
     let (_, p, nx, ny, bin) = best?;
-    Some(
-        points
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| on_line(r, p, nx, ny, bin))
-            .map(|(i, _)| i)
-            .collect(),
-    )
+    Some(points.iter().map(|r| on_line(r, p, nx, ny, bin)).collect())
 }
 
 /// Obstacle points (hazards aside) of each map that land within `tolerance_m` of the other
