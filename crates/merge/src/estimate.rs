@@ -363,7 +363,7 @@ fn run(
     // Hypotheses with the heading group they came from.
     let mut hyps = Vec::new();
     let mut groups_seen = 0usize;
-    let coarse = window.is_none() && a.extent_m > params.large_map_m;
+    let coarse = window.is_none() && a.searched_coarse;
     for yaws in groups {
         let (found, group_stats) = if coarse {
             let yaws: Vec<f64> = yaws.iter().step_by(2).copied().collect();

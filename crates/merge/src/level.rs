@@ -457,38 +457,34 @@ pub struct Despeckled {
 impl Despeckled {
     /// Despeckles `map`.
     pub fn of(map: &Map) -> Despeckled {
-        Despeckled {
-            geometry: *map.geometry(),
-            cells: despeckled(map),
-        }
-    }
-}
-
-fn despeckled(map: &Map) -> Vec<MapCell> {
-    let g = map.geometry();
-    let (w, h) = (g.width, g.height);
-    let src = map.cells.cells();
-    let mut out = src.to_vec();
-    for y in 0..h {
-        for x in 0..w {
-            if !src[y * w + x].is_feature() {
-                continue;
-            }
-            let mut neighbour = false;
-            'n: for ny in y.saturating_sub(1)..(y + 2).min(h) {
-                for nx in x.saturating_sub(1)..(x + 2).min(w) {
-                    if (nx, ny) != (x, y) && src[ny * w + nx].is_feature() {
-                        neighbour = true;
-                        break 'n;
+        let g = map.geometry();
+        let (w, h) = (g.width, g.height);
+        let src = map.cells.cells();
+        let mut out = src.to_vec();
+        for y in 0..h {
+            for x in 0..w {
+                if !src[y * w + x].is_feature() {
+                    continue;
+                }
+                let mut neighbour = false;
+                'n: for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                    for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                        if (nx, ny) != (x, y) && src[ny * w + nx].is_feature() {
+                            neighbour = true;
+                            break 'n;
+                        }
                     }
                 }
-            }
-            if !neighbour {
-                out[y * w + x] = MapCell::Unknown;
+                if !neighbour {
+                    out[y * w + x] = MapCell::Unknown;
+                }
             }
         }
+        Despeckled {
+            geometry: *g,
+            cells: out,
+        }
     }
-    out
 }
 
 /// 3-4 chamfer distance (in tenths of a cell, ~exact to 8 %) from every cell to the nearest

@@ -174,6 +174,9 @@ pub struct Prepared {
     global_fields: std::cell::OnceCell<Fields>,
     /// The larger side of the map, metres.
     pub extent_m: f64,
+    /// Whether the map, as the fixed one, is searched globally on [`Prepared::global`]
+    /// rather than on the search level: larger than [`Params::large_map_m`].
+    pub searched_coarse: bool,
     /// Fields of the search level without the pyramid, for refinement.
     flat_fields: std::cell::OnceCell<Fields>,
     /// Fields of the refinement level (no pyramid), for refinement.
@@ -237,6 +240,7 @@ impl Prepared {
     /// Prepares `map` with `params`.
     pub fn new(map: &Map, params: &Params) -> Prepared {
         let extent_m = map.geometry().width_m().max(map.geometry().height_m());
+        let searched_coarse = extent_m > params.large_map_m;
         let despeckled = Despeckled::of(map);
         let search = Level::build_from(&despeckled, params.search_cell_m);
         let global = Level::build_from(&despeckled, 2.0 * params.search_cell_m);
@@ -264,6 +268,7 @@ impl Prepared {
             global,
             global_fields: std::cell::OnceCell::new(),
             extent_m,
+            searched_coarse,
             known_points,
             known_area_per_point_m2,
             refine_points,
@@ -276,7 +281,7 @@ impl Prepared {
             local_points,
             free_penalty: params.free_penalty,
             pyramid_depth: params.pyramid_depth,
-            search_depth: if extent_m > params.large_map_m {
+            search_depth: if searched_coarse {
                 params.pyramid_depth.min(WINDOW_PYRAMID_DEPTH)
             } else {
                 params.pyramid_depth

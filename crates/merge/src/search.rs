@@ -34,6 +34,13 @@ pub fn direction_bin(normal_rad: f64) -> usize {
     (crate::level::floor_i64(t + 0.5) & (DIRECTION_BINS as i64 - 1)) as usize
 }
 
+/// Whether direction bins `m` and `n` face within one bin of each other (wrapped).
+#[inline]
+pub fn bins_face_alike(m: usize, n: usize) -> bool {
+    let d = m.abs_diff(n);
+    d.min(DIRECTION_BINS - d) <= 1
+}
+
 /// The score fields of one map, one per direction bin.
 #[derive(Clone, Debug)]
 pub struct Fields {

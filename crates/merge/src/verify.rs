@@ -14,7 +14,7 @@
 
 use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};
 use crate::prepare::{Params, Prepared};
-use crate::search::{DIRECTION_BINS, Fields, direction_bin};
+use crate::search::{Fields, bins_face_alike, direction_bin};
 use realms_core::{Point2, Pose2};
 
 /// Agreeing: the other map has structure within this many fine cells.
@@ -111,7 +111,7 @@ fn field_score(
         .sum()
 }
 
-/// A landing cell scores nothing, in [`field_score`] or [`smooth_score`], unless the other
+/// A landing cell scores nothing, in [`field_score`] or [`Relevant::smooth_score`], unless the other
 /// map has known ground within this many cells: one for the fields' band beside structure,
 /// two for the smooth score's reach and one for its interpolation.
 const REACH_CELLS: f64 = 4.0;
@@ -482,10 +482,9 @@ fn judge(s: &Surface, target: &Level, t: &Rigid, yaw_rad: f64) -> (Point2, Verdi
         let n = direction_bin(s.normal_rad + yaw_rad);
         let facing = (-1..=1).any(|dy| {
             (-1..=1).any(|dx| {
-                target.bin_at(x + dx, y + dy).is_some_and(|m| {
-                    let d = m.abs_diff(n);
-                    d.min(DIRECTION_BINS - d) <= 1
-                })
+                target
+                    .bin_at(x + dx, y + dy)
+                    .is_some_and(|m| bins_face_alike(m, n))
             })
         });
         let verdict = if facing {
@@ -587,8 +586,7 @@ fn strongest_wall(points: &[(Point2, usize, f64)], tolerance_m: f64) -> Option<V
     // Whether `r` lies on the line through `p` with unit normal `(nx, ny)`, seen from the
     // same side as points in `bin`.
     let on_line = |r: &(Point2, usize, f64), p: Point2, nx: f64, ny: f64, bin: usize| {
-        let d = r.1.abs_diff(bin);
-        d.min(DIRECTION_BINS - d) <= 1
+        bins_face_alike(r.1, bin)
             && ((r.0.x_m - p.x_m) * nx + (r.0.y_m - p.y_m) * ny).abs() <= tolerance_m
     };
     let mut best: Option<(f64, Point2, f64, f64, usize)> = None;
