@@ -188,7 +188,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
     }
     println!("results in {}/", out.display());
     println!(
-        "  mission.json  truth.png  trajectories.png  trajectories.csv  coverage.png  {}{}roverN_map.png/.pgm/.yaml",
+        "  mission.json  truth.png  trajectories.png  trajectories.csv  slam.csv  coverage.png  {}{}roverN_map.png/.pgm/.yaml",
         if net.simulated { "network.png  " } else { "" },
         if report.merge.is_some() {
             "merged_map.png/.pgm/.yaml  "

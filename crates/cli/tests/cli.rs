@@ -44,6 +44,7 @@ fn mission_writes_its_results_folder_and_says_where() {
         "truth.png",
         "trajectories.png",
         "trajectories.csv",
+        "slam.csv",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }

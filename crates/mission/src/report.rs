@@ -225,6 +225,7 @@ impl MissionReport {
                     ("truth", "truth.png"),
                     ("trajectories", "trajectories.png"),
                     ("trajectories_csv", "trajectories.csv"),
+                    ("slam_csv", "slam.csv"),
                     ("coverage", "coverage.png"),
                 ]);
                 if mission.network().is_some() {
@@ -476,6 +477,25 @@ pub fn write_results(
         }
     }
     let csv_path = dir.join("trajectories.csv");
+    std::fs::write(&csv_path, csv).map_err(io(&csv_path))?;
+
+    let mut csv = String::from(
+        "t_s,rover,slam_x_m,slam_y_m,slam_yaw_rad,odom_x_m,odom_y_m,odom_yaw_rad,true_x_m,true_y_m,true_yaw_rad,final_x_m,final_y_m,final_yaw_rad\n",
+    );
+    for (body, record) in world.rovers().zip(mission.slam_records()) {
+        for c in &record.checks {
+            csv.push_str(&format!("{:.3},{}", c.t.as_secs_f64(), body.id));
+            for p in [c.estimate, c.odometry, c.truth] {
+                csv.push_str(&format!(",{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad));
+            }
+            match c.optimised {
+                Some(p) => csv.push_str(&format!(",{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad)),
+                None => csv.push_str(",,,"),
+            }
+            csv.push('\n');
+        }
+    }
+    let csv_path = dir.join("slam.csv");
     std::fs::write(&csv_path, csv).map_err(io(&csv_path))?;
 
     for (body, record) in world.rovers().zip(mission.slam_records()) {

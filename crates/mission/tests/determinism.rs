@@ -40,7 +40,12 @@ fn same_seed_gives_byte_identical_outputs_and_another_seed_differs() {
     let s = small();
     let a = run(&s, "a", 1.5);
     let b = run(&s, "b", 2.5);
-    for file in ["truth.png", "trajectories.png", "trajectories.csv"] {
+    for file in [
+        "truth.png",
+        "trajectories.png",
+        "trajectories.csv",
+        "slam.csv",
+    ] {
         let (x, y) = (
             std::fs::read(a.join(file)).expect("a"),
             std::fs::read(b.join(file)).expect("b"),

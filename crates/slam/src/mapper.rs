@@ -86,6 +86,31 @@ pub struct MapperConfig {
     /// heading is redone with the heading held to the odometry's (`None`: trust the match;
     /// right for wheel-only headings such as the recorded logs'), radians.
     pub max_heading_step_rad: Option<f64>,
+    /// A closure may correct the pose only as far as the map can have drifted between the
+    /// two places it joins (`None`: any correction the search window allows; right for
+    /// wheel-only odometry, whose drift is too wild to bound this way).
+    pub closure_drift: Option<ClosureDrift>,
+}
+
+/// How far a loop closure may move a keyframe: `base_m + per_m * d`, where `d` is the length
+/// of the shortest path between the two ends through the pose graph (travel along its
+/// odometry edges, [`hop_m`](Self::hop_m) for each accepted closure).
+///
+/// The search window must be metres wide, because after a long loop the drift can be. But a
+/// symmetric object (the lander's square, a row of look-alike boulders) then offers a second
+/// fit one side-length away, which scores as well as the true one and is found again from
+/// every nearby keyframe, so neither the ambiguity test nor the confirmation stops it. What
+/// does is that the two ends were joined a few metres ago: the map cannot have drifted metres
+/// since. This is gating a closure by the relative pose uncertainty of its two ends, with the
+/// path length standing in for the covariance a full estimator would carry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosureDrift {
+    /// Correction always allowed, metres.
+    pub base_m: f64,
+    /// Allowed correction per metre of path between the ends.
+    pub per_m: f64,
+    /// Path length a closure already in the graph stands for, metres.
+    pub hop_m: f64,
 }
 
 /// Scans taken while the robot stands still carry nothing new, and matching them against a
@@ -118,6 +143,7 @@ impl Default for MapperConfig {
             trim_radius_m: None,
             motion_filter: None,
             max_heading_step_rad: None,
+            closure_drift: None,
         }
     }
 }
@@ -189,6 +215,9 @@ pub struct Mapper {
     pub closures: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
+    /// Closures refused because they asked for more correction than the map can have
+    /// drifted by.
+    pub closures_beyond_drift: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
 }
@@ -213,6 +242,7 @@ impl Mapper {
             last_information: [[0.0; 3]; 3],
             closures: 0,
             heading_holds: 0,
+            closures_beyond_drift: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
         }
     }
@@ -541,17 +571,40 @@ impl Mapper {
             let found = self.verified_match(s, &points, &full, pose, &window);
             self.keyframe_points[node] = full;
             if let Some(m) = found {
-                let from = self.submaps[s].origin_node;
-                added |= self.propose_closure(Edge {
-                    from,
+                let closure = Edge {
+                    from: self.submaps[s].origin_node,
                     to: node,
                     measurement: m.pose,
                     information: [400.0, 400.0, 2500.0],
                     robust: true,
-                });
+                };
+                if self.within_drift(&closure) {
+                    added |= self.propose_closure(closure);
+                } else {
+                    self.closures_beyond_drift += 1;
+                }
             }
         }
         added
+    }
+
+    /// Whether the correction `closure` asks for is one the map can have drifted by (see
+    /// [`ClosureDrift`]); always true without a bound.
+    fn within_drift(&self, closure: &Edge) -> bool {
+        let Some(bound) = self.cfg.closure_drift else {
+            return true;
+        };
+        let wanted = self.graph.nodes[closure.from] * closure.measurement;
+        let asked_m = wanted
+            .position()
+            .distance_m(self.graph.nodes[closure.to].position());
+        if asked_m <= bound.base_m {
+            return true;
+        }
+        let needed_m = (asked_m - bound.base_m) / bound.per_m;
+        self.graph
+            .path_length_within(closure.from, closure.to, needed_m, bound.hop_m)
+            .is_none()
     }
 
     /// The correction a closure asks of its keyframe: where the closure puts the keyframe,
@@ -694,5 +747,69 @@ impl Mapper {
     /// Optimises the whole graph once more (at the end of a log).
     pub fn finish(&mut self) {
         self.graph.optimize(10);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mapper whose graph is a straight drive of `n` keyframes 0.25 m apart along x.
+    fn straight_drive(n: usize) -> Mapper {
+        let mut mapper = Mapper::new(MapperConfig {
+            closure_drift: Some(ClosureDrift {
+                base_m: 0.3,
+                per_m: 0.05,
+                hop_m: 2.0,
+            }),
+            ..MapperConfig::default()
+        });
+        for k in 0..n {
+            mapper
+                .graph
+                .nodes
+                .push(Pose2::new(0.25 * k as f64, 0.0, 0.0));
+            if k > 0 {
+                mapper.graph.edges.push(Edge {
+                    from: k - 1,
+                    to: k,
+                    measurement: Pose2::new(0.25, 0.0, 0.0),
+                    information: [400.0, 400.0, 2500.0],
+                    robust: false,
+                });
+            }
+        }
+        mapper
+    }
+
+    /// A closure from `from` that puts `to` `off_m` to the side of where the graph has it.
+    fn closure(mapper: &Mapper, from: usize, to: usize, off_m: f64) -> Edge {
+        let wanted = mapper.graph.nodes[to] * Pose2::new(0.0, off_m, 0.0);
+        Edge {
+            from,
+            to,
+            measurement: mapper.graph.nodes[from].inverse() * wanted,
+            information: [400.0, 400.0, 2500.0],
+            robust: true,
+        }
+    }
+
+    #[test]
+    fn a_closure_may_correct_only_as_far_as_the_path_between_its_ends_can_drift() {
+        // 10 m between the ends: 0.3 + 0.05 * 10 = 0.8 m allowed.
+        let mapper = straight_drive(41);
+        assert!(mapper.within_drift(&closure(&mapper, 0, 40, 0.7)));
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 0.9)));
+        // The lander's square fitted one side over, 2.4 m away, after 100 m: allowed then.
+        let mut mapper = straight_drive(401);
+        assert!(mapper.within_drift(&closure(&mapper, 0, 400, 2.4)));
+        // ... but not once a closure has joined the two stretches: 0.25 + 2 + 0.25 m.
+        let shortcut = closure(&mapper, 1, 399, 0.0);
+        mapper.graph.edges.push(shortcut);
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 400, 2.4)));
+        assert!(mapper.within_drift(&closure(&mapper, 0, 400, 0.4)));
+        // Without a bound, any correction the window finds is allowed.
+        mapper.cfg.closure_drift = None;
+        assert!(mapper.within_drift(&closure(&mapper, 0, 400, 2.4)));
     }
 }

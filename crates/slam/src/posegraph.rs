@@ -32,6 +32,61 @@ pub struct PoseGraph {
     pub edges: Vec<Edge>,
 }
 
+impl PoseGraph {
+    /// The length of the shortest path from node `a` to node `b` through the graph, if it is
+    /// at most `limit_m`: a sequential edge counts its measured translation, a robust edge (a
+    /// loop closure) `closure_m`. Dijkstra's search, abandoned past the limit, so asking about
+    /// two nodes far apart costs no more than the neighbourhood within the limit.
+    pub fn path_length_within(
+        &self,
+        a: usize,
+        b: usize,
+        limit_m: f64,
+        closure_m: f64,
+    ) -> Option<f64> {
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        let n = self.nodes.len();
+        if a >= n || b >= n {
+            return None;
+        }
+        let mut adjacent: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+        for e in &self.edges {
+            let length_m = if e.robust {
+                closure_m
+            } else {
+                e.measurement.x_m.hypot(e.measurement.y_m)
+            };
+            if e.from < n && e.to < n {
+                adjacent[e.from].push((e.to, length_m));
+                adjacent[e.to].push((e.from, length_m));
+            }
+        }
+        let mut best = vec![f64::INFINITY; n];
+        let mut frontier = BinaryHeap::new();
+        best[a] = 0.0;
+        // Lengths are non-negative, so their bit patterns order like the numbers.
+        frontier.push(Reverse((0f64.to_bits(), a)));
+        while let Some(Reverse((bits, node))) = frontier.pop() {
+            let d = f64::from_bits(bits);
+            if d > best[node] {
+                continue;
+            }
+            if node == b {
+                return Some(d);
+            }
+            for &(next, length_m) in &adjacent[node] {
+                let via = d + length_m;
+                if via <= limit_m && via < best[next] {
+                    best[next] = via;
+                    frontier.push(Reverse((via.to_bits(), next)));
+                }
+            }
+        }
+        None
+    }
+}
+
 /// Huber threshold on the Mahalanobis length of a residual.
 const HUBER_K: f64 = 1.0;
 
@@ -286,6 +341,30 @@ mod tests {
             information: [100.0, 100.0, 400.0],
             robust: false,
         }
+    }
+
+    #[test]
+    fn path_length_takes_closures_as_shortcuts_and_stops_at_the_limit() {
+        let mut graph = PoseGraph {
+            nodes: vec![Pose2::IDENTITY; 11],
+            edges: (0..10)
+                .map(|k| odometry_edge(k, Pose2::new(1.0, 0.0, 0.0)))
+                .collect(),
+        };
+        assert_eq!(graph.path_length_within(0, 10, 100.0, 2.0), Some(10.0));
+        assert_eq!(graph.path_length_within(10, 3, 100.0, 2.0), Some(7.0));
+        assert_eq!(graph.path_length_within(0, 10, 9.5, 2.0), None);
+        // A closure from node 1 to node 9: 1 + 2 + 1 beats the 10 m along the chain.
+        graph.edges.push(Edge {
+            from: 1,
+            to: 9,
+            measurement: Pose2::new(8.0, 0.0, 0.0),
+            information: [400.0, 400.0, 2500.0],
+            robust: true,
+        });
+        assert_eq!(graph.path_length_within(0, 10, 100.0, 2.0), Some(4.0));
+        assert_eq!(graph.path_length_within(0, 10, 3.9, 2.0), None);
+        assert_eq!(graph.path_length_within(0, 11, 100.0, 2.0), None);
     }
 
     /// A square loop of 4 x 10 steps of 1 m, odometry turning 2 % too little at each corner
