@@ -21,10 +21,11 @@ use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
+use crate::occupancy::CellState;
 use crate::posegraph::{Edge, PoseGraph};
 use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
-use realms_core::{Point2, Pose2};
+use realms_core::{Cell, Point2, Pose2};
 
 /// Loop closures are searched at every this many keyframes.
 const LOOP_EVERY_KEYFRAMES: usize = 2;
@@ -187,6 +188,11 @@ const MAX_REFINE_SHIFT_M: f64 = 0.2;
 const HELD_HEADING_WEIGHT: f64 = 1e7;
 /// Scans with fewer endpoints than this are neither matched nor mapped.
 const MIN_POINTS: usize = 10;
+/// A finished submap is dropped for a newer one starting nearby only if the newer one knows
+/// at least this share of the cells it knows. Starting nearby is not enough: driving off the
+/// other way, the newer one never sees what the older saw ahead, and dropping the older would
+/// make that ground unknown again (a frontier the rover then drives back to, for ever).
+const TRIM_MIN_COVERED: f64 = 0.95;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
 const RELOCALISE_WINDOW_M: f64 = 3.0;
 /// ... and this far in heading, radians.
@@ -734,13 +740,49 @@ impl Mapper {
         let at = self.graph.nodes[self.submaps[newest].origin_node].position();
         for s in 0..newest {
             let origin = self.graph.nodes[self.submaps[s].origin_node].position();
-            let sub = &mut self.submaps[s];
-            if sub.finished && !sub.trimmed && origin.distance_m(at) <= radius {
+            let sub = &self.submaps[s];
+            if sub.finished
+                && !sub.trimmed
+                && origin.distance_m(at) <= radius
+                && self.known_share(s, newest) >= TRIM_MIN_COVERED
+            {
+                let sub = &mut self.submaps[s];
                 self.assembly.remove(s, sub.map.finest());
                 sub.map.release();
                 sub.precomputed = None;
                 sub.trimmed = true;
             }
+        }
+    }
+
+    /// The share of the cells submap `old` knows (free or occupied) that submap `new` knows
+    /// too, with both at their poses now; 1 when `old` knows nothing.
+    fn known_share(&self, old: usize, new: usize) -> f64 {
+        let old_origin = self.graph.nodes[self.submaps[old].origin_node];
+        let new_origin = self.graph.nodes[self.submaps[new].origin_node];
+        let new_from_old = new_origin.inverse() * old_origin;
+        let grid = self.submaps[old].map.finest();
+        let covering = self.submaps[new].map.finest();
+        let geo = grid.geometry();
+        let (mut known, mut covered) = (0usize, 0usize);
+        for (i, l) in grid.log_odds().iter().enumerate() {
+            if CellState::from_log_odds(*l) == CellState::Unknown {
+                continue;
+            }
+            known += 1;
+            let centre = geo.cell_center(Cell {
+                x: i % geo.width,
+                y: i / geo.width,
+            });
+            let there = covering.log_odds_at(new_from_old.transform_point(centre));
+            if CellState::from_log_odds(there) != CellState::Unknown {
+                covered += 1;
+            }
+        }
+        if known == 0 {
+            1.0
+        } else {
+            covered as f64 / known as f64
         }
     }
 
@@ -792,6 +834,43 @@ mod tests {
             information: [400.0, 400.0, 2500.0],
             robust: true,
         }
+    }
+
+    /// A finished submap at the origin that saw a wall 4 m east, then a newer one at the
+    /// same place that saw a wall 4 m to `newer_looks` (east or west); returns whether the
+    /// older was dropped when the newer finished.
+    fn older_dropped(newer_looks_east: bool) -> bool {
+        let mut mapper = Mapper::new(MapperConfig {
+            trim_radius_m: Some(3.0),
+            ..MapperConfig::default()
+        });
+        let f = mapper.cfg.frontend;
+        mapper.graph.nodes = vec![Pose2::IDENTITY; 2];
+        let wall = |x_m: f64| -> Vec<(Point2, bool)> {
+            (-20..=20)
+                .map(|k| (Point2::new(x_m, 0.1 * k as f64), true))
+                .collect()
+        };
+        for (node, x_m) in [(0, 4.0), (1, if newer_looks_east { 4.0 } else { -4.0 })] {
+            let mut map = MultiResMap::new(f.resolution_m, f.levels);
+            map.insert(Point2::new(0.0, 0.0), &wall(x_m));
+            mapper.submaps.push(Submap {
+                origin_node: node,
+                map,
+                keyframes: 1,
+                finished: true,
+                precomputed: None,
+                trimmed: false,
+            });
+        }
+        mapper.trim_submaps(1);
+        mapper.submaps[0].trimmed
+    }
+
+    #[test]
+    fn a_submap_is_dropped_only_for_a_newer_one_that_knows_its_ground() {
+        assert!(older_dropped(true));
+        assert!(!older_dropped(false));
     }
 
     #[test]
