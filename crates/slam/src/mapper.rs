@@ -730,9 +730,10 @@ impl Mapper {
     }
 
     /// Drops the grids of finished submaps that the just-finished submap `newest` makes
-    /// redundant: their origins lie within the trim radius of its origin, so it covers
-    /// nearly the same ground. Keeps a long mission's memory bounded by the area explored,
-    /// not the distance driven. Their keyframes stay in the graph.
+    /// redundant: their origins lie within the trim radius of its origin, and it knows
+    /// nearly every cell they know ([`TRIM_MIN_COVERED`]). Keeps a long mission's memory
+    /// bounded by the area explored, not the distance driven. Their keyframes stay in the
+    /// graph.
     fn trim_submaps(&mut self, newest: usize) {
         let Some(radius) = self.cfg.trim_radius_m else {
             return;
