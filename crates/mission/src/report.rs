@@ -485,12 +485,19 @@ pub fn write_results(
     for (body, record) in world.rovers().zip(mission.slam_records()) {
         for c in &record.checks {
             csv.push_str(&format!("{:.3},{}", c.t.as_secs_f64(), body.id));
-            for p in [c.estimate, c.odometry, c.truth] {
-                csv.push_str(&format!(",{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad));
-            }
-            match c.optimised {
-                Some(p) => csv.push_str(&format!(",{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad)),
-                None => csv.push_str(",,,"),
+            let poses = [
+                Some(c.estimate),
+                Some(c.odometry),
+                Some(c.truth),
+                c.optimised,
+            ];
+            for pose in poses {
+                match pose {
+                    Some(p) => {
+                        csv.push_str(&format!(",{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad))
+                    }
+                    None => csv.push_str(",,,"),
+                }
             }
             csv.push('\n');
         }

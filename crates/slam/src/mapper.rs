@@ -221,9 +221,6 @@ pub struct Mapper {
     pub closures: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
-    /// Closures refused because they asked for more correction than the map can have
-    /// drifted by.
-    pub closures_beyond_drift: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
 }
@@ -248,7 +245,6 @@ impl Mapper {
             last_information: [[0.0; 3]; 3],
             closures: 0,
             heading_holds: 0,
-            closures_beyond_drift: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
         }
     }
@@ -586,8 +582,6 @@ impl Mapper {
                 };
                 if self.within_drift(&closure) {
                     added |= self.propose_closure(closure);
-                } else {
-                    self.closures_beyond_drift += 1;
                 }
             }
         }
@@ -838,8 +832,8 @@ mod tests {
     }
 
     /// A finished submap at the origin that saw a wall 4 m east, then a newer one at the
-    /// same place that saw a wall 4 m to `newer_looks` (east or west); returns whether the
-    /// older was dropped when the newer finished.
+    /// same place that saw a wall 4 m east too (`newer_looks_east`) or 4 m west; returns
+    /// whether the older was dropped when the newer finished.
     fn older_dropped(newer_looks_east: bool) -> bool {
         let mut mapper = Mapper::new(MapperConfig {
             trim_radius_m: Some(3.0),

@@ -35,8 +35,9 @@ pub struct PoseGraph {
 impl PoseGraph {
     /// The length of the shortest path from node `a` to node `b` through the graph, if it is
     /// at most `limit_m`: a sequential edge counts its measured translation, a robust edge (a
-    /// loop closure) `closure_m`. Dijkstra's search, abandoned past the limit, so asking about
-    /// two nodes far apart costs no more than the neighbourhood within the limit.
+    /// loop closure) `closure_m`. Dijkstra's search, abandoned past the limit. Each call
+    /// rebuilds the adjacency from every edge, so it suits occasional questions (the mapper
+    /// asks only about closures that want more than a small correction), not one per scan.
     pub fn path_length_within(
         &self,
         a: usize,
