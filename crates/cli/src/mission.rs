@@ -71,6 +71,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
     );
     let options = MissionOptions {
         ideal_comms: args.ideal_comms,
+        cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
         ..MissionOptions::default()
     };
     let mut mission = Mission::with_options(World::new(&scenario), options);
@@ -117,6 +118,12 @@ pub fn run(args: MissionArgs) -> Result<()> {
     println!(
         "mission done: {:.0} s simulated in {:.1} s ({:.0}x real time)",
         report.sim_duration_s, wall_s, report.speedup
+    );
+    println!(
+        "SLAM for {} rovers took {:.1} s of that ({:.0}x real time)",
+        report.rovers.len(),
+        report.slam_wall_s,
+        report.slam_speedup
     );
     for r in &report.rovers {
         println!(

@@ -18,6 +18,6 @@ pub mod msgs;
 pub mod time;
 
 pub use geometry::{Point2, Pose2, Quaternion, Vec3};
-pub use grid::{Cell, Grid, GridGeometry};
+pub use grid::{Cell, CentreLookup, Grid, GridGeometry};
 pub use ids::{RoverId, Topic};
 pub use time::{Duration, Time};

@@ -51,6 +51,8 @@ pub const NETWORK_STATS_PERIOD: Duration = Duration::from_secs(10);
 /// How often rover poses are sampled for trajectories.
 pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 
+pub use realms_node::cost::CostClock;
+
 /// How a mission is run, beyond its scenario.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MissionOptions {
@@ -63,6 +65,9 @@ pub struct MissionOptions {
     /// How long the rovers stand still at the start measuring their gyro's bias
     /// ([`GYRO_CALIBRATION`] by default; short tests may take less and get a worse gyro).
     pub gyro_calibration: Duration,
+    /// Lent to the rovers to time their SLAM (`mission.json`'s `slam_wall_s`); without it
+    /// that time reads zero.
+    pub cost_clock: CostClock,
 }
 
 impl Default for MissionOptions {
@@ -71,6 +76,7 @@ impl Default for MissionOptions {
             rovers_hear_each_other: true,
             ideal_comms: false,
             gyro_calibration: GYRO_CALIBRATION,
+            cost_clock: CostClock::default(),
         }
     }
 }
@@ -183,6 +189,7 @@ impl Mission {
                     } else {
                         vec![body.id]
                     },
+                    cost_clock: options.cost_clock,
                 };
                 Box::new(RoverNode::new(body.id, cfg)) as Box<dyn Node>
             })
@@ -503,6 +510,7 @@ impl Mission {
                     .collect();
                 if let Some(k) = self.world.rovers().position(|b| b.id == rover.id()) {
                     self.slam[k].attach_trajectory(&trajectory);
+                    self.slam[k].wall_s = rover.slam_wall_s();
                 }
             }
             pending.extend(

@@ -36,6 +36,11 @@ pub struct MissionReport {
     pub wall_s: f64,
     /// Simulated seconds per wall second (varies run to run).
     pub speedup: f64,
+    /// Wall time every rover's SLAM took, summed, seconds (varies run to run).
+    pub slam_wall_s: f64,
+    /// Simulated seconds per second of the fleet's SLAM: how much faster than real time one
+    /// core runs SLAM for every rover (varies run to run).
+    pub slam_speedup: f64,
     /// What drove the rovers.
     pub behaviour: &'static str,
     /// The arena.
@@ -170,6 +175,8 @@ impl MissionReport {
             })
             .collect();
         let sim_duration_s = mission.now().as_secs_f64();
+        let slam_wall_s: f64 = mission.slam_records().iter().map(|r| r.wall_s).sum();
+        let per_wall_s = |w: f64| if w > 0.0 { sim_duration_s / w } else { 0.0 };
         MissionReport {
             schema: SCHEMA,
             realms_version: env!("CARGO_PKG_VERSION"),
@@ -177,11 +184,9 @@ impl MissionReport {
             seed: s.seed,
             sim_duration_s,
             wall_s,
-            speedup: if wall_s > 0.0 {
-                sim_duration_s / wall_s
-            } else {
-                0.0
-            },
+            speedup: per_wall_s(wall_s),
+            slam_wall_s,
+            slam_speedup: per_wall_s(slam_wall_s),
             behaviour: BEHAVIOUR,
             arena: ArenaSummary {
                 width_m: s.arena.width_m,

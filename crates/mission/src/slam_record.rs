@@ -47,6 +47,8 @@ pub struct RoverSlamRecord {
     pub changes: Vec<StateChange>,
     /// The latest map.
     pub map: Option<OccupancyGrid>,
+    /// Wall time the rover's SLAM took, seconds (set when the mission finishes).
+    pub wall_s: f64,
     next_check: Time,
 }
 

@@ -13,6 +13,7 @@
 //! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
 //!   from its updates, its pose and its status.
 
+pub mod cost;
 pub mod guard;
 pub mod lander_merge;
 pub mod mapping;

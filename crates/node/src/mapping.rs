@@ -16,7 +16,7 @@ use realms_core::msgs::{
     Header, Imu, LaserScan, LocalisationStatus, MapDelta, MapMetaData, Message, OccupancyGrid,
     Odometry, PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
 };
-use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
+use realms_core::{CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
@@ -486,6 +486,7 @@ impl Mapping {
         };
         let fine = states.cells();
         let hazards = self.hazard_states();
+        let lookup = CentreLookup::new(hazards.geometry(), &geo);
         let mut cells = Vec::with_capacity(geo.len());
         for y in 0..geo.height {
             for x in 0..geo.width {
@@ -497,8 +498,11 @@ impl Mapping {
                         free |= *c == CellState::Free;
                     }
                 }
-                let centre = geo.cell_center(realms_core::Cell { x, y });
-                cells.push(cell_value(occupied, hazard_at(&hazards, centre), free));
+                cells.push(cell_value(
+                    occupied,
+                    hazard_at(&hazards, &lookup, x, y),
+                    free,
+                ));
             }
         }
         Grid::from_cells(geo, cells).expect("one value per cell")
@@ -509,6 +513,7 @@ impl Mapping {
         let states = self.mapper.map_states();
         let hazards = self.hazard_states();
         let g = states.geometry();
+        let lookup = CentreLookup::new(hazards.geometry(), g);
         OccupancyGrid {
             header: self.header(stamp),
             info: MapMetaData {
@@ -527,7 +532,7 @@ impl Mapping {
                 .map(|(cell, c)| {
                     cell_value(
                         *c == CellState::Occupied,
-                        hazard_at(&hazards, g.cell_center(cell)),
+                        hazard_at(&hazards, &lookup, cell.x, cell.y),
                         *c == CellState::Free,
                     )
                 })
@@ -549,9 +554,10 @@ fn cell_value(occupied: bool, hazard: Option<bool>, free: bool) -> i8 {
     }
 }
 
-/// What the hazard layer says of the cell holding `p`: hazardous, safe, or unseen (`None`).
-fn hazard_at(hazards: &Grid<CellState>, p: Point2) -> Option<bool> {
-    match hazards.at_world(p) {
+/// What the hazard layer says of the cell holding the centre of map cell (`x`, `y`) (found
+/// through `lookup`): hazardous, safe, or unseen (`None`).
+fn hazard_at(hazards: &Grid<CellState>, lookup: &CentreLookup, x: usize, y: usize) -> Option<bool> {
+    match lookup.index(x, y).map(|i| &hazards.cells()[i]) {
         Some(CellState::Occupied) => Some(true),
         Some(CellState::Free) => Some(false),
         _ => None,

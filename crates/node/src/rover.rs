@@ -5,6 +5,7 @@
 //! ([`Guard`]) against what the map does not show yet, and it stops if its lidar falls
 //! silent.
 
+use crate::cost::CostClock;
 use crate::guard::{Guard, GuardConfig};
 use crate::mapping::{Mapping, MappingConfig};
 use crate::navigation::{Activity, GoalKind, NavigationConfig, Navigator};
@@ -41,6 +42,8 @@ pub struct RoverConfig {
     pub guard: GuardConfig,
     /// Every rover of the fleet (itself included): whose `nav/status` it listens to.
     pub fleet: Vec<RoverId>,
+    /// Times SLAM's work, for the record.
+    pub cost_clock: CostClock,
 }
 
 /// A rover's on-board node.
@@ -60,6 +63,9 @@ pub struct RoverNode {
     reason: String,
     next_explored: Time,
     outbox: Vec<Outgoing>,
+    cost_clock: CostClock,
+    /// Wall time spent in SLAM, to report what it costs (see [`CostClock`]).
+    slam_wall: std::time::Duration,
 }
 
 impl RoverNode {
@@ -79,12 +85,21 @@ impl RoverNode {
             reason: String::new(),
             next_explored: Time::ZERO,
             outbox: Vec::new(),
+            cost_clock: cfg.cost_clock,
+            slam_wall: std::time::Duration::ZERO,
         }
     }
 
     /// Which rover this is.
     pub fn id(&self) -> RoverId {
         self.id
+    }
+
+    /// Wall time this rover's SLAM has taken so far, seconds: scan matching, the pose graph,
+    /// the hazard layer and drawing the maps it publishes and plans on. It varies from run to
+    /// run.
+    pub fn slam_wall_s(&self) -> f64 {
+        self.slam_wall.as_secs_f64()
     }
 
     /// The rover's on-board SLAM.
@@ -184,7 +199,10 @@ impl RoverNode {
         }
         let pose = self.mapping.pose();
         if self.navigator.wants_map(now) {
-            let map = self.mapping.nav_map(NAV_MAP_FACTOR);
+            let mapping = &mut self.mapping;
+            let map = self
+                .cost_clock
+                .time(&mut self.slam_wall, || mapping.nav_map(NAV_MAP_FACTOR));
             self.navigator.on_map(now, &map, pose);
             if now >= self.next_explored {
                 self.next_explored = now + EXPLORED_PERIOD;
@@ -235,19 +253,21 @@ impl Node for RoverNode {
             }
             return;
         }
+        let (clock, mapping, spent) = (self.cost_clock, &mut self.mapping, &mut self.slam_wall);
         match message {
             Message::LaserScan(scan) => {
                 self.last_scan = Some(now);
                 self.stopped_for_silence = false;
-                self.mapping.on_scan(scan, &mut self.outbox);
+                let outbox = &mut self.outbox;
+                clock.time(spent, || mapping.on_scan(scan, outbox));
                 let (v, w) = self.drive(now, scan);
                 self.send_cmd(now, v, w);
                 self.publish_status(now);
             }
-            Message::Odometry(odom) => self.mapping.on_odometry(odom),
-            Message::Imu(imu) => self.mapping.on_imu(imu),
+            Message::Odometry(odom) => clock.time(spent, || mapping.on_odometry(odom)),
+            Message::Imu(imu) => clock.time(spent, || mapping.on_imu(imu)),
             Message::PointCloud(cloud) => {
-                self.mapping.on_depth(cloud);
+                clock.time(spent, || mapping.on_depth(cloud));
                 self.guard.on_depth(now, cloud);
             }
             Message::NavGoal(goal) => self.navigator.set_operator_goal(now, goal.target),
@@ -267,7 +287,9 @@ impl Node for RoverNode {
     }
 
     fn on_shutdown(&mut self, now: Time) {
-        self.mapping.publish_map(now, &mut self.outbox);
+        let (mapping, outbox) = (&mut self.mapping, &mut self.outbox);
+        self.cost_clock
+            .time(&mut self.slam_wall, || mapping.publish_map(now, outbox));
     }
 
     fn as_rover(&self) -> Option<&RoverNode> {

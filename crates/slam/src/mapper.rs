@@ -223,6 +223,12 @@ pub struct Mapper {
     pub heading_holds: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
+    /// Counts changes that can change the map: keyframes (inserted into submaps, which may
+    /// trim older ones or optimise the graph) and optimisations.
+    revision: u64,
+    /// [`Mapper::map_states`] at a revision: a rover parked, or asked for its map twice
+    /// between keyframes, gets it again without redrawing.
+    states_cache: Option<(u64, realms_core::Grid<crate::occupancy::CellState>)>,
 }
 
 impl Mapper {
@@ -246,6 +252,8 @@ impl Mapper {
             closures: 0,
             heading_holds: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
+            revision: 0,
+            states_cache: None,
         }
     }
 
@@ -489,6 +497,7 @@ impl Mapper {
     }
 
     fn add_keyframe(&mut self, points: Vec<Point2>) {
+        self.revision += 1;
         let node = self.graph.nodes.len();
         self.graph.nodes.push(self.pose);
         self.keyframe_points.push(points);
@@ -682,12 +691,19 @@ impl Mapper {
 
     /// The state of every cell of [`render_map`](Self::render_map), more cheaply.
     pub fn map_states(&mut self) -> realms_core::Grid<crate::occupancy::CellState> {
+        if let Some((revision, states)) = &self.states_cache
+            && *revision == self.revision
+        {
+            return states.clone();
+        }
         let active = self.sync_assembly();
         let active: Vec<_> = active
             .into_iter()
             .map(|(s, pose)| (self.submaps[s].map.finest(), pose))
             .collect();
-        self.assembly.states(&active)
+        let states = self.assembly.states(&active);
+        self.states_cache = Some((self.revision, states.clone()));
+        states
     }
 
     /// The pose of every submap's origin now, by submap index (trimmed ones included: their
@@ -784,6 +800,7 @@ impl Mapper {
     /// Optimises the whole graph once more (at the end of a log).
     pub fn finish(&mut self) {
         self.graph.optimize(10);
+        self.revision += 1;
     }
 }
 
