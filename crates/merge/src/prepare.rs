@@ -105,6 +105,11 @@ pub struct Params {
     /// A rival must also agree at least as well as the best less this (share of agreeing
     /// structure among agreeing and conflicting).
     pub rival_agreement_slack: f64,
+    /// A rival must also bring at least this share of the landmark points (rocks, rims) the
+    /// best pose brings into agreement. Walls and corners line up at many poses; a pose
+    /// that lines them up while leaving most of the best's rocks apart is not as likely,
+    /// however much wall it overlaps.
+    pub rival_landmark_share: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -150,6 +155,7 @@ impl Default for Params {
             min_off_two_walls: 0.07,
             rival_share: 0.2,
             rival_agreement_slack: 0.03,
+            rival_landmark_share: 0.5,
             large_map_m: 30.0,
         }
     }
