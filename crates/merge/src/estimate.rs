@@ -303,7 +303,6 @@ fn same_pose(p: &Pose2, q: &Pose2, centre: Point2, params: &Params) -> bool {
         && normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs() < params.distinct_rad
 }
 
-/// Whether landmark points land on open ground too often for `e`'s pose to be right.
 /// Whether a clearly different pose with evidence `e` is an alternative to the best pose
 /// (evidence `best`), however the totals compare: a larger overlap of walls buys a larger
 /// total without being any more likely. It must be as consistent: no more than
@@ -321,6 +320,7 @@ fn is_rival(e: &Evidence, best: &Evidence, params: &Params) -> bool {
         && e.landmark_agree as f64 >= params.rival_landmark_share * best.landmark_agree as f64
 }
 
+/// Whether landmark points land on open ground too often for `e`'s pose to be right.
 fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
     e.landmark_conflict >= params.min_landmark_conflicts
         && e.landmark_conflict as f64 > params.max_landmark_conflict_share * e.landmark_agree as f64

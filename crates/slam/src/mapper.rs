@@ -903,4 +903,31 @@ mod tests {
         mapper.cfg.closure_drift = None;
         assert!(mapper.within_drift(&closure(&mapper, 0, 400, 2.4)));
     }
+
+    #[test]
+    fn the_map_shows_every_new_keyframe_and_is_not_redrawn_without_one() {
+        // A wall along the drive, 1 m to the left, seen from -1 m to +4 m of the rover.
+        let wall: Vec<Point2> = (0..100)
+            .map(|i| Point2::new(-1.0 + 0.05 * i as f64, 1.0))
+            .collect();
+        let known = |m: &mut Mapper| {
+            m.map_states()
+                .cells()
+                .iter()
+                .filter(|c| **c != CellState::Unknown)
+                .count()
+        };
+        let mut mapper = Mapper::new(MapperConfig::default());
+        mapper.add_points(0.0, Pose2::IDENTITY, wall.clone());
+        let first = known(&mut mapper);
+        assert!(first > 50, "{first} cells known");
+        assert_eq!(known(&mut mapper), first);
+        for k in 1..=10 {
+            let odom = Pose2::new(0.1 * k as f64, 0.0, 0.0);
+            mapper.add_points(0.1 * k as f64, odom, wall.clone());
+        }
+        let later = known(&mut mapper);
+        // A metre more of wall, and the ground beside it.
+        assert!(later > first + 20, "{later} cells known, {first} before");
+    }
 }
