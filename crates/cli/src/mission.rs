@@ -152,6 +152,20 @@ pub fn run(args: MissionArgs) -> Result<()> {
             ))
         );
     }
+    let powered_off: Vec<&str> = report
+        .rovers
+        .iter()
+        .filter(|r| !r.powered)
+        .map(|r| r.name.as_str())
+        .collect();
+    let complete = match (report.exploration_complete, powered_off.is_empty()) {
+        (false, _) => String::new(),
+        (true, true) => "; exploration complete, every rover home".to_string(),
+        (true, false) => format!(
+            "; exploration complete, every rover home but {} (powered off)",
+            powered_off.join(", ")
+        ),
+    };
     println!(
         "coverage {:.1} % of the explorable area{}{}{}",
         100.0 * report.coverage,
@@ -161,11 +175,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
         report
             .time_to_95_s
             .map_or(String::new(), |t| format!(", 95 % at {:.0} min", t / 60.0)),
-        if report.exploration_complete {
-            "; exploration complete, every rover home"
-        } else {
-            ""
-        }
+        complete
     );
     let net = &report.network;
     if net.simulated {

@@ -330,10 +330,13 @@ impl Default for Scenario {
                     duration_s: 8.0,
                     sensor: None,
                 },
+                // DESIGN's mid-mission failure: five minutes in, with over a third of the
+                // hall still unknown (exploration ends after 15-20 minutes), so the others
+                // must map its share.
                 Fault {
                     kind: FaultKind::PowerOff,
                     rover: "rover2".into(),
-                    at_s: 5400.0,
+                    at_s: 300.0,
                     duration_s: 0.0,
                     sensor: None,
                 },
