@@ -307,7 +307,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             hazard_entries: bodies.iter().map(|b| b.stats.hazard_entries).sum(),
             stuck: bodies.iter().filter(|b| b.stuck).count() as u32,
             wall_s: t0.elapsed().as_secs_f64(),
-            slam_wall_s: mission.slam_records().iter().map(|r| r.wall_s).sum(),
+            slam_wall_s: mission.slam_wall_s(),
             slam: mission
                 .slam_records()
                 .iter()

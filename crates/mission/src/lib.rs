@@ -495,6 +495,12 @@ impl Mission {
         &self.slam
     }
 
+    /// Wall time every rover's SLAM took, summed, seconds (known once the mission finished;
+    /// 0 without a [`CostClock`]).
+    pub fn slam_wall_s(&self) -> f64 {
+        self.slam.iter().map(|r| r.wall_s).sum()
+    }
+
     /// Ends the mission at the time reached: nodes publish their final products.
     pub fn finish(&mut self) {
         let t = self.now();

@@ -175,7 +175,7 @@ impl MissionReport {
             })
             .collect();
         let sim_duration_s = mission.now().as_secs_f64();
-        let slam_wall_s: f64 = mission.slam_records().iter().map(|r| r.wall_s).sum();
+        let slam_wall_s = mission.slam_wall_s();
         let per_wall_s = |w: f64| if w > 0.0 { sim_duration_s / w } else { 0.0 };
         MissionReport {
             schema: SCHEMA,

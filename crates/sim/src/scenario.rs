@@ -331,7 +331,7 @@ impl Default for Scenario {
                     sensor: None,
                 },
                 // DESIGN's mid-mission failure: five minutes in, with over a third of the
-                // hall still unknown (exploration ends after 15-20 minutes), so the others
+                // hall still unknown (exploration ends after 10-20 minutes), so the others
                 // must map its share.
                 Fault {
                     kind: FaultKind::PowerOff,

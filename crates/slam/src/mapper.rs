@@ -905,7 +905,7 @@ mod tests {
     }
 
     #[test]
-    fn the_map_shows_every_new_keyframe_and_is_not_redrawn_without_one() {
+    fn the_map_shows_every_new_keyframe() {
         // A wall along the drive, 1 m to the left, seen from -1 m to +4 m of the rover.
         let wall: Vec<Point2> = (0..100)
             .map(|i| Point2::new(-1.0 + 0.05 * i as f64, 1.0))
