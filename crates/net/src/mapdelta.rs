@@ -70,17 +70,23 @@ fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
     };
     let dx = shift(g.origin.x_m, geometry.origin.x_m)?;
     let dy = shift(g.origin.y_m, geometry.origin.y_m)?;
+    if (dx, dy, g.width, g.height) == (0, 0, geometry.width, geometry.height) {
+        // The map did not grow (most updates): nothing to re-lay.
+        return Some(old.clone());
+    }
     let mut out = Grid::new(geometry, UNKNOWN);
+    // Row by row: the old columns that land inside the new grid, copied as one slice.
+    let x_from = (-dx).clamp(0, g.width as i64) as usize;
+    let x_to = (geometry.width as i64 - dx).clamp(x_from as i64, g.width as i64) as usize;
+    let new_width = geometry.width;
     for y in 0..g.height {
-        for x in 0..g.width {
-            let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-            if nx >= 0
-                && ny >= 0
-                && let Some(cell) = out.get_mut(nx as usize, ny as usize)
-            {
-                *cell = old.cells()[y * g.width + x];
-            }
+        let ny = y as i64 + dy;
+        if ny < 0 || ny >= geometry.height as i64 || x_from == x_to {
+            continue;
         }
+        let src = &old.cells()[y * g.width + x_from..y * g.width + x_to];
+        let dst0 = ny as usize * new_width + (x_from as i64 + dx) as usize;
+        out.cells_mut()[dst0..dst0 + src.len()].copy_from_slice(src);
     }
     Some(out)
 }

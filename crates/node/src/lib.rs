@@ -16,6 +16,7 @@
 pub mod cost;
 pub mod guard;
 pub mod lander_merge;
+pub mod layers;
 pub mod mapping;
 pub mod navigation;
 pub mod rover;

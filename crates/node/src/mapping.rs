@@ -11,12 +11,13 @@
 //! arena's frame until it drifts.
 
 use crate::Outgoing;
+use crate::layers::TiledLayer;
 use realms_core::geometry::{Quaternion, Vec3, normalize_angle_rad};
 use realms_core::msgs::{
     Header, Imu, LaserScan, LocalisationStatus, MapDelta, MapMetaData, Message, OccupancyGrid,
     Odometry, PointCloud, Pose3, PoseWithCovariance, PoseWithCovarianceStamped,
 };
-use realms_core::{CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
+use realms_core::{Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
@@ -109,6 +110,10 @@ pub struct Mapping {
     delta_encoder: Encoder,
     /// A receiver missed an update: the next one is a snapshot.
     snapshot_wanted: bool,
+    /// The map as published, kept between publications.
+    published_layer: TiledLayer,
+    /// The planner's map, kept between plans (once asked for).
+    planner_layer: Option<TiledLayer>,
 }
 
 impl Mapping {
@@ -134,6 +139,8 @@ impl Mapping {
             next_delta: Time::ZERO,
             delta_encoder: Encoder::new(),
             snapshot_wanted: false,
+            published_layer: TiledLayer::new(1),
+            planner_layer: None,
         }
     }
 
@@ -404,14 +411,17 @@ impl Mapping {
     /// Publishes the changes of the map since the last update (and restarts the period).
     pub fn publish_delta(&mut self, now: Time, out: &mut Vec<Outgoing>) {
         self.next_delta = now + self.cfg.delta_period;
-        let map = self.map(now);
-        let geo = GridGeometry {
-            width: map.info.width as usize,
-            height: map.info.height as usize,
-            resolution_m: map.info.resolution_m as f64,
-            origin: Point2::new(map.info.origin.position.x, map.info.origin.position.y),
+        let header = self.header(now);
+        let hazards = self.hazard_states();
+        let view = self.mapper.live_map();
+        let grid = self.published_layer.refresh(&view, hazards);
+        // Updates carry the geometry of the map message (whose resolution is a float32, as
+        // in ROS), so a map rebuilt from them and the map itself agree exactly.
+        let geometry = GridGeometry {
+            resolution_m: grid.geometry().resolution_m as f32 as f64,
+            ..*grid.geometry()
         };
-        let Some(grid) = Grid::from_cells(geo, map.data) else {
+        let Some(grid) = Grid::from_cells(geometry, grid.cells().to_vec()) else {
             return;
         };
         let update = self.delta_encoder.update(&grid, self.snapshot_wanted);
@@ -425,10 +435,7 @@ impl Mapping {
         };
         out.push(Outgoing {
             topic: self.id.topic(leaf),
-            message: Message::MapDelta(Box::new(MapDelta {
-                header: map.header,
-                update,
-            })),
+            message: Message::MapDelta(Box::new(MapDelta { header, update })),
         });
     }
 
@@ -471,99 +478,51 @@ impl Mapping {
         self.hazards.states(&self.mapper.submap_origins())
     }
 
-    /// The map at `factor` times the SLAM resolution, for navigation: a cell is an obstacle
-    /// if any of its SLAM cells is, else hazard if the hazard layer says so at its centre,
-    /// else free if any SLAM cell (or the depth camera) saw it free, else unknown.
+    /// The map at `factor` times the SLAM resolution (a power of two up to
+    /// [`LIVE_TILE_CELLS`](realms_slam::assembly::LIVE_TILE_CELLS)), for navigation: a cell
+    /// is an obstacle if any of its SLAM cells is, else hazard if the hazard layer says so at
+    /// its centre, else free if any SLAM cell (or the depth camera) saw it free, else unknown.
     pub fn nav_map(&mut self, factor: usize) -> Grid<i8> {
-        let factor = factor.max(1);
-        let states = self.mapper.map_states();
-        let g = *states.geometry();
-        let geo = GridGeometry {
-            width: g.width / factor,
-            height: g.height / factor,
-            resolution_m: g.resolution_m * factor as f64,
-            origin: g.origin,
-        };
-        let fine = states.cells();
         let hazards = self.hazard_states();
-        let lookup = CentreLookup::new(hazards.geometry(), &geo);
-        let mut cells = Vec::with_capacity(geo.len());
-        for y in 0..geo.height {
-            for x in 0..geo.width {
-                let (mut occupied, mut free) = (false, false);
-                for dy in 0..factor {
-                    let row = (y * factor + dy) * g.width + x * factor;
-                    for c in &fine[row..row + factor] {
-                        occupied |= *c == CellState::Occupied;
-                        free |= *c == CellState::Free;
-                    }
-                }
-                cells.push(cell_value(
-                    occupied,
-                    hazard_at(&hazards, &lookup, x, y),
-                    free,
-                ));
-            }
-        }
-        Grid::from_cells(geo, cells).expect("one value per cell")
+        let layer = self
+            .planner_layer
+            .take()
+            .filter(|l| l.factor() == TiledLayer::new(factor).factor())
+            .unwrap_or_else(|| TiledLayer::new(factor));
+        let view = self.mapper.live_map();
+        let layer = self.planner_layer.insert(layer);
+        layer.refresh(&view, hazards).clone()
+    }
+
+    /// The map now, at the SLAM resolution: the lidar map with the hazard layer over it.
+    fn published_grid(&mut self) -> &Grid<i8> {
+        let hazards = self.hazard_states();
+        let view = self.mapper.live_map();
+        self.published_layer.refresh(&view, hazards)
     }
 
     /// The map now, as a ROS occupancy grid.
     pub fn map(&mut self, stamp: Time) -> OccupancyGrid {
-        let states = self.mapper.map_states();
-        let hazards = self.hazard_states();
-        let g = states.geometry();
-        let lookup = CentreLookup::new(hazards.geometry(), g);
-        // The lidar passes over crater bowls and low rocks and calls them free: the hazard
-        // layer overrules it everywhere but on what the lidar sees as obstacles. Row by row,
-        // as the cell-by-cell iterator's division per cell costs as much as the rest.
-        let cells = states.cells();
-        let mut data = Vec::with_capacity(cells.len());
-        for (y, row) in cells.chunks_exact(g.width.max(1)).enumerate() {
-            data.extend(row.iter().enumerate().map(|(x, c)| {
-                cell_value(
-                    *c == CellState::Occupied,
-                    hazard_at(&hazards, &lookup, x, y),
-                    *c == CellState::Free,
-                )
-            }));
-        }
-        OccupancyGrid {
-            header: self.header(stamp),
-            info: MapMetaData {
-                resolution_m: g.resolution_m as f32,
-                width: g.width as u32,
-                height: g.height as u32,
-                origin: Pose3 {
-                    position: Vec3::new(g.origin.x_m, g.origin.y_m, 0.0),
-                    orientation: Quaternion::IDENTITY,
-                },
+        let header = self.header(stamp);
+        map_message(header, self.published_grid())
+    }
+}
+
+/// `grid` as a ROS occupancy grid.
+fn map_message(header: Header, grid: &Grid<i8>) -> OccupancyGrid {
+    let g = grid.geometry();
+    OccupancyGrid {
+        header,
+        info: MapMetaData {
+            resolution_m: g.resolution_m as f32,
+            width: g.width as u32,
+            height: g.height as u32,
+            origin: Pose3 {
+                position: Vec3::new(g.origin.x_m, g.origin.y_m, 0.0),
+                orientation: Quaternion::IDENTITY,
             },
-            data,
-        }
-    }
-}
-
-/// A published map cell from what the lidar map and the hazard layer say: the lidar passes
-/// over crater bowls and low rocks and calls them free, so the hazard layer overrules it
-/// everywhere but on what the lidar sees as obstacles; ground the depth camera judged
-/// drivable is known free too.
-fn cell_value(occupied: bool, hazard: Option<bool>, free: bool) -> i8 {
-    match (occupied, hazard, free) {
-        (true, _, _) => OccupancyGrid::OCCUPIED,
-        (_, Some(true), _) => OccupancyGrid::HAZARD,
-        (_, Some(false), _) | (_, None, true) => OccupancyGrid::FREE,
-        _ => OccupancyGrid::UNKNOWN,
-    }
-}
-
-/// What the hazard layer says of the cell holding the centre of map cell (`x`, `y`) (found
-/// through `lookup`): hazardous, safe, or unseen (`None`).
-fn hazard_at(hazards: &Grid<CellState>, lookup: &CentreLookup, x: usize, y: usize) -> Option<bool> {
-    match lookup.index(x, y).map(|i| &hazards.cells()[i]) {
-        Some(CellState::Occupied) => Some(true),
-        Some(CellState::Free) => Some(false),
-        _ => None,
+        },
+        data: grid.cells().to_vec(),
     }
 }
 

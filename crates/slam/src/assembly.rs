@@ -6,8 +6,19 @@
 //! longer change) and only redraws one when the pose graph has moved it, by taking it out at
 //! its old pose and putting it in at the new one; submaps still being built are drawn onto a
 //! copy when the map is asked for. Sums are kept unclamped so taking a submap out is exact.
+//!
+//! A rover asks for its map every few seconds, and drawing its active submaps (which span
+//! ten metres of driving and the lidar's reach around it, half the map) each time cost more
+//! than the rest of its SLAM. So the occupancy map is also kept *live*
+//! ([`Assembly::live_states`]): each active submap has a shadow in the assembly's cells,
+//! drawn from the submap once and then updated by tracing each new scan into it as the scan
+//! goes into the submap, and every cell's state is kept current as its evidence changes. A
+//! shadow is drawn afresh from its submap only when the pose graph moves the submap, and
+//! replaced by the exact drawing when the submap is finished.
 
-use crate::occupancy::{CellState, OccupancyGrid, growth, regrow};
+use crate::occupancy::{
+    CellState, Lattice, OccupancyGrid, beams_box, growth, regrow, trace_beams, updated_log_odds,
+};
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
 /// A submap is redrawn when its pose moved more than this, metres ...
@@ -29,6 +40,115 @@ pub struct Assembly {
     placed: Vec<Option<Pose2>>,
     /// What a submap cell's log-odds contribute to the sum.
     weigh: fn(f32) -> f32,
+    /// The live map, once asked for.
+    live: Option<Live>,
+}
+
+/// Cells on a side of the square tiles the live map counts its changes in.
+pub const LIVE_TILE_CELLS: usize = 32;
+
+/// The finished submaps' sum with the active submaps' shadows added, and every cell's state.
+#[derive(Clone, Debug)]
+struct Live {
+    sum: Vec<f32>,
+    states: Vec<CellState>,
+    shadows: Vec<Shadow>,
+    width: usize,
+    /// Tiles per row.
+    tiles_wide: usize,
+    /// The version in which a cell of each tile (row-major) last changed state.
+    tile_version: Vec<u64>,
+    /// The version changes are stamped with now: one more than the last handed out.
+    version: u64,
+}
+
+/// The live map as it is now, and where it changed ([`Assembly::live_states`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LiveView<'a> {
+    /// Where the cells lie.
+    pub geometry: GridGeometry,
+    /// Every cell's state, row-major from the grid's origin.
+    pub states: &'a [CellState],
+    /// This view's version: a later view changed only the tiles
+    /// [`changed_since`](LiveView::changed_since) this one names.
+    pub version: u64,
+    tiles_wide: usize,
+    tile_version: &'a [u64],
+}
+
+impl LiveView<'_> {
+    /// Whether a cell of tile (`tx`, `ty`) (cells `tx * LIVE_TILE_CELLS ..`, likewise for
+    /// `ty`) may have changed state since the view of version `since`. Views of different
+    /// geometries share no versions: redraw everything when the geometry changed.
+    pub fn changed_since(&self, tx: usize, ty: usize, since: u64) -> bool {
+        self.tile_version
+            .get(ty * self.tiles_wide + tx)
+            .is_none_or(|v| *v > since)
+    }
+}
+
+/// An active submap's log-odds in the assembly's cells.
+#[derive(Clone, Debug)]
+struct Shadow {
+    /// The submap's index.
+    index: usize,
+    /// The submap's pose when the shadow was drawn or started.
+    pose: Pose2,
+    cells: Vec<f32>,
+}
+
+/// Cells `[x0, x1] x [y0, y1]` of an assembly, inclusive.
+type CellBox = [usize; 4];
+
+impl Live {
+    fn new(sum: Vec<f32>, width: usize, height: usize) -> Self {
+        let tiles_wide = width.div_ceil(LIVE_TILE_CELLS);
+        Live {
+            states: sum.iter().map(|&l| CellState::from_log_odds(l)).collect(),
+            sum,
+            shadows: Vec::new(),
+            width,
+            tiles_wide,
+            tile_version: vec![1; tiles_wide * height.div_ceil(LIVE_TILE_CELLS)],
+            version: 1,
+        }
+    }
+
+    /// Adds `delta` to cell `i`'s evidence and brings its state up to date.
+    fn add(&mut self, i: usize, delta: f32) {
+        self.sum[i] += delta;
+        self.restate(i);
+    }
+
+    /// Brings cell `i`'s state up to date with its evidence, noting its tile if it changed.
+    fn restate(&mut self, i: usize) {
+        restate(
+            &self.sum,
+            &mut self.states,
+            &mut self.tile_version,
+            [self.width, self.tiles_wide],
+            self.version,
+            i,
+        );
+    }
+}
+
+/// [`Live::restate`] on borrowed parts (`shape`: cells and tiles per row).
+fn restate(
+    sum: &[f32],
+    states: &mut [CellState],
+    tile_version: &mut [u64],
+    shape: [usize; 2],
+    version: u64,
+    i: usize,
+) {
+    let state = CellState::from_log_odds(sum[i]);
+    if state != states[i] {
+        states[i] = state;
+        let [width, tiles_wide] = shape;
+        let (x, y) = (i % width, i / width);
+        tile_version[(y / LIVE_TILE_CELLS) * tiles_wide + x / LIVE_TILE_CELLS] = version;
+    }
 }
 
 impl Assembly {
@@ -48,6 +168,7 @@ impl Assembly {
             sum: Vec::new(),
             placed: Vec::new(),
             weigh,
+            live: None,
         }
     }
 
@@ -79,6 +200,25 @@ impl Assembly {
             return;
         };
         self.sum = regrow(&self.sum, w, h, g, 0.0);
+        if let Some(live) = &mut self.live {
+            let shadows = std::mem::take(&mut live.shadows);
+            let version = live.version;
+            // A new geometry: every tile counts as changed.
+            *live = Live::new(
+                regrow(&live.sum, w, h, g, 0.0),
+                self.width + g[0] + g[2],
+                self.height + g[1] + g[3],
+            );
+            live.version = version;
+            live.tile_version.fill(version);
+            live.shadows = shadows
+                .into_iter()
+                .map(|s| Shadow {
+                    cells: regrow(&s.cells, w, h, g, 0.0),
+                    ..s
+                })
+                .collect();
+        }
         self.origin = Point2::new(
             self.origin.x_m - g[0] as f64 * r,
             self.origin.y_m - g[1] as f64 * r,
@@ -88,11 +228,19 @@ impl Assembly {
     }
 
     /// Adds `sign` times the log-odds of `grid` placed at `pose` to `target` (a sum over this
-    /// assembly's geometry), sampling the submap at each target cell's centre.
-    fn draw(&self, target: &mut [f32], grid: &OccupancyGrid, pose: Pose2, sign: f32) {
-        let Some((min, max)) = placed_box(grid, pose) else {
-            return;
-        };
+    /// assembly's geometry), sampling the submap at each target cell's centre; returns the
+    /// cells it may have changed.
+    fn draw(
+        &self,
+        target: &mut [f32],
+        grid: &OccupancyGrid,
+        pose: Pose2,
+        sign: f32,
+    ) -> Option<CellBox> {
+        let (min, max) = placed_box(grid, pose)?;
+        if self.width == 0 {
+            return None;
+        }
         let r = self.resolution_m;
         let cell = |v: f64, o: f64| ((v - o) / r).floor();
         let x0 = cell(min.x_m, self.origin.x_m).max(0.0) as usize;
@@ -126,6 +274,25 @@ impl Assembly {
                 ly += dy;
             }
         }
+        Some([x0, y0, x1, y1])
+    }
+
+    /// Adds `sign` times `grid` at `pose` to the sum, and to the live map if there is one.
+    fn add(&mut self, grid: &OccupancyGrid, pose: Pose2, sign: f32) {
+        let mut sum = std::mem::take(&mut self.sum);
+        self.draw(&mut sum, grid, pose, sign);
+        self.sum = sum;
+        if let Some(mut live) = self.live.take() {
+            if let Some([x0, y0, x1, y1]) = self.draw(&mut live.sum, grid, pose, sign) {
+                for y in y0..=y1 {
+                    let row = y * self.width;
+                    for i in row + x0..=row + x1 {
+                        live.restate(i);
+                    }
+                }
+            }
+            self.live = Some(live);
+        }
     }
 
     fn grow_for(&mut self, grid: &OccupancyGrid, pose: Pose2) {
@@ -147,10 +314,10 @@ impl Assembly {
             }
             self.remove(index, grid);
         }
+        // A submap just finished: its exact drawing replaces its shadow.
+        self.drop_shadow(index);
         self.grow_for(grid, pose);
-        let mut sum = std::mem::take(&mut self.sum);
-        self.draw(&mut sum, grid, pose, 1.0);
-        self.sum = sum;
+        self.add(grid, pose, 1.0);
         self.placed[index] = Some(pose);
     }
 
@@ -159,10 +326,153 @@ impl Assembly {
         let Some(Some(old)) = self.placed.get(index).copied() else {
             return;
         };
-        let mut sum = std::mem::take(&mut self.sum);
-        self.draw(&mut sum, grid, old, -1.0);
-        self.sum = sum;
+        self.add(grid, old, -1.0);
         self.placed[index] = None;
+    }
+
+    /// Takes active submap `index`'s shadow out of the live map, if it has one.
+    fn drop_shadow(&mut self, index: usize) {
+        let Some(live) = &mut self.live else {
+            return;
+        };
+        let Some(k) = live.shadows.iter().position(|s| s.index == index) else {
+            return;
+        };
+        let shadow = live.shadows.swap_remove(k);
+        for (i, v) in shadow.cells.iter().enumerate() {
+            if *v != 0.0 {
+                live.add(i, -v);
+            }
+        }
+    }
+
+    /// Makes the live map hold active submap `index` (`grid`) at `pose`: draws its shadow
+    /// if it has none or the submap moved since it was drawn.
+    fn track(&mut self, index: usize, grid: &OccupancyGrid, pose: Pose2) {
+        if let Some(live) = &self.live
+            && let Some(shadow) = live.shadows.iter().find(|s| s.index == index)
+        {
+            let d = pose.relative_to(&shadow.pose);
+            if d.x_m.hypot(d.y_m) <= REDRAW_SHIFT_M && d.yaw_rad.abs() <= REDRAW_TURN_RAD {
+                return;
+            }
+        }
+        self.drop_shadow(index);
+        self.grow_for(grid, pose);
+        let mut cells = vec![0.0; self.sum.len()];
+        let drawn = self.draw(&mut cells, grid, pose, 1.0);
+        let Some(live) = &mut self.live else {
+            return;
+        };
+        if let Some([x0, y0, x1, y1]) = drawn {
+            for y in y0..=y1 {
+                let row = y * self.width;
+                for (i, v) in cells.iter().enumerate().take(row + x1 + 1).skip(row + x0) {
+                    if *v != 0.0 {
+                        live.add(i, *v);
+                    }
+                }
+            }
+        }
+        live.shadows.push(Shadow { index, pose, cells });
+    }
+
+    /// Traces one scan, just inserted into each of the active submaps `into` (index and
+    /// pose), into the live map: beams from `sensor` to each endpoint, in the assembly's
+    /// frame. Does nothing until the live map is first asked for.
+    pub fn trace(&mut self, into: &[(usize, Pose2)], sensor: Point2, endpoints: &[(Point2, bool)]) {
+        if self.live.is_none() || endpoints.is_empty() || into.is_empty() {
+            return;
+        }
+        let (min, max) = beams_box(sensor, endpoints);
+        self.ensure(min, max);
+        let lattice = Lattice {
+            origin: self.origin,
+            resolution_m: self.resolution_m,
+            width: self.width,
+        };
+        let cells = self.sum.len();
+        let Some(live) = &mut self.live else {
+            return;
+        };
+        for (index, pose) in into {
+            if !live.shadows.iter().any(|s| s.index == *index) {
+                // A submap started since the live map was last asked for: it was empty.
+                live.shadows.push(Shadow {
+                    index: *index,
+                    pose: *pose,
+                    cells: vec![0.0; cells],
+                });
+            }
+        }
+        let shape = [live.width, live.tiles_wide];
+        let Live {
+            sum,
+            states,
+            shadows,
+            tile_version,
+            version,
+            ..
+        } = live;
+        let mut targets: Vec<&mut Vec<f32>> = shadows
+            .iter_mut()
+            .filter(|s| into.iter().any(|(i, _)| *i == s.index))
+            .map(|s| &mut s.cells)
+            .collect();
+        // One walk along each beam for every shadow it goes into.
+        trace_beams(&lattice, sensor, endpoints, |i, delta| {
+            let mut change = 0.0;
+            for shadow in targets.iter_mut() {
+                let before = shadow[i];
+                let after = updated_log_odds(before, delta);
+                shadow[i] = after;
+                change += after - before;
+            }
+            if change != 0.0 {
+                sum[i] += change;
+                restate(sum, states, tile_version, shape, *version, i);
+            }
+        });
+    }
+
+    /// The live map: the finished submaps' sum with the `active` submaps (index, grid, pose)
+    /// on top, as their shadows. The first call draws the shadows; later ones redraw only the
+    /// shadows of submaps that moved.
+    pub fn live_states(&mut self, active: &[(usize, &OccupancyGrid, Pose2)]) -> LiveView<'_> {
+        for (_, grid, pose) in active {
+            self.grow_for(grid, *pose);
+        }
+        if self.width == 0 {
+            // Nothing drawn yet: one unknown cell.
+            self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
+        }
+        if self.live.is_none() {
+            self.live = Some(Live::new(self.sum.clone(), self.width, self.height));
+        }
+        let stale: Vec<usize> = self
+            .live
+            .iter()
+            .flat_map(|l| &l.shadows)
+            .map(|s| s.index)
+            .filter(|i| !active.iter().any(|(a, _, _)| a == i))
+            .collect();
+        for index in stale {
+            self.drop_shadow(index);
+        }
+        for (index, grid, pose) in active {
+            self.track(*index, grid, *pose);
+        }
+        let geometry = self.geometry();
+        let live = self.live.as_mut().expect("made above");
+        let version = live.version;
+        live.version += 1;
+        LiveView {
+            geometry,
+            states: &live.states,
+            version,
+            tiles_wide: live.tiles_wide,
+            tile_version: &live.tile_version,
+        }
     }
 
     /// The assembled log-odds: the finished submaps' sum with the `active` submaps (still
@@ -301,6 +611,107 @@ mod tests {
         w.sort_by_key(|(x, y, _)| (*y, *x));
         assert!(w.len() > 1000, "the rooms were drawn: {}", w.len());
         assert_eq!(g, w);
+    }
+
+    /// 360 beams from `sensor` to the walls of a square room 2 m out.
+    fn room_beams(sensor: Point2) -> Vec<(Point2, bool)> {
+        (0..360)
+            .map(|k| {
+                let a = (k as f64).to_radians();
+                let r = 2.0 / a.cos().abs().max(a.sin().abs());
+                (
+                    Point2::new(sensor.x_m + r * a.cos(), sensor.y_m + r * a.sin()),
+                    true,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_live_map_follows_traced_scans_and_finished_submaps_exactly() {
+        // A submap at the assembly's own frame and lattice: its traced shadow must equal
+        // drawing the submap itself, cell for cell (beams end off cell edges, where the two
+        // grids' different corners could round a coordinate either way).
+        let mut asm = Assembly::new(0.05);
+        let mut sub = OccupancyGrid::new(0.05);
+        let first = room_beams(Point2::new(0.0123, 0.0271));
+        sub.insert(Point2::new(0.0123, 0.0271), &first);
+        let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+        let v0 = view.version;
+        let tiles = |g: &GridGeometry| {
+            (
+                g.width.div_ceil(LIVE_TILE_CELLS),
+                g.height.div_ceil(LIVE_TILE_CELLS),
+            )
+        };
+        let (tw, th) = tiles(&view.geometry);
+        // A scan from 3 m further east, into the submap and traced into the live map.
+        let sensor = Point2::new(3.0123, 0.0271);
+        let second = room_beams(sensor);
+        sub.insert(sensor, &second);
+        asm.trace(&[(0, Pose2::IDENTITY)], sensor, &second);
+        let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+        let live =
+            Grid::from_cells(view.geometry, view.states.to_vec()).expect("one state per cell");
+        let geometry = view.geometry;
+        let grew = (tw, th) != tiles(&geometry);
+        let changed: Vec<(usize, usize)> = (0..geometry.height.div_ceil(LIVE_TILE_CELLS))
+            .flat_map(|ty| (0..geometry.width.div_ceil(LIVE_TILE_CELLS)).map(move |tx| (tx, ty)))
+            .filter(|(tx, ty)| view.changed_since(*tx, *ty, v0))
+            .collect();
+        let want = fresh(&[(&sub, Pose2::IDENTITY)]);
+        let on = |g: &Grid<CellState>, p: Point2| {
+            g.geometry()
+                .world_to_cell(p)
+                .map(|c| g.cells()[c.y * g.geometry().width + c.x])
+        };
+        let mut compared = 0;
+        for (cell, s) in want.iter() {
+            let p = want.geometry().cell_center(cell);
+            assert_eq!(on(&live, p).unwrap_or(CellState::Unknown), *s, "at {p:?}");
+            compared += usize::from(*s != CellState::Unknown);
+        }
+        assert!(compared > 3000, "{compared} known cells compared");
+        // Every cell that changed lies in a tile said to have changed, and the tiles west
+        // of the first room, which the second scan never reached, did not.
+        if !grew {
+            let first_only = fresh(&[(
+                &{
+                    let mut g = OccupancyGrid::new(0.05);
+                    g.insert(Point2::new(0.0123, 0.0271), &first);
+                    g
+                },
+                Pose2::IDENTITY,
+            )]);
+            for (cell, s) in want.iter() {
+                let p = want.geometry().cell_center(cell);
+                if on(&first_only, p).unwrap_or(CellState::Unknown) != *s {
+                    let c = geometry.world_to_cell(p).expect("inside");
+                    assert!(changed.contains(&(c.x / LIVE_TILE_CELLS, c.y / LIVE_TILE_CELLS)));
+                }
+            }
+            let west = geometry
+                .world_to_cell(Point2::new(-2.5, 0.0))
+                .expect("inside");
+            assert!(!changed.contains(&(west.x / LIVE_TILE_CELLS, west.y / LIVE_TILE_CELLS)));
+        }
+        // Finished and moved: the exact drawing at the new pose replaces the shadow.
+        let moved = Pose2::new(0.7, -0.3, 0.4);
+        asm.place(0, &sub, moved);
+        let view = asm.live_states(&[]);
+        let live =
+            Grid::from_cells(view.geometry, view.states.to_vec()).expect("one state per cell");
+        let want = fresh(&[(&sub, moved)]);
+        for (cell, s) in want.iter() {
+            let p = want.geometry().cell_center(cell);
+            assert_eq!(on(&live, p).unwrap_or(CellState::Unknown), *s, "at {p:?}");
+        }
+        assert!(
+            live.iter()
+                .filter(|(_, s)| **s != CellState::Unknown)
+                .count()
+                > 3000
+        );
     }
 
     #[test]

@@ -223,12 +223,6 @@ pub struct Mapper {
     pub heading_holds: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
-    /// Counts changes that can change the map: keyframes (inserted into submaps, which may
-    /// trim older ones or optimise the graph) and optimisations.
-    revision: u64,
-    /// [`Mapper::map_states`] at a revision: a rover parked, or asked for its map twice
-    /// between keyframes, gets it again without redrawing.
-    states_cache: Option<(u64, realms_core::Grid<crate::occupancy::CellState>)>,
 }
 
 impl Mapper {
@@ -252,8 +246,6 @@ impl Mapper {
             closures: 0,
             heading_holds: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
-            revision: 0,
-            states_cache: None,
         }
     }
 
@@ -497,7 +489,6 @@ impl Mapper {
     }
 
     fn add_keyframe(&mut self, points: Vec<Point2>) {
-        self.revision += 1;
         let node = self.graph.nodes.len();
         self.graph.nodes.push(self.pose);
         self.keyframe_points.push(points);
@@ -531,13 +522,21 @@ impl Mapper {
         let active: Vec<usize> = (0..self.submaps.len())
             .filter(|i| !self.submaps[*i].finished)
             .collect();
+        let mut into = Vec::with_capacity(active.len());
         for s in active {
             self.insert(s, node);
+            into.push((s, self.graph.nodes[self.submaps[s].origin_node]));
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
                 self.trim_submaps(s);
             }
         }
+        // The same beams in the assembly's frame, for the live map.
+        let beams: Vec<(Point2, bool)> = self.keyframe_points[node]
+            .iter()
+            .map(|p| (self.pose.transform_point(*p), true))
+            .collect();
+        self.assembly.trace(&into, self.pose.position(), &beams);
         // Closures are searched every few keyframes and the graph re-optimised in batches:
         // both cost far more than tracking.
         if node.is_multiple_of(LOOP_EVERY_KEYFRAMES) && self.close_loops(node) {
@@ -689,21 +688,24 @@ impl Mapper {
         self.assembly.render(&active)
     }
 
-    /// The state of every cell of [`render_map`](Self::render_map), more cheaply.
+    /// The state of every cell of the map, kept live between calls (see [`Assembly`]): the
+    /// active submaps as traced scan by scan, so a cell may differ from
+    /// [`render_map`](Self::render_map)'s where a beam crosses it at a corner.
     pub fn map_states(&mut self) -> realms_core::Grid<crate::occupancy::CellState> {
-        if let Some((revision, states)) = &self.states_cache
-            && *revision == self.revision
-        {
-            return states.clone();
-        }
+        let view = self.live_map();
+        realms_core::Grid::from_cells(view.geometry, view.states.to_vec())
+            .expect("one state per cell")
+    }
+
+    /// [`map_states`](Self::map_states) without copying, with where it changed since an
+    /// earlier view.
+    pub fn live_map(&mut self) -> crate::assembly::LiveView<'_> {
         let active = self.sync_assembly();
         let active: Vec<_> = active
             .into_iter()
-            .map(|(s, pose)| (self.submaps[s].map.finest(), pose))
+            .map(|(s, pose)| (s, self.submaps[s].map.finest(), pose))
             .collect();
-        let states = self.assembly.states(&active);
-        self.states_cache = Some((self.revision, states.clone()));
-        states
+        self.assembly.live_states(&active)
     }
 
     /// The pose of every submap's origin now, by submap index (trimmed ones included: their
@@ -800,7 +802,6 @@ impl Mapper {
     /// Optimises the whole graph once more (at the end of a log).
     pub fn finish(&mut self) {
         self.graph.optimize(10);
-        self.revision += 1;
     }
 }
 

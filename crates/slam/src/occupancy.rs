@@ -155,7 +155,7 @@ impl OccupancyGrid {
     }
 
     fn update(&mut self, i: usize, delta: f32) {
-        let l = (self.log_odds[i] + delta).clamp(-CLAMP, CLAMP);
+        let l = updated_log_odds(self.log_odds[i], delta);
         self.log_odds[i] = l;
         self.prob[i] = 1.0 - 1.0 / (1.0 + l.exp());
     }
@@ -166,44 +166,17 @@ impl OccupancyGrid {
         if endpoints.is_empty() {
             return;
         }
-        let (mut min, mut max) = (sensor, sensor);
-        for (p, _) in endpoints {
-            min = Point2::new(min.x_m.min(p.x_m), min.y_m.min(p.y_m));
-            max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
-        }
+        let (min, max) = beams_box(sensor, endpoints);
         self.ensure(min, max);
         self.touch(min, max);
-        let r = self.resolution_m;
-        let origin = self.origin;
-        let to_cell = |p: Point2| {
-            (
-                ((p.x_m - origin.x_m) / r).floor() as i64,
-                ((p.y_m - origin.y_m) / r).floor() as i64,
-            )
+        let lattice = Lattice {
+            origin: self.origin,
+            resolution_m: self.resolution_m,
+            width: self.width,
         };
-        let (sx, sy) = to_cell(sensor);
-        let w = self.width as i64;
-        for (p, hit) in endpoints {
-            let (ex, ey) = to_cell(*p);
-            // Bresenham from the sensor cell to the endpoint cell, excluding the endpoint.
-            let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
-            let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
-            let (mut x, mut y, mut err) = (sx, sy, dx + dy);
-            while (x, y) != (ex, ey) {
-                self.update((y * w + x) as usize, MISS);
-                let e2 = 2 * err;
-                if e2 >= dy {
-                    err += dy;
-                    x += stx;
-                }
-                if e2 <= dx {
-                    err += dx;
-                    y += sty;
-                }
-            }
-            let i = (ey * w + ex) as usize;
-            self.update(i, if *hit { HIT } else { MISS });
-        }
+        trace_beams(&lattice, sensor, endpoints, |i, delta| {
+            self.update(i, delta)
+        });
     }
 
     /// The log-odds of the cell holding `p`; 0 (no evidence) outside the grid.
@@ -329,6 +302,69 @@ impl OccupancyGrid {
             .map(|l| CellState::from_log_odds(*l))
             .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
+    }
+}
+
+/// A cell's log-odds `l` after evidence `delta`, clamped.
+pub(crate) fn updated_log_odds(l: f32, delta: f32) -> f32 {
+    (l + delta).clamp(-CLAMP, CLAMP)
+}
+
+/// The box holding `sensor` and every endpoint.
+pub(crate) fn beams_box(sensor: Point2, endpoints: &[(Point2, bool)]) -> (Point2, Point2) {
+    let (mut min, mut max) = (sensor, sensor);
+    for (p, _) in endpoints {
+        min = Point2::new(min.x_m.min(p.x_m), min.y_m.min(p.y_m));
+        max = Point2::new(max.x_m.max(p.x_m), max.y_m.max(p.y_m));
+    }
+    (min, max)
+}
+
+/// Where a grid's cells lie: its corner, cell edge and row length.
+pub(crate) struct Lattice {
+    pub origin: Point2,
+    pub resolution_m: f64,
+    pub width: usize,
+}
+
+/// Traces beams from `sensor` to each endpoint over the cells of `lattice` (which must hold
+/// them all), calling `update(cell index, log-odds evidence)` for each cell a beam passes
+/// through (a miss) and for its end (a hit, or a miss for a clipped max-range reading).
+pub(crate) fn trace_beams(
+    lattice: &Lattice,
+    sensor: Point2,
+    endpoints: &[(Point2, bool)],
+    mut update: impl FnMut(usize, f32),
+) {
+    let r = lattice.resolution_m;
+    let origin = lattice.origin;
+    let to_cell = |p: Point2| {
+        (
+            ((p.x_m - origin.x_m) / r).floor() as i64,
+            ((p.y_m - origin.y_m) / r).floor() as i64,
+        )
+    };
+    let (sx, sy) = to_cell(sensor);
+    let w = lattice.width as i64;
+    for (p, hit) in endpoints {
+        let (ex, ey) = to_cell(*p);
+        // Bresenham from the sensor cell to the endpoint cell, excluding the endpoint.
+        let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
+        let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
+        let (mut x, mut y, mut err) = (sx, sy, dx + dy);
+        while (x, y) != (ex, ey) {
+            update((y * w + x) as usize, MISS);
+            let e2 = 2 * err;
+            if e2 >= dy {
+                err += dy;
+                x += stx;
+            }
+            if e2 <= dx {
+                err += dx;
+                y += sty;
+            }
+        }
+        update((ey * w + ex) as usize, if *hit { HIT } else { MISS });
     }
 }
 
