@@ -47,10 +47,11 @@ pub struct Assembly {
 /// Cells on a side of the square tiles the live map counts its changes in.
 pub const LIVE_TILE_CELLS: usize = 32;
 
-/// The finished submaps' sum with the active submaps' shadows added, and every cell's state.
+/// The active submaps' shadows and their sum, and every cell's state: that of the finished
+/// submaps' sum with the shadows' added.
 #[derive(Clone, Debug)]
 struct Live {
-    sum: Vec<f32>,
+    shadow_sum: Vec<f32>,
     states: Vec<CellState>,
     shadows: Vec<Shadow>,
     width: usize,
@@ -101,11 +102,15 @@ struct Shadow {
 type CellBox = [usize; 4];
 
 impl Live {
-    fn new(sum: Vec<f32>, width: usize, height: usize) -> Self {
+    /// No shadows over the finished submaps' sum `finished` (`width` x `height` cells).
+    fn new(finished: &[f32], width: usize, height: usize) -> Self {
         let tiles_wide = width.div_ceil(LIVE_TILE_CELLS);
         Live {
-            states: sum.iter().map(|&l| CellState::from_log_odds(l)).collect(),
-            sum,
+            states: finished
+                .iter()
+                .map(|&l| CellState::from_log_odds(l))
+                .collect(),
+            shadow_sum: vec![0.0; finished.len()],
             shadows: Vec::new(),
             width,
             tiles_wide,
@@ -114,16 +119,17 @@ impl Live {
         }
     }
 
-    /// Adds `delta` to cell `i`'s evidence and brings its state up to date.
-    fn add(&mut self, i: usize, delta: f32) {
-        self.sum[i] += delta;
-        self.restate(i);
+    /// Adds `delta` to cell `i`'s shadow evidence and brings its state up to date.
+    fn add(&mut self, finished: &[f32], i: usize, delta: f32) {
+        self.shadow_sum[i] += delta;
+        self.restate(finished, i);
     }
 
-    /// Brings cell `i`'s state up to date with its evidence, noting its tile if it changed.
-    fn restate(&mut self, i: usize) {
+    /// Brings cell `i`'s state up to date with its evidence (`finished`: the finished
+    /// submaps' sum), noting its tile if it changed.
+    fn restate(&mut self, finished: &[f32], i: usize) {
         restate(
-            &self.sum,
+            [finished, &self.shadow_sum],
             &mut self.states,
             &mut self.tile_version,
             [self.width, self.tiles_wide],
@@ -133,16 +139,17 @@ impl Live {
     }
 }
 
-/// [`Live::restate`] on borrowed parts (`shape`: cells and tiles per row).
+/// [`Live::restate`] on borrowed parts (`sums`: the finished submaps' and the shadows';
+/// `shape`: cells and tiles per row).
 fn restate(
-    sum: &[f32],
+    sums: [&[f32]; 2],
     states: &mut [CellState],
     tile_version: &mut [u64],
     shape: [usize; 2],
     version: u64,
     i: usize,
 ) {
-    let state = CellState::from_log_odds(sum[i]);
+    let state = CellState::from_log_odds(sums[0][i] + sums[1][i]);
     if state != states[i] {
         states[i] = state;
         let [width, tiles_wide] = shape;
@@ -201,23 +208,16 @@ impl Assembly {
         };
         self.sum = regrow(&self.sum, w, h, g, 0.0);
         if let Some(live) = &mut self.live {
-            let shadows = std::mem::take(&mut live.shadows);
-            let version = live.version;
+            let (w2, h2) = (w + g[0] + g[2], h + g[1] + g[3]);
+            live.shadow_sum = regrow(&live.shadow_sum, w, h, g, 0.0);
+            live.states = regrow(&live.states, w, h, g, CellState::Unknown);
+            for shadow in &mut live.shadows {
+                shadow.cells = regrow(&shadow.cells, w, h, g, 0.0);
+            }
+            live.width = w2;
+            live.tiles_wide = w2.div_ceil(LIVE_TILE_CELLS);
             // A new geometry: every tile counts as changed.
-            *live = Live::new(
-                regrow(&live.sum, w, h, g, 0.0),
-                self.width + g[0] + g[2],
-                self.height + g[1] + g[3],
-            );
-            live.version = version;
-            live.tile_version.fill(version);
-            live.shadows = shadows
-                .into_iter()
-                .map(|s| Shadow {
-                    cells: regrow(&s.cells, w, h, g, 0.0),
-                    ..s
-                })
-                .collect();
+            live.tile_version = vec![live.version; live.tiles_wide * h2.div_ceil(LIVE_TILE_CELLS)];
         }
         self.origin = Point2::new(
             self.origin.x_m - g[0] as f64 * r,
@@ -277,21 +277,19 @@ impl Assembly {
         Some([x0, y0, x1, y1])
     }
 
-    /// Adds `sign` times `grid` at `pose` to the sum, and to the live map if there is one.
+    /// Adds `sign` times `grid` at `pose` to the sum (and brings the live map's states up
+    /// to date, if there is one).
     fn add(&mut self, grid: &OccupancyGrid, pose: Pose2, sign: f32) {
         let mut sum = std::mem::take(&mut self.sum);
-        self.draw(&mut sum, grid, pose, sign);
+        let drawn = self.draw(&mut sum, grid, pose, sign);
         self.sum = sum;
-        if let Some(mut live) = self.live.take() {
-            if let Some([x0, y0, x1, y1]) = self.draw(&mut live.sum, grid, pose, sign) {
-                for y in y0..=y1 {
-                    let row = y * self.width;
-                    for i in row + x0..=row + x1 {
-                        live.restate(i);
-                    }
+        if let (Some(live), Some([x0, y0, x1, y1])) = (&mut self.live, drawn) {
+            for y in y0..=y1 {
+                let row = y * self.width;
+                for i in row + x0..=row + x1 {
+                    live.restate(&self.sum, i);
                 }
             }
-            self.live = Some(live);
         }
     }
 
@@ -341,7 +339,7 @@ impl Assembly {
         let shadow = live.shadows.swap_remove(k);
         for (i, v) in shadow.cells.iter().enumerate() {
             if *v != 0.0 {
-                live.add(i, -v);
+                live.add(&self.sum, i, -v);
             }
         }
     }
@@ -369,7 +367,7 @@ impl Assembly {
                 let row = y * self.width;
                 for (i, v) in cells.iter().enumerate().take(row + x1 + 1).skip(row + x0) {
                     if *v != 0.0 {
-                        live.add(i, *v);
+                        live.add(&self.sum, i, *v);
                     }
                 }
             }
@@ -406,8 +404,9 @@ impl Assembly {
             }
         }
         let shape = [live.width, live.tiles_wide];
+        let finished = &self.sum;
         let Live {
-            sum,
+            shadow_sum,
             states,
             shadows,
             tile_version,
@@ -429,8 +428,15 @@ impl Assembly {
                 change += after - before;
             }
             if change != 0.0 {
-                sum[i] += change;
-                restate(sum, states, tile_version, shape, *version, i);
+                shadow_sum[i] += change;
+                restate(
+                    [finished, shadow_sum],
+                    states,
+                    tile_version,
+                    shape,
+                    *version,
+                    i,
+                );
             }
         });
     }
@@ -447,7 +453,7 @@ impl Assembly {
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
         }
         if self.live.is_none() {
-            self.live = Some(Live::new(self.sum.clone(), self.width, self.height));
+            self.live = Some(Live::new(&self.sum, self.width, self.height));
         }
         let stale: Vec<usize> = self
             .live
