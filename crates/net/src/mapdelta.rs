@@ -95,22 +95,34 @@ fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
 fn runs(before: Option<&Grid<i8>>, now: &Grid<i8>) -> Vec<Run> {
     let mut out: Vec<Run> = Vec::new();
     let mut gap = 0u32;
-    for (i, &v) in now.cells().iter().enumerate() {
-        let changed = before.is_none_or(|b| b.cells()[i] != v);
-        if !changed {
-            gap += 1;
-            continue;
+    let cells = now.cells();
+    let mut push = |i: usize, v: i8, gap: &mut u32| {
+        if before.is_some_and(|b| b.cells()[i] == v) {
+            *gap += 1;
+            return;
         }
         match out.last_mut() {
-            Some(run) if gap == 0 && run.value == v => run.len += 1,
+            Some(run) if *gap == 0 && run.value == v => run.len += 1,
             _ => {
                 out.push(Run {
-                    skip: gap,
+                    skip: *gap,
                     len: 1,
                     value: v,
                 });
-                gap = 0;
+                *gap = 0;
             }
+        }
+    };
+    // Most of a map is as it was: whole chunks found equal at once are skipped.
+    const CHUNK: usize = 64;
+    for start in (0..cells.len()).step_by(CHUNK) {
+        let end = (start + CHUNK).min(cells.len());
+        if before.is_some_and(|b| b.cells()[start..end] == cells[start..end]) {
+            gap += (end - start) as u32;
+            continue;
+        }
+        for (i, &v) in cells.iter().enumerate().take(end).skip(start) {
+            push(i, v, &mut gap);
         }
     }
     out

@@ -10,6 +10,7 @@
 //! - [`navigation::Navigator`]: exploration, planning, path following and recovery.
 //! - [`guard::Guard`]: the reactive check of the rover's own sensors.
 //! - [`lander_merge`]: the lander's job of merging every rover's map into one.
+//! - [`layers`]: the rover's published and planner maps, redrawn only where they changed.
 //! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
 //!   from its updates, its pose and its status.
 
