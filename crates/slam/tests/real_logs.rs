@@ -162,6 +162,42 @@ fn mapper_gives_every_scan_a_pose_and_beats_odometry_on_a_segment() {
 }
 
 #[test]
+fn the_live_map_agrees_with_the_map_drawn_afresh_on_a_real_log() {
+    // The map a rover publishes is kept live (active submaps traced scan by scan, see
+    // `assembly`) rather than drawn from its submaps each time. Asked for every 25 scans, as
+    // a rover asks every few seconds, through 3000 scans of the Intel lab with its loops, it
+    // must still say what drawing every submap afresh says.
+    use realms_slam::mapper::{Mapper, MapperConfig};
+    use realms_slam::occupancy::CellState;
+    let l = log("intel");
+    let mut mapper = Mapper::new(MapperConfig::default());
+    for (k, s) in l.scans[..3000].iter().enumerate() {
+        mapper.add_scan(s);
+        if k % 25 == 0 {
+            mapper.map_states();
+        }
+    }
+    let live = mapper.map_states();
+    let fresh = mapper.render_map().states();
+    assert_eq!(live.geometry(), fresh.geometry());
+    let (mut known, mut same) = (0usize, 0usize);
+    for (a, b) in live.cells().iter().zip(fresh.cells()) {
+        if *a != CellState::Unknown || *b != CellState::Unknown {
+            known += 1;
+            same += usize::from(a == b);
+        }
+    }
+    let agreement = same as f64 / known as f64;
+    eprintln!("live map: {agreement:.4} of {known} known cells agree");
+    assert!(known > 100_000, "{known} cells known");
+    assert!(
+        agreement > 0.98,
+        "{:.4} of {known} known cells agree",
+        agreement
+    );
+}
+
+#[test]
 fn verified_loop_closures_keep_the_aces_building_consistent() {
     // The whole ACES log: a large building whose outer loop drifts by metres before it
     // closes. Graph mapping (Kümmerle et al. 2009) reaches 0.044 m here; scan matching alone
