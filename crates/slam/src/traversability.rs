@@ -95,6 +95,12 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     let baseline = 2i64;
     let slope = cfg.max_slope_rad.tan();
     let reach = (FLOOR_REACH_M / r).ceil() as i64;
+    // Every neighbour's offset and distance, cells, worked out once a frame.
+    let neighbours: Vec<(i64, i64, f64)> = (-reach..=reach)
+        .flat_map(|dy| {
+            (-reach..=reach).map(move |dx| (dx, dy, ((dx * dx + dy * dy) as f64).sqrt()))
+        })
+        .collect();
     let mut out = Vec::new();
     for iy in 0..side as i64 {
         for ix in 0..side as i64 {
@@ -105,29 +111,24 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             // The local floor: the lowest point within `reach` cells.
             let mut floor = cols[i].min_z;
             let mut steep = false;
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let (x, y) = (ix + dx, iy + dy);
-                    if x < 0 || y < 0 || x >= side as i64 || y >= side as i64 {
-                        continue;
-                    }
-                    let j = y as usize * side + x as usize;
-                    if !judged(j) {
-                        continue;
-                    }
-                    floor = floor.min(cols[j].min_z);
-                    // Far from the camera the points thin out to a few cells per row, so
-                    // the slope is taken to any judged neighbour at least two cells away.
-                    // Only the upper cell of a steep pair is marked: the face of a rock or
-                    // a crater's wall is the hazard, not the flat floor at its foot (which
-                    // would otherwise grow every rock and wall by a band the width of the
-                    // baseline).
-                    let dist = ((dx * dx + dy * dy) as f64).sqrt();
-                    if dist >= baseline as f64
-                        && mean(i) - mean(j) > slope * dist * r + SLOPE_NOISE_M
-                    {
-                        steep = true;
-                    }
+            let here = mean(i);
+            for &(dx, dy, dist) in &neighbours {
+                let (x, y) = (ix + dx, iy + dy);
+                if x < 0 || y < 0 || x >= side as i64 || y >= side as i64 {
+                    continue;
+                }
+                let j = y as usize * side + x as usize;
+                if !judged(j) {
+                    continue;
+                }
+                floor = floor.min(cols[j].min_z);
+                // Far from the camera the points thin out to a few cells per row, so the
+                // slope is taken to any judged neighbour at least two cells away. Only the
+                // upper cell of a steep pair is marked: the face of a rock or a crater's wall
+                // is the hazard, not the flat floor at its foot (which would otherwise grow
+                // every rock and wall by a band the width of the baseline).
+                if dist >= baseline as f64 && here - mean(j) > slope * dist * r + SLOPE_NOISE_M {
+                    steep = true;
                 }
             }
             let step = cols[i].max_z - floor > cfg.max_step_m;
