@@ -71,6 +71,10 @@ pub struct SlamArgs {
     /// Gauss-Newton iterations per resolution.
     #[arg(long, default_value_t = 6)]
     pub iterations: usize,
+    /// Fill in the surface between neighbouring beams' endpoints up to this far apart before
+    /// matching and mapping, metres (0: use the endpoints as they are).
+    #[arg(long, default_value_t = 0.0)]
+    pub fill_gap_m: f64,
     /// Scan matching against one global map only: no submaps, pose graph or loop closures.
     #[arg(long)]
     pub no_loop_closure: bool,

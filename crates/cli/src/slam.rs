@@ -33,6 +33,12 @@ pub fn run(args: SlamArgs) -> Result<()> {
         ..FrontendConfig::default()
     };
     cfg.matcher.iterations = args.iterations.clamp(1, 100);
+    if args.fill_gap_m > 0.0 {
+        cfg.densify = Some(realms_slam::frontend::Densify {
+            max_gap_m: args.fill_gap_m,
+            spacing_m: args.resolution_m,
+        });
+    }
     let mut frontend = Frontend::new(cfg);
     let mcfg = realms_slam::mapper::MapperConfig {
         frontend: cfg,

@@ -206,6 +206,9 @@ pub enum NavActivity {
     Recovering,
     /// Exploration is over and the rover is home.
     Done,
+    /// Lost, and no view it turned through matched its map: stopped, waiting for the
+    /// operator (its map is kept as it was when it got lost).
+    Lost,
 }
 
 /// A rover's navigation state and target (`nav/status`; no ROS counterpart). Sent when

@@ -482,12 +482,13 @@ impl Mission {
     }
 
     /// Whether every rover has finished exploring (and is home, or gave up getting there
-    /// and stays put) or has no power: the mission has nothing left to do.
+    /// and stays put), is lost past finding itself, or has no power: the mission has nothing
+    /// left to do without the operator.
     pub fn exploration_over(&self) -> bool {
         self.world
             .rovers()
             .zip(&self.activity)
-            .all(|(body, a)| *a == NavActivity::Done || !body.powered)
+            .all(|(body, a)| matches!(a, NavActivity::Done | NavActivity::Lost) || !body.powered)
     }
 
     /// What each rover's SLAM reported, in rover order.

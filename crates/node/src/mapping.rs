@@ -59,6 +59,13 @@ pub struct MappingConfig {
 pub fn rover_mapper_config() -> MapperConfig {
     let mut cfg = MapperConfig::default();
     cfg.frontend.max_range_m = 12.0;
+    // One degree between beams leaves gaps wider than a cell beyond 3 m; filled in, the
+    // heading of a turn in place holds to a few hundredths of a degree, not a few tenths
+    // (BENCHMARKS.md, "Filling in the surfaces").
+    cfg.frontend.densify = Some(realms_slam::frontend::Densify {
+        max_gap_m: 0.3,
+        spacing_m: 0.05,
+    });
     cfg.keyframe_translation_m = 0.3;
     cfg.keyframe_rotation_rad = 10f64.to_radians();
     // Hours of driving in one hall: keep one submap per few metres of ground, not per few

@@ -30,6 +30,10 @@ const EXPLORED_FACTOR: usize = 5;
 const NAV_MAP_FACTOR: usize = 2;
 /// Yaw rate while lost: turning in place shows the relocaliser new views.
 const LOST_TURN_RAD_S: f64 = 0.3;
+/// A lost rover turns this long (about four turns) before it gives up and stops: the views
+/// from where it stands are all it can show the relocaliser, and driving blind could end
+/// in a crater.
+const LOST_SEARCH: Duration = Duration::from_secs(90);
 
 /// Everything a rover node needs to know.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +66,8 @@ pub struct RoverNode {
     /// The navigator's latest event, for the status.
     reason: String,
     next_explored: Time,
+    /// Since when it has been lost, if it is.
+    lost_since: Option<Time>,
     outbox: Vec<Outgoing>,
     cost_clock: CostClock,
     /// Wall time spent in SLAM, to report what it costs (see [`CostClock`]).
@@ -84,6 +90,7 @@ impl RoverNode {
             last_status: None,
             reason: String::new(),
             next_explored: Time::ZERO,
+            lost_since: None,
             outbox: Vec::new(),
             cost_clock: cfg.cost_clock,
             slam_wall: std::time::Duration::ZERO,
@@ -133,7 +140,9 @@ impl RoverNode {
 
     /// Publishes `nav/status` when it changed or is due again.
     fn publish_status(&mut self, now: Time) {
+        let gave_up = self.gave_up(now);
         let activity = match self.navigator.activity() {
+            _ if gave_up => NavActivity::Lost,
             Activity::Idle => NavActivity::Idle,
             Activity::Driving(GoalKind::Frontier) => NavActivity::Exploring,
             Activity::Driving(GoalKind::Operator) => NavActivity::OperatorGoal,
@@ -143,9 +152,20 @@ impl RoverNode {
         };
         let target = self.navigator.goal().map(|(p, _)| p);
         let events = self.navigator.take_events();
-        let news = !events.is_empty();
+        let mut news = !events.is_empty();
         if let Some(e) = events.last() {
             self.reason = e.what.clone();
+        }
+        if gave_up
+            && self
+                .last_status
+                .is_none_or(|(a, _, _)| a != NavActivity::Lost)
+        {
+            self.reason = format!(
+                "lost for {:.0} s and no view matched the map: stopped, waiting for the operator",
+                LOST_SEARCH.as_secs_f64()
+            );
+            news = true;
         }
         let due = match self.last_status {
             None => true,
@@ -188,6 +208,12 @@ impl RoverNode {
         });
     }
 
+    /// Whether it has been lost so long that it stopped looking.
+    fn gave_up(&self, now: Time) -> bool {
+        self.lost_since
+            .is_some_and(|since| now - since >= LOST_SEARCH)
+    }
+
     /// Decides the velocity after a scan.
     fn drive(&mut self, now: Time, scan: &realms_core::msgs::LaserScan) -> (f64, f64) {
         if self.mapping.calibrating(now) {
@@ -195,8 +221,14 @@ impl RoverNode {
         }
         let guarded = self.guard.on_scan(now, scan);
         if self.mapping.state() == LocalisationState::Lost {
-            return (0.0, LOST_TURN_RAD_S);
+            let since = *self.lost_since.get_or_insert(now);
+            return if now - since < LOST_SEARCH {
+                (0.0, LOST_TURN_RAD_S)
+            } else {
+                (0.0, 0.0)
+            };
         }
+        self.lost_since = None;
         let pose = self.mapping.pose();
         if self.navigator.wants_map(now) {
             let mapping = &mut self.mapping;
