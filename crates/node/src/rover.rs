@@ -339,3 +339,140 @@ impl Node for RoverNode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mapping::rover_mapper_config;
+    use realms_core::Point2;
+    use realms_core::geometry::Quaternion;
+    use realms_core::msgs::{Imu, LaserScan, Odometry};
+    use realms_slam::traversability::TraversabilityConfig;
+
+    fn node() -> RoverNode {
+        let id = RoverId(1);
+        let depth_rot = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
+        RoverNode::new(
+            id,
+            RoverConfig {
+                mapping: crate::mapping::MappingConfig {
+                    lidar_x_m: 0.0,
+                    lidar_height_m: 0.3,
+                    ground_clearance_m: 0.12,
+                    mapper: rover_mapper_config(),
+                    map_period: Duration::from_secs(60),
+                    delta_period: Duration::from_secs(60),
+                    gyro_calibration: Duration::from_secs(1),
+                    depth_rot,
+                    depth_origin_m: [0.2, 0.0, 0.3],
+                    traversability: TraversabilityConfig::default(),
+                },
+                navigation: NavigationConfig::new(Point2::new(0.0, 0.0)),
+                guard: GuardConfig {
+                    half_length_m: 0.2,
+                    half_width_m: 0.15,
+                    lidar_x_m: 0.0,
+                    lidar_clearance_m: 0.25,
+                    depth_reach_m: 0.6,
+                    depth_rot,
+                    depth_origin_m: [0.2, 0.0, 0.3],
+                    max_step_m: 0.1,
+                    max_drop_m: 0.15,
+                },
+                fleet: vec![id],
+                cost_clock: CostClock::default(),
+            },
+        )
+    }
+
+    /// A scan from the middle of a 6 m x 4 m room (`walls`), or of open ground.
+    fn scan(t: Time, walls: bool) -> LaserScan {
+        let n = 360;
+        let ranges = (0..n)
+            .map(|i| {
+                let a = -std::f64::consts::PI + i as f64 * std::f64::consts::TAU / n as f64;
+                let (s, c) = a.sin_cos();
+                let r = (3.0 / c.abs()).min(2.0 / s.abs());
+                if walls { r as f32 } else { f32::INFINITY }
+            })
+            .collect();
+        let mut s = LaserScan {
+            angle_min_rad: -std::f32::consts::PI,
+            angle_increment_rad: std::f32::consts::TAU / n as f32,
+            range_min_m: 0.15,
+            range_max_m: 12.0,
+            ranges_m: ranges,
+            ..LaserScan::default()
+        };
+        s.header.stamp = t;
+        s
+    }
+
+    /// Feeds the node 0.1 s of standing still ending at `t`, with a scan if `lidar`; returns
+    /// the yaw rate it commanded last and the navigation statuses it sent.
+    fn step(node: &mut RoverNode, t: Time, lidar: Option<bool>) -> (Option<f64>, Vec<NavStatus>) {
+        let id = node.id();
+        let mut odom = Odometry::default();
+        odom.header.stamp = t;
+        odom.pose.pose.orientation = Quaternion::IDENTITY;
+        node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+        let mut imu = Imu::default();
+        imu.header.stamp = t;
+        imu.linear_acceleration.z = 9.81;
+        node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+        if let Some(walls) = lidar {
+            let topic = id.topic("scan");
+            node.on_message(t, &topic, &Message::LaserScan(scan(t, walls)));
+        }
+        let (mut yaw_rate, mut statuses) = (None, Vec::new());
+        for o in node.drain_outbox() {
+            match o.message {
+                Message::CmdVel(c) => yaw_rate = Some(c.twist.angular.z),
+                Message::NavStatus(s) => statuses.push(s),
+                _ => {}
+            }
+        }
+        (yaw_rate, statuses)
+    }
+
+    #[test]
+    fn a_rover_lost_where_nothing_matches_its_map_turns_then_stops_and_says_so() {
+        let mut node = node();
+        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        // Ten seconds mapping the room, then twelve without the lidar: lost.
+        for k in 1..=100 {
+            step(&mut node, at(k), Some(true));
+        }
+        assert_ne!(node.mapping().state(), LocalisationState::Lost);
+        for k in 101..=220 {
+            step(&mut node, at(k), None);
+        }
+        // The lidar is back, but sees open ground: nothing to relocalise against.
+        let mut turned_until = None;
+        let mut lost_status = None;
+        for k in 221..=1500 {
+            let (w, statuses) = step(&mut node, at(k), Some(false));
+            let w = w.expect("a command per scan");
+            assert_eq!(node.mapping().state(), LocalisationState::Lost);
+            if w != 0.0 {
+                turned_until = Some(k);
+            }
+            if lost_status.is_none() {
+                lost_status = statuses
+                    .into_iter()
+                    .find(|s| s.activity == NavActivity::Lost)
+                    .map(|s| (k, s.reason));
+            }
+        }
+        // It turned from the first scan after the gap for LOST_SEARCH (90 s), then stopped,
+        // and said why.
+        let turned_until = turned_until.expect("it turned while lost");
+        assert!(
+            (1120..=1122).contains(&turned_until),
+            "turned until scan {turned_until}"
+        );
+        let (said_at, why) = lost_status.expect("it reported Lost");
+        assert_eq!(said_at, turned_until + 1);
+        assert!(why.contains("waiting for the operator"), "{why}");
+    }
+}
