@@ -68,3 +68,19 @@ pub trait Node {
         None
     }
 }
+
+/// A 360-beam scan stamped `t` with `ranges_m`, beam 0 pointing backwards (as the simulated
+/// lidar's), for tests.
+#[cfg(test)]
+pub(crate) fn test_scan(t: Time, ranges_m: Vec<f32>) -> realms_core::msgs::LaserScan {
+    let mut s = realms_core::msgs::LaserScan {
+        angle_min_rad: -std::f32::consts::PI,
+        angle_increment_rad: std::f32::consts::TAU / ranges_m.len() as f32,
+        range_min_m: 0.15,
+        range_max_m: 12.0,
+        ranges_m,
+        ..realms_core::msgs::LaserScan::default()
+    };
+    s.header.stamp = t;
+    s
+}

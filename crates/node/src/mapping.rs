@@ -582,16 +582,7 @@ mod tests {
         let n = 360;
         let mut ranges = vec![f32::INFINITY; n];
         ranges[n / 2] = range_m;
-        let mut s = LaserScan {
-            angle_min_rad: -std::f32::consts::PI,
-            angle_increment_rad: std::f32::consts::TAU / n as f32,
-            range_min_m: 0.15,
-            range_max_m: 12.0,
-            ranges_m: ranges,
-            ..LaserScan::default()
-        };
-        s.header.stamp = t;
-        s
+        crate::test_scan(t, ranges)
     }
 
     #[test]

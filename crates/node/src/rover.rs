@@ -396,16 +396,7 @@ mod tests {
                 if walls { r as f32 } else { f32::INFINITY }
             })
             .collect();
-        let mut s = LaserScan {
-            angle_min_rad: -std::f32::consts::PI,
-            angle_increment_rad: std::f32::consts::TAU / n as f32,
-            range_min_m: 0.15,
-            range_max_m: 12.0,
-            ranges_m: ranges,
-            ..LaserScan::default()
-        };
-        s.header.stamp = t;
-        s
+        crate::test_scan(t, ranges)
     }
 
     /// Feeds the node 0.1 s of standing still ending at `t`, with a scan if `lidar`; returns

@@ -193,6 +193,11 @@ const MIN_POINTS: usize = 10;
 /// other way, the newer one never sees what the older saw ahead, and dropping the older would
 /// make that ground unknown again (a frontier the rover then drives back to, for ever).
 const TRIM_MIN_COVERED: f64 = 0.95;
+/// While lost, a new relocalisation search once odometry has moved this far since the last,
+/// metres ...
+const RELOCALISE_AFTER_M: f64 = 0.1;
+/// ... or turned this far (5 degrees), radians.
+const RELOCALISE_AFTER_RAD: f64 = 0.087;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
 const RELOCALISE_WINDOW_M: f64 = 3.0;
 /// ... and this far in heading, radians.
@@ -216,11 +221,15 @@ pub struct Mapper {
     health: HealthMonitor,
     transitions: Vec<(f64, Transition)>,
     lost_at: Option<Pose2>,
+    /// The odometry pose of the last relocalisation attempt.
+    last_relocalise_odom: Option<Pose2>,
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
+    /// Relocalisation searches made while lost.
+    pub relocalise_searches: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
 }
@@ -242,9 +251,11 @@ impl Mapper {
             health: HealthMonitor::new(cfg.health),
             transitions: Vec::new(),
             lost_at: None,
+            last_relocalise_odom: None,
             last_information: [[0.0; 3]; 3],
             closures: 0,
             heading_holds: 0,
+            relocalise_searches: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
         }
     }
@@ -292,8 +303,19 @@ impl Mapper {
         };
         if self.health.state() == LocalisationState::Lost {
             self.pose = predicted;
-            self.try_relocalise(&points);
+            // A view seen from (nearly) where the last attempt was made shows the search
+            // nothing new: a rover turning in place is searched every few degrees, and one
+            // standing still not again (a search costs as much as a loop closure's).
+            let new_view = self.last_relocalise_odom.is_none_or(|at| {
+                let d = at.inverse() * odom;
+                d.x_m.hypot(d.y_m) >= RELOCALISE_AFTER_M || d.yaw_rad.abs() >= RELOCALISE_AFTER_RAD
+            });
+            if new_view {
+                self.last_relocalise_odom = Some(odom);
+                self.try_relocalise(&points);
+            }
         } else {
+            self.last_relocalise_odom = None;
             // Track against the older active submap, in its own frame.
             let tracking = self
                 .submaps
@@ -389,6 +411,7 @@ impl Mapper {
         if points.len() < MIN_POINTS {
             return;
         }
+        self.relocalise_searches += 1;
         let sample = subsample(points, LOOP_POINTS);
         let window = SearchWindow {
             linear_m: RELOCALISE_WINDOW_M,
@@ -984,6 +1007,40 @@ mod tests {
         // With the endpoints as they are, 0.66 degrees: the second keyframe's map holds the
         // turn the first match took.
         assert!(filled < 0.1, "mean heading error {filled:.3} deg");
+    }
+
+    #[test]
+    fn a_lost_mapper_searches_again_only_for_a_new_view() {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        let mut mapper = Mapper::new(cfg);
+        let here = Pose2::new(0.3, 0.2, 0.0);
+        for k in 0..5 {
+            mapper.add_points(0.1 * k as f64, here, sparse_hall_scan(here));
+        }
+        // Eleven seconds without a scan: lost. What it sees then is a ring 1 m round it,
+        // which the hall has nowhere.
+        let ring: Vec<Point2> = (0..360)
+            .map(|i| {
+                let a = (i as f64).to_radians();
+                Point2::new(a.cos(), a.sin())
+            })
+            .collect();
+        let mut t = 11.5;
+        for _ in 0..20 {
+            mapper.add_points(t, here, ring.clone());
+            t += 0.1;
+        }
+        assert_eq!(mapper.state(), LocalisationState::Lost);
+        assert_eq!(mapper.relocalise_searches, 1, "standing still");
+        for k in 1..=10 {
+            let turned = Pose2::new(here.x_m, here.y_m, (2.0 * k as f64).to_radians());
+            mapper.add_points(t, turned, ring.clone());
+            t += 0.1;
+        }
+        // 20 degrees in 2-degree steps, a search once 5 degrees from the last: at 6, 12
+        // and 18 degrees.
+        assert_eq!(mapper.relocalise_searches, 1 + 3, "turning");
     }
 
     #[test]
