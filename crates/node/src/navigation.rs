@@ -56,6 +56,12 @@ pub struct NavigationConfig {
     pub home: Point2,
     /// Whether the rover explores by itself (otherwise it waits for operator goals).
     pub autonomous: bool,
+    /// Exploration is over when the map has not grown by `stall_growth_m2` in this long,
+    /// whatever frontiers it still shows: they are ones driving up to does not map (a map
+    /// redrawn after a loop closure, ground only a sensor that cannot see it would show).
+    pub stall_window: Duration,
+    /// ... square metres.
+    pub stall_growth_m2: f64,
 }
 
 impl NavigationConfig {
@@ -77,6 +83,8 @@ impl NavigationConfig {
             check_ahead_m: 2.5,
             home,
             autonomous: true,
+            stall_window: Duration::from_secs(300),
+            stall_growth_m2: 2.0,
         }
     }
 }
@@ -157,6 +165,10 @@ pub struct Navigator {
     home_failures: u32,
     /// When the guard last forced a replan.
     last_forced_replan: Option<Time>,
+    /// Known cells of the map when it last grew by the stall threshold, and when.
+    grown: Option<(usize, Time)>,
+    /// The map stopped growing: no frontier is worth a drive until it grows again.
+    stalled: bool,
     events: Vec<NavEvent>,
 }
 
@@ -192,6 +204,8 @@ impl Navigator {
             done: false,
             home_failures: 0,
             last_forced_replan: None,
+            grown: None,
+            stalled: false,
             events: Vec::new(),
         }
     }
@@ -359,6 +373,7 @@ impl Navigator {
             geo.world_to_cell(p)
                 .is_some_and(|c| field[geo.index(c)].is_finite())
         };
+        self.watch_growth(now, map);
         // Operator goals first.
         if let Some(op) = self.operator_goal
             && self.goal.is_none_or(|g| g.kind != GoalKind::Operator)
@@ -390,10 +405,25 @@ impl Navigator {
                 .filter(|c| !c.taken_by_peer())
                 .copied()
                 .collect();
-            self.choose_frontier(now, &free);
-            if options.is_empty() && !self.done && self.goal.is_none() {
-                self.event(now, "no reachable frontier left: returning home".into());
-                self.start_goal(now, self.cfg.home, GoalKind::Home);
+            if self.stalled {
+                if self.goal.is_some() {
+                    self.goal = None;
+                    self.follower.set_path(Vec::new());
+                }
+                if !self.done {
+                    let minutes = self.cfg.stall_window.as_secs_f64() / 60.0;
+                    self.event(
+                        now,
+                        format!("no new ground mapped in {minutes:.0} min: returning home"),
+                    );
+                    self.start_goal(now, self.cfg.home, GoalKind::Home);
+                }
+            } else {
+                self.choose_frontier(now, &free);
+                if options.is_empty() && !self.done && self.goal.is_none() {
+                    self.event(now, "no reachable frontier left: returning home".into());
+                    self.start_goal(now, self.cfg.home, GoalKind::Home);
+                }
             }
         }
         let Some(goal) = self.goal else {
@@ -448,6 +478,26 @@ impl Navigator {
             }
         }
         self.costmap = Some(costmap);
+    }
+
+    /// Follows how much of `map` is known: the stall clock restarts whenever it has grown by
+    /// [`NavigationConfig::stall_growth_m2`].
+    fn watch_growth(&mut self, now: Time, map: &Grid<i8>) {
+        let known = map.cells().iter().filter(|v| **v >= 0).count();
+        let r = map.geometry().resolution_m;
+        let step = (self.cfg.stall_growth_m2 / (r * r)).ceil() as usize;
+        match self.grown {
+            Some((before, _)) if known < before + step => {}
+            _ => {
+                self.grown = Some((known, now));
+                self.stalled = false;
+            }
+        }
+        if let Some((_, since)) = self.grown
+            && now - since >= self.cfg.stall_window
+        {
+            self.stalled = true;
+        }
     }
 
     fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
@@ -683,6 +733,44 @@ mod tests {
                 .iter()
                 .all(|e| !e.what.contains("Operator")),
         );
+    }
+
+    #[test]
+    fn a_rover_whose_map_stops_growing_ends_exploring_and_goes_home() {
+        let mut nav = navigator();
+        // The east half stays unknown whatever the rover does: its frontier never clears.
+        let map = room(false);
+        let mut pose = Pose2::new(2.0, 5.0, 0.0);
+        let mut went_home = None;
+        for k in 0..4000 {
+            let now = Time::from_secs_f64(k as f64 * 0.1);
+            if nav.wants_map(now) {
+                nav.on_map(now, &map, pose);
+            }
+            nav.steer(now, pose, 0.3, Guarded::default());
+            // The rover drives straight at its goal, 3 cm a step.
+            if let Some((goal, _)) = nav.goal() {
+                let d = goal.distance_m(pose.position());
+                if d > 0.05 {
+                    let s = (0.03 / d).min(1.0);
+                    pose = Pose2::new(
+                        pose.x_m + s * (goal.x_m - pose.x_m),
+                        pose.y_m + s * (goal.y_m - pose.y_m),
+                        0.0,
+                    );
+                }
+            }
+            for e in nav.take_events() {
+                if e.what.starts_with("no new ground") {
+                    went_home.get_or_insert(e.t.as_secs_f64());
+                }
+            }
+        }
+        // Five minutes after the first map, at the next map after that (every 3 s).
+        let t = went_home.expect("it gave exploring up");
+        assert!((300.0..303.0).contains(&t), "at {t} s");
+        // Home by the end, and it stays there.
+        assert_eq!(nav.activity(), Activity::Done);
     }
 
     #[test]
