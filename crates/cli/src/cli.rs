@@ -72,8 +72,9 @@ pub struct SlamArgs {
     #[arg(long, default_value_t = 6)]
     pub iterations: usize,
     /// Fill in the surface between neighbouring beams' endpoints up to this far apart before
-    /// matching and mapping, metres (0: use the endpoints as they are).
-    #[arg(long, default_value_t = 0.0)]
+    /// matching and mapping into the submaps, metres (0: use the endpoints as they are). The
+    /// scan-matching-only frontend does not fill, so it cannot go with `--no-loop-closure`.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "no_loop_closure")]
     pub fill_gap_m: f64,
     /// Scan matching against one global map only: no submaps, pose graph or loop closures.
     #[arg(long)]

@@ -61,7 +61,7 @@ pub fn rover_mapper_config() -> MapperConfig {
     cfg.frontend.max_range_m = 12.0;
     // One degree between beams leaves gaps wider than a cell beyond 3 m; filled in, the
     // heading of a turn in place holds to a few hundredths of a degree, not a few tenths
-    // (BENCHMARKS.md, "Filling in the surfaces").
+    // (BENCHMARKS.md, "Filling in the surface between beams").
     cfg.frontend.densify = Some(realms_slam::frontend::Densify {
         max_gap_m: 0.3,
         spacing_m: 0.05,

@@ -167,8 +167,6 @@ pub struct Navigator {
     last_forced_replan: Option<Time>,
     /// Known cells of the map when it last grew by the stall threshold, and when.
     grown: Option<(usize, Time)>,
-    /// The map stopped growing: no frontier is worth a drive until it grows again.
-    stalled: bool,
     events: Vec<NavEvent>,
 }
 
@@ -205,7 +203,6 @@ impl Navigator {
             home_failures: 0,
             last_forced_replan: None,
             grown: None,
-            stalled: false,
             events: Vec::new(),
         }
     }
@@ -373,7 +370,7 @@ impl Navigator {
             geo.world_to_cell(p)
                 .is_some_and(|c| field[geo.index(c)].is_finite())
         };
-        self.watch_growth(now, map);
+        let stalled = self.stalled(now, map);
         // Operator goals first.
         if let Some(op) = self.operator_goal
             && self.goal.is_none_or(|g| g.kind != GoalKind::Operator)
@@ -405,7 +402,7 @@ impl Navigator {
                 .filter(|c| !c.taken_by_peer())
                 .copied()
                 .collect();
-            if self.stalled {
+            if stalled {
                 if self.goal.is_some() {
                     self.goal = None;
                     self.follower.set_path(Vec::new());
@@ -480,24 +477,20 @@ impl Navigator {
         self.costmap = Some(costmap);
     }
 
-    /// Follows how much of `map` is known: the stall clock restarts whenever it has grown by
-    /// [`NavigationConfig::stall_growth_m2`].
-    fn watch_growth(&mut self, now: Time, map: &Grid<i8>) {
+    /// Whether `map` has not grown by [`NavigationConfig::stall_growth_m2`] for the stall
+    /// window: no frontier is then worth a drive until it grows again.
+    fn stalled(&mut self, now: Time, map: &Grid<i8>) -> bool {
         let known = map.cells().iter().filter(|v| **v >= 0).count();
         let r = map.geometry().resolution_m;
         let step = (self.cfg.stall_growth_m2 / (r * r)).ceil() as usize;
-        match self.grown {
-            Some((before, _)) if known < before + step => {}
+        let since = match self.grown {
+            Some((before, since)) if known < before + step => since,
             _ => {
                 self.grown = Some((known, now));
-                self.stalled = false;
+                now
             }
-        }
-        if let Some((_, since)) = self.grown
-            && now - since >= self.cfg.stall_window
-        {
-            self.stalled = true;
-        }
+        };
+        now - since >= self.cfg.stall_window
     }
 
     fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
