@@ -11,6 +11,7 @@
 //! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
 //! - [`health`]: notices unreliable odometry and lost tracking, from the scans.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
+//! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 //! - [`assembly`]: the whole map from the submaps, kept current incrementally.
@@ -26,5 +27,6 @@ pub mod matcher;
 pub mod numeric_lines;
 pub mod occupancy;
 pub mod posegraph;
+pub mod slip;
 pub mod trajectory;
 pub mod traversability;

@@ -23,6 +23,7 @@ use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan,
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
 use crate::occupancy::CellState;
 use crate::posegraph::{Edge, PoseGraph};
+use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Cell, Point2, Pose2};
@@ -91,6 +92,9 @@ pub struct MapperConfig {
     /// two places it joins (`None`: any correction the search window allows; right for
     /// wheel-only odometry, whose drift is too wild to bound this way).
     pub closure_drift: Option<ClosureDrift>,
+    /// Scale the wheels' translation by the share the scan matches found real (`None`: take
+    /// the wheels at their word, as for a recorded log's calibrated odometry).
+    pub slip_calibration: Option<SlipCalibration>,
 }
 
 /// How far a loop closure may move a keyframe: `base_m + per_m * d`, where `d` is the length
@@ -145,6 +149,7 @@ impl Default for MapperConfig {
             motion_filter: None,
             max_heading_step_rad: None,
             closure_drift: None,
+            slip_calibration: None,
         }
     }
 }
@@ -232,6 +237,8 @@ pub struct Mapper {
     pub relocalise_searches: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
+    /// How far the wheels over-report, learnt from the matches.
+    wheel_scale: Option<WheelScale>,
 }
 
 impl Mapper {
@@ -257,6 +264,7 @@ impl Mapper {
             heading_holds: 0,
             relocalise_searches: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m),
+            wheel_scale: cfg.slip_calibration.map(WheelScale::new),
         }
     }
 
@@ -289,13 +297,15 @@ impl Mapper {
         let odom_delta = self
             .last_odom
             .map_or(Pose2::IDENTITY, |prev| prev.inverse() * odom);
-        let predicted = match self.last_odom {
-            Some(_) => self.pose * odom_delta,
-            None => odom,
+        let predicted = match (self.last_odom, &self.wheel_scale) {
+            (Some(_), Some(w)) => self.pose * w.apply(odom_delta),
+            (Some(_), None) => self.pose * odom_delta,
+            (None, _) => odom,
         };
         self.last_odom = Some(odom);
         let before = self.pose;
         let mut score = None;
+        let mut trusted_along = false;
         // Matched and mapped filled in; the live map and closures take the endpoints.
         let dense = match self.cfg.frontend.densify {
             Some(d) => std::borrow::Cow::Owned(crate::frontend::densify(&points, d)),
@@ -349,6 +359,11 @@ impl Mapper {
                     }
                     score = Some(m.score);
                     self.last_information = m.information;
+                    trusted_along = self.wheel_scale.as_ref().is_some_and(|w| {
+                        let prior_weight =
+                            self.cfg.frontend.matcher.prior_translation_weight * dense.len() as f64;
+                        w.trusted(&m.information, prior_weight, m.pose.yaw_rad)
+                    });
                     origin * m.pose
                 }
                 _ => predicted,
@@ -372,6 +387,15 @@ impl Mapper {
                     self.lost_at = Some(before);
                 }
                 self.transitions.push((time_s, t));
+            }
+            if let Some(w) = &mut self.wheel_scale {
+                // Only matches of a rover whose wheels and scans agree teach the scale: a
+                // slip burst's matches would teach it the burst.
+                if self.health.state() == LocalisationState::Tracking {
+                    w.observe(odom, self.pose, trusted_along);
+                } else {
+                    w.restart();
+                }
             }
         }
         let lost = self.health.state() == LocalisationState::Lost;
@@ -574,6 +598,9 @@ impl Mapper {
         if self.pending_closures && node.is_multiple_of(OPTIMIZE_EVERY_KEYFRAMES) {
             self.graph.optimize(3);
             self.pose = self.graph.nodes[node];
+            if let Some(w) = &mut self.wheel_scale {
+                w.restart();
+            }
             self.pending_closures = false;
         }
     }
@@ -1007,6 +1034,44 @@ mod tests {
         // With the endpoints as they are, 0.66 degrees: the second keyframe's map holds the
         // turn the first match took.
         assert!(filled < 0.1, "mean heading error {filled:.3} deg");
+    }
+
+    /// Drives east through the sparse hall on wheels that over-report the travel by 13.6 %
+    /// (the ground moves 88 % of it), seeing for 8 m and then nothing for 3 m (scans with no
+    /// endpoints, as in the middle of the simulated hall); returns how far ahead of the truth
+    /// the pose is at the end of the blind stretch, metres.
+    fn error_after_a_blind_stretch(slip_calibration: Option<SlipCalibration>) -> f64 {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.slip_calibration = slip_calibration;
+        let mut mapper = Mapper::new(cfg);
+        let truth = |k: usize| Point2::new(-6.0 + 0.04 * k as f64, 0.2);
+        let mut end = Pose2::IDENTITY;
+        for k in 0..=275 {
+            let at = truth(k);
+            let seen = if at.x_m < 2.0 {
+                sparse_hall_scan(Pose2::new(at.x_m, at.y_m, 0.0))
+            } else {
+                Vec::new()
+            };
+            end = mapper
+                .add_points(0.1 * k as f64, Pose2::new(at.x_m / 0.88, 0.0, 0.0), seen)
+                .pose;
+        }
+        // The map frame is the odometry's at the first scan, which the truth has at x = -6.
+        end.x_m + 6.0 / 0.88 - 6.0 - truth(275).x_m
+    }
+
+    #[test]
+    fn wheel_slip_learnt_from_the_matches_carries_the_pose_through_a_blind_stretch() {
+        let learnt = error_after_a_blind_stretch(Some(SlipCalibration::default()));
+        let wheels = error_after_a_blind_stretch(None);
+        // Taken at their word, the wheels put it 3 m * 13.6 % = 0.41 m ahead.
+        assert!(wheels > 0.3, "without calibration {wheels:.3} m");
+        assert!(
+            learnt.abs() < 0.03,
+            "with calibration {learnt:.3} m (without {wheels:.3} m)"
+        );
     }
 
     #[test]
