@@ -79,8 +79,21 @@ fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
             let idle = mission.nav_log()[r]
                 .last()
                 .is_some_and(|(_, s)| matches!(s.activity, NavActivity::Done | NavActivity::Idle));
-            if idle && k > 10 {
-                let target = patrol[next[r] % patrol.len()];
+            // Six seconds before the burst rover1 is sent to the patrol corner farthest from
+            // it, whatever it was doing, so the burst finds it driving a long straight leg
+            // (the turn towards the corner is over by then).
+            let before_burst = r == 0 && second == SLIP_AT_S - 6.0;
+            if (idle && k > 10) || before_burst {
+                let target = if before_burst {
+                    let at = mission.world().rovers().next().expect("rover1").pose;
+                    let away = |p: &Point2| (p.x_m - at.x_m).hypot(p.y_m - at.y_m);
+                    *patrol
+                        .iter()
+                        .max_by(|a, b| away(a).total_cmp(&away(b)))
+                        .expect("patrol has corners")
+                } else {
+                    patrol[next[r] % patrol.len()]
+                };
                 next[r] += 1;
                 let now = mission.now();
                 mission.publish(
