@@ -10,11 +10,15 @@
 //! 3. on large maps (searched on a level twice as coarse) each also searched again on the
 //!    search level in a small window, both kept;
 //! 4. each refined and verified on the fine level ([`crate::verify`]);
-//! 5. the best verified hypothesis is accepted only if enough structure agrees, little
-//!    conflicts, the maps overlap enough and the runner-up (the best clearly different
-//!    pose) scores clearly lower, no landmark lands on open ground, more agrees than a
-//!    corner of two walls (with no prior), and no pose close by explains the maps as
-//!    well. Refusing is always preferred to merging wrong.
+//! 5. the best verified hypothesis is the highest scoring consistent one (no landmarks on
+//!    open ground), unless another consistent one explains what it explains and more of the
+//!    rocks (walls over walls a quarter turn away outscore the true pose at low overlap);
+//! 6. it is accepted only if enough structure agrees, little conflicts, the maps overlap
+//!    enough and the runner-up (the best clearly different pose that is neither a lesser
+//!    explanation nor the same one slid along itself) scores clearly lower, no landmark
+//!    lands on open ground, more agrees than a corner of two walls (with no prior), and no
+//!    pose close by explains the maps as well. Refusing is always preferred to merging
+//!    wrong.
 
 use crate::map::Map;
 use crate::prepare::{Params, Prepared};
@@ -320,6 +324,33 @@ fn is_rival(e: &Evidence, best: &Evidence, params: &Params) -> bool {
         && e.landmark_agree as f64 >= params.rival_landmark_share * best.landmark_agree as f64
 }
 
+/// Whether a pose with evidence `e` is a lesser explanation than one with evidence `by`:
+/// `by` explains what `e` does (`by` would be a rival to `e`), while `e` leaves out too
+/// much of what `by` explains to be a rival to it. At a quarter turn in a rectangular
+/// arena the walls lie over walls for metres and outscore the true pose, but the rocks the
+/// true pose brings together stay apart.
+fn dominated(e: &Evidence, by: &Evidence, params: &Params) -> bool {
+    is_rival(by, e, params) && !is_rival(e, by, params)
+}
+
+/// Which verified pose (sorted best score first) to take: the best scoring one that is
+/// consistent (agreement and landmarks), or the first pose if none is; then a consistent
+/// pose that dominates it ([`dominated`]) instead, if there is one.
+fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) -> usize {
+    let consistent =
+        |e: &Evidence| e.agreement() >= params.min_agreement && !landmarks_disagree(e, params);
+    let Some(first) = verified.iter().position(|(_, e)| consistent(e)) else {
+        return 0;
+    };
+    let (top, top_e) = &verified[first];
+    verified
+        .iter()
+        .position(|(p, e)| {
+            consistent(e) && !same_pose(p, top, centre, params) && dominated(top_e, e, params)
+        })
+        .unwrap_or(first)
+}
+
 /// Whether landmark points land on open ground too often for `e`'s pose to be right.
 fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
     e.landmark_conflict >= params.min_landmark_conflicts
@@ -493,11 +524,25 @@ fn run(
         })
         .collect();
     verified.sort_by(|x, y| y.1.score.total_cmp(&x.1.score));
+    let best = choose_best(&verified, b.centroid, params);
+    let chosen_best = verified.remove(best);
+    verified.insert(0, chosen_best);
     let (best_pose, evidence) = verified[0];
+    // Not an alternative to the best: a clearly different pose whose landmarks land on open
+    // ground, one the best explains while it leaves out what the best explains
+    // ([`dominated`]), and one that agrees with nothing but what the best agrees with, paired
+    // alike: the same explanation with part of it slid out of the overlap (a crater rim
+    // turned about its centre, a wall slid along itself; [`verify::shared_agreement`]).
     let others: Vec<&(Pose2, Evidence)> = verified
         .iter()
         .skip(1)
-        .filter(|(p, _)| !same_pose(p, &best_pose, b.centroid, params))
+        .filter(|(p, e)| {
+            !same_pose(p, &best_pose, b.centroid, params)
+                && !landmarks_disagree(e, params)
+                && !dominated(e, &evidence, params)
+                && verify::shared_agreement(a, b, &best_pose, p, params.subset_tolerance_m)
+                    < params.subset_share
+        })
         .collect();
     let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
     let rival = others.iter().find(|(_, e)| is_rival(e, &evidence, params));
@@ -675,5 +720,33 @@ mod tests {
         // Where the best has no landmarks, structure alone decides, as before.
         assert!(is_rival(&evidence(900, 0), &evidence(823, 0), &params));
         assert!(!is_rival(&evidence(100, 0), &evidence(823, 0), &params));
+    }
+
+    #[test]
+    fn the_pose_that_explains_the_other_is_taken_over_a_higher_score() {
+        // Pair 16's numbers again, sorted by score as verification leaves them: the
+        // quarter-turn first. The true pose explains it (it would be a rival to it) while
+        // it leaves most of the true pose's rocks apart: the true pose is taken.
+        let params = Params::default();
+        let centre = Point2::new(5.0, 5.0);
+        let quarter = (Pose2::new(20.0, 3.0, 1.57), evidence(1493, 20));
+        let truth = (Pose2::new(0.0, 0.0, 0.0), evidence(823, 58));
+        assert!(dominated(&quarter.1, &truth.1, &params));
+        assert_eq!(choose_best(&[quarter, truth], centre, &params), 1);
+        // A quarter-turn with as many rocks is no lesser explanation: the top score stays
+        // (and the estimate then refuses it as ambiguous).
+        let rocky_quarter = (quarter.0, evidence(1493, 50));
+        assert_eq!(choose_best(&[rocky_quarter, truth], centre, &params), 0);
+        // The top pose landing rocks on open ground is passed over for the next consistent.
+        let contradicted = (
+            quarter.0,
+            Evidence {
+                landmark_conflict: 20,
+                ..evidence(5064, 0)
+            },
+        );
+        assert_eq!(choose_best(&[contradicted, truth], centre, &params), 1);
+        // Nothing consistent: the top score stays, to be refused with its reason.
+        assert_eq!(choose_best(&[contradicted], centre, &params), 0);
     }
 }

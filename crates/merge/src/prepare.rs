@@ -110,6 +110,12 @@ pub struct Params {
     /// that lines them up while leaving most of the best's rocks apart is not as likely,
     /// however much wall it overlaps.
     pub rival_landmark_share: f64,
+    /// A clearly different pose is no alternative to the best when at least this share of
+    /// what agrees at it also agrees at the best ...
+    pub subset_share: f64,
+    /// ... landing within this distance of where the best puts it, metres
+    /// ([`crate::verify::shared_agreement`]).
+    pub subset_tolerance_m: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -156,6 +162,8 @@ impl Default for Params {
             rival_share: 0.2,
             rival_agreement_slack: 0.03,
             rival_landmark_share: 0.5,
+            subset_share: 0.9,
+            subset_tolerance_m: 0.5,
             large_map_m: 30.0,
         }
     }
