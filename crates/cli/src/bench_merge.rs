@@ -42,6 +42,11 @@ struct Row {
     /// Wrong merges off by more than 1 m or 5 degrees (the rest are near misses).
     gross_wrong_pct: f64,
     refused_pct: f64,
+    /// Pairs whose overlap holds a landmark (rock, crater rim) agreeing at the true pose;
+    /// walls alone fit every slide along them, so the others cannot be merged by anything.
+    with_landmark: usize,
+    /// Success among those, percent.
+    success_with_landmark_pct: f64,
     median_ms: f64,
     max_ms: f64,
 }
@@ -166,6 +171,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 ..PairSpec::default()
             };
             let (mut ok, mut wrong, mut gross, mut refused) = (0usize, 0usize, 0usize, 0usize);
+            let (mut with_landmark, mut ok_with_landmark) = (0usize, 0usize);
             let mut times_ms = Vec::new();
             for i in 0..args.pairs {
                 let source = &sources[i % sources.len()];
@@ -200,6 +206,24 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     synth::pose_error(&p, &pair.a_from_b, centre)
                 });
                 let correct = err_m < SUCCESS_CELLS * cell_m && err_rad.to_degrees() < SUCCESS_DEG;
+                // What the maps share at the true pose (outside the timing).
+                let truth_grid = pair
+                    .a
+                    .frame_from_grid()
+                    .inverse()
+                    .compose(&pair.a_from_b)
+                    .compose(&pair.b.frame_from_grid());
+                let at_truth = realms_merge::verify::verify(
+                    &a,
+                    &b,
+                    &truth_grid,
+                    params.conflict_weight,
+                    realms_merge::verify::On::Refine,
+                );
+                if at_truth.landmark_agree > 0 {
+                    with_landmark += 1;
+                    ok_with_landmark += usize::from(correct && est.accepted().is_some());
+                }
                 let verdict = match (est.accepted().is_some(), correct) {
                     (true, true) => {
                         ok += 1;
@@ -218,19 +242,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     }
                 };
                 if args.verbose {
-                    let truth_grid = pair
-                        .a
-                        .frame_from_grid()
-                        .inverse()
-                        .compose(&pair.a_from_b)
-                        .compose(&pair.b.frame_from_grid());
-                    let t = realms_merge::verify::verify(
-                        &a,
-                        &b,
-                        &truth_grid,
-                        params.conflict_weight,
-                        realms_merge::verify::On::Refine,
-                    );
+                    let t = at_truth;
                     eprintln!(
                         "  truth: agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
                         t.agree,
@@ -303,6 +315,9 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 wrong_pct: 100.0 * wrong as f64 / n,
                 gross_wrong_pct: 100.0 * gross as f64 / n,
                 refused_pct: 100.0 * refused as f64 / n,
+                with_landmark,
+                success_with_landmark_pct: 100.0 * ok_with_landmark as f64
+                    / with_landmark.max(1) as f64,
                 max_ms: times_ms.iter().copied().fold(0.0, f64::max),
                 median_ms: median(times_ms),
             });
@@ -330,18 +345,21 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
     );
     println!();
     println!(
-        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | median ms | max ms |"
+        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | pairs with a landmark in the overlap | success on those | median ms | max ms |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for r in &rows {
         println!(
-            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {:.0} | {:.0} |",
+            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {} of {} | {:.0} % | {:.0} | {:.0} |",
             r.kind,
             r.overlap_pct,
             r.success_pct,
             r.wrong_pct,
             r.gross_wrong_pct,
             r.refused_pct,
+            r.with_landmark,
+            r.pairs,
+            r.success_with_landmark_pct,
             r.median_ms,
             r.max_ms
         );
