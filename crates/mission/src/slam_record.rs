@@ -239,15 +239,23 @@ pub fn map_grid(map: &OccupancyGrid) -> Option<Grid<i8>> {
     Grid::from_cells(geometry, map.data.clone())
 }
 
-/// Whether any cell of `grid` within `reach_m` (per axis) of `p` satisfies `pred`.
+/// Whether any cell of `grid` within `reach_m` (per axis) of `p` satisfies `pred`. `p` may
+/// lie outside the grid: a map's wall drawn a cell past the truth's outermost wall cells is
+/// still within reach of them.
 fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> bool) -> bool {
-    let reach = (reach_m / grid.resolution_m()).ceil() as i64;
-    let Some(c) = grid.geometry().world_to_cell(p) else {
+    let g = grid.geometry();
+    // Less a hair: a map's f32 resolution (0.05 m reads 0.050000001) must not make one
+    // cell's reach two.
+    let reach = (reach_m / g.resolution_m - 1e-6).ceil() as i64;
+    let fx = ((p.x_m - g.origin.x_m) / g.resolution_m).floor();
+    let fy = ((p.y_m - g.origin.y_m) / g.resolution_m).floor();
+    if !(fx.is_finite() && fy.is_finite()) {
         return false;
-    };
+    }
+    let (cx, cy) = (fx as i64, fy as i64);
     (-reach..=reach).any(|dy| {
         (-reach..=reach).any(|dx| {
-            let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
+            let (x, y) = (cx + dx, cy + dy);
             x >= 0 && y >= 0 && grid.get(x as usize, y as usize).is_some_and(&pred)
         })
     })
@@ -485,6 +493,48 @@ mod tests {
             (g.path_hazards_flagged_nearby - 16.0 / 32.0).abs() < 1e-12,
             "{g:?}"
         );
+    }
+
+    #[test]
+    fn a_wall_drawn_a_cell_past_the_truths_edge_is_right_and_two_cells_past_is_not() {
+        let geo = GridGeometry {
+            width: 20,
+            height: 20,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        // The truth's outermost column is wall.
+        let mut lidar_obstacles = Grid::new(geo, false);
+        for y in 0..20 {
+            *lidar_obstacles.get_mut(19, y).expect("inside") = true;
+        }
+        let truth = GroundTruth {
+            traversability: Grid::new(geo, TruthCell::Free),
+            lidar_obstacles,
+            explorable: Grid::new(geo, true),
+            explorable_area_m2: 1.0,
+        };
+        // The map is 22 columns wide over the same origin: its wall is drawn in column 20,
+        // one cell past the truth's edge, for rows 0..10 and in column 21 for rows 10..20.
+        let mut data = vec![OccupancyGrid::FREE; 22 * 20];
+        for y in 0..20 {
+            data[y * 22 + 19] = OccupancyGrid::UNKNOWN;
+            data[y * 22 + if y < 10 { 20 } else { 21 }] = OccupancyGrid::OCCUPIED;
+            data[y * 22 + if y < 10 { 21 } else { 20 }] = OccupancyGrid::UNKNOWN;
+        }
+        let msg = OccupancyGrid {
+            info: realms_core::msgs::MapMetaData {
+                resolution_m: 0.05,
+                width: 22,
+                height: 20,
+                ..Default::default()
+            },
+            data,
+            ..Default::default()
+        };
+        let g = grade_map(&msg, &truth, &[Point2::new(0.5, 0.5)]);
+        assert_eq!(g.occupied_cells, 20);
+        assert!((g.occupied_correct - 0.5).abs() < 1e-12, "{g:?}");
     }
 
     #[test]
