@@ -720,6 +720,17 @@ mod tests {
         // Where the best has no landmarks, structure alone decides, as before.
         assert!(is_rival(&evidence(900, 0), &evidence(823, 0), &params));
         assert!(!is_rival(&evidence(100, 0), &evidence(823, 0), &params));
+        // Pair 13 (seed 1): a quarter-turn bringing 27 of the true pose's 51 rock points
+        // together, but with ten times its conflicts: 96.8 % agreement against 99.2 %.
+        let with_conflicts = |agree: usize, conflict: usize, landmarks: usize| Evidence {
+            conflict,
+            score: agree as f64 - params.conflict_weight * conflict as f64,
+            ..evidence(agree, landmarks)
+        };
+        let truth = with_conflicts(947, 8, 51);
+        assert!(!is_rival(&with_conflicts(2465, 80, 27), &truth, &params));
+        // As consistent as the truth, it would be one.
+        assert!(is_rival(&with_conflicts(2465, 20, 27), &truth, &params));
     }
 
     #[test]
