@@ -220,13 +220,12 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     params.conflict_weight,
                     realms_merge::verify::On::Refine,
                 );
-                if at_truth.landmark_agree > 0 {
-                    with_landmark += 1;
-                    ok_with_landmark += usize::from(correct && est.accepted().is_some());
-                }
+                let has_landmark = at_truth.landmark_agree > 0;
+                with_landmark += usize::from(has_landmark);
                 let verdict = match (est.accepted().is_some(), correct) {
                     (true, true) => {
                         ok += 1;
+                        ok_with_landmark += usize::from(has_landmark);
                         "ok"
                     }
                     (true, false) => {

@@ -410,6 +410,20 @@ impl RoverSlamRecord {
 mod tests {
     use super::*;
 
+    /// A published map of `width x height` 5 cm cells at the arena's origin.
+    fn map_msg(width: u32, height: u32, data: Vec<i8>) -> OccupancyGrid {
+        OccupancyGrid {
+            info: realms_core::msgs::MapMetaData {
+                resolution_m: 0.05,
+                width,
+                height,
+                ..Default::default()
+            },
+            data,
+            ..Default::default()
+        }
+    }
+
     #[test]
     fn the_cells_near_a_path_are_those_within_reach_of_one_of_its_points() {
         let geo = GridGeometry {
@@ -474,16 +488,7 @@ mod tests {
             explorable: Grid::new(geo, true),
             explorable_area_m2: 4.0,
         };
-        let msg = OccupancyGrid {
-            info: realms_core::msgs::MapMetaData {
-                resolution_m: 0.05,
-                width: 40,
-                height: 40,
-                ..Default::default()
-            },
-            data: map,
-            ..Default::default()
-        };
+        let msg = map_msg(40, 40, map);
         let g = grade_map(&msg, &truth, &[Point2::new(1.0, 1.0)]);
         assert_eq!(g.path_hazards, 32);
         // Half of the first block is under the shifted mark; all of it has one within
@@ -522,16 +527,7 @@ mod tests {
             data[y * 22 + if y < 10 { 20 } else { 21 }] = OccupancyGrid::OCCUPIED;
             data[y * 22 + if y < 10 { 21 } else { 20 }] = OccupancyGrid::UNKNOWN;
         }
-        let msg = OccupancyGrid {
-            info: realms_core::msgs::MapMetaData {
-                resolution_m: 0.05,
-                width: 22,
-                height: 20,
-                ..Default::default()
-            },
-            data,
-            ..Default::default()
-        };
+        let msg = map_msg(22, 20, data);
         let g = grade_map(&msg, &truth, &[Point2::new(0.5, 0.5)]);
         assert_eq!(g.occupied_cells, 20);
         assert!((g.occupied_correct - 0.5).abs() < 1e-12, "{g:?}");

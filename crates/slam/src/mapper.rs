@@ -297,10 +297,15 @@ impl Mapper {
         let odom_delta = self
             .last_odom
             .map_or(Pose2::IDENTITY, |prev| prev.inverse() * odom);
-        let predicted = match (self.last_odom, &self.wheel_scale) {
-            (Some(_), Some(w)) => self.pose * w.apply(odom_delta),
-            (Some(_), None) => self.pose * odom_delta,
-            (None, _) => odom,
+        let predicted = match self.last_odom {
+            Some(_) => {
+                self.pose
+                    * self
+                        .wheel_scale
+                        .as_ref()
+                        .map_or(odom_delta, |w| w.apply(odom_delta))
+            }
+            None => odom,
         };
         self.last_odom = Some(odom);
         let before = self.pose;

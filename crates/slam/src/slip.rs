@@ -155,7 +155,7 @@ mod tests {
     use super::*;
 
     /// Drives straight ahead in `steps` of 0.1 m of wheel travel, the ground moving `real`
-    /// of it, every match trusted; returns the scale learnt.
+    /// of it, every match trusted.
     fn drive(scale: &mut WheelScale, steps: usize, real: f64, heading_rad: f64) {
         let (s, c) = heading_rad.sin_cos();
         for k in 0..=steps {
