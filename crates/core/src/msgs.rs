@@ -249,16 +249,26 @@ impl ExploredArea {
     /// Whether the cell holding `p` is known; false outside the area or past the end of a
     /// short bit array (the message came from outside and may be malformed).
     pub fn is_known(&self, p: Point2) -> bool {
+        self.geometry()
+            .and_then(|g| g.world_to_cell(p).map(|c| g.index(c)))
+            .is_some_and(|i| self.is_known_at(i))
+    }
+
+    /// The area's cells as a grid geometry; `None` if its resolution is not a positive
+    /// number (the message came from outside).
+    pub fn geometry(&self) -> Option<crate::GridGeometry> {
         let r = self.resolution_m as f64;
-        if r.is_nan() || r <= 0.0 {
-            return false;
-        }
-        let fx = ((p.x_m - self.origin.x_m) / r).floor();
-        let fy = ((p.y_m - self.origin.y_m) / r).floor();
-        if !(fx >= 0.0 && fy >= 0.0 && fx < self.width as f64 && fy < self.height as f64) {
-            return false;
-        }
-        let i = fy as usize * self.width as usize + fx as usize;
+        (r > 0.0).then_some(crate::GridGeometry {
+            width: self.width as usize,
+            height: self.height as usize,
+            resolution_m: r,
+            origin: self.origin,
+        })
+    }
+
+    /// Whether the cell with row-major index `i` is known; false past the end of a short
+    /// bit array.
+    pub fn is_known_at(&self, i: usize) -> bool {
         self.known
             .get(i / 8)
             .is_some_and(|byte| byte & (1 << (i % 8)) != 0)

@@ -14,7 +14,7 @@
 //! beside the lander) and stops there.
 
 use realms_core::msgs::ExploredArea;
-use realms_core::{Duration, Grid, Point2, Pose2, RoverId, Time};
+use realms_core::{CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
 use realms_nav::frontier::FrontierTracker;
@@ -326,16 +326,22 @@ impl Navigator {
             return None;
         }
         let geo = *map.geometry();
-        Some(
-            map.iter()
-                .map(|(cell, v)| {
-                    *v < 0 && {
-                        let p = geo.cell_center(cell);
-                        live.iter().any(|a| a.is_known(p))
-                    }
-                })
-                .collect(),
-        )
+        // Where each of our cells' centres lies in each peer's area, worked out per row and
+        // per column rather than per cell.
+        let lookups: Vec<(&ExploredArea, CentreLookup)> = live
+            .iter()
+            .filter_map(|a| Some((*a, CentreLookup::new(&a.geometry()?, &geo))))
+            .collect();
+        let mut seen = vec![false; geo.len()];
+        for (y, row) in map.cells().chunks(geo.width).enumerate() {
+            for (x, v) in row.iter().enumerate() {
+                seen[y * geo.width + x] = *v < 0
+                    && lookups
+                        .iter()
+                        .any(|(a, l)| l.index(x, y).is_some_and(|i| a.is_known_at(i)));
+            }
+        }
+        Some(seen)
     }
 
     /// Peers' live claims; a peer with a higher id than ours does not displace our current
