@@ -76,6 +76,10 @@ pub struct SlamArgs {
     /// scan-matching-only frontend does not fill, so it cannot go with `--no-loop-closure`.
     #[arg(long, default_value_t = 0.0, conflicts_with = "no_loop_closure")]
     pub fill_gap_m: f64,
+    /// Let each scan clear a cell at most once, and never a cell a beam ends in
+    /// (Cartographer's update), instead of once per beam crossing it.
+    #[arg(long)]
+    pub miss_once_per_scan: bool,
     /// Scan matching against one global map only: no submaps, pose graph or loop closures.
     #[arg(long)]
     pub no_loop_closure: bool,

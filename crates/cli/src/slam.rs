@@ -39,6 +39,9 @@ pub fn run(args: SlamArgs) -> Result<()> {
             spacing_m: args.resolution_m,
         });
     }
+    if args.miss_once_per_scan {
+        cfg.miss_rule = realms_slam::occupancy::MissRule::OncePerScan;
+    }
     let mut frontend = Frontend::new(cfg);
     let mcfg = realms_slam::mapper::MapperConfig {
         frontend: cfg,

@@ -17,7 +17,8 @@
 //! replaced by the exact drawing when the submap is finished.
 
 use crate::occupancy::{
-    CellState, Lattice, OccupancyGrid, beams_box, growth, regrow, trace_beams, updated_log_odds,
+    CellState, Lattice, MissRule, OccupancyGrid, beams_box, growth, regrow, trace_beams,
+    updated_log_odds,
 };
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
@@ -43,6 +44,8 @@ pub struct Assembly {
     placed: Vec<Option<Pose2>>,
     /// What a submap cell's log-odds contribute to the sum.
     weigh: fn(f32) -> f32,
+    /// How traced scans clear cells: as the submaps do.
+    miss_rule: MissRule,
     /// The live map, once asked for.
     live: Option<Live>,
 }
@@ -167,6 +170,12 @@ impl Assembly {
         Assembly::weighing(resolution_m, |l| l)
     }
 
+    /// The assembly tracing scans with `rule` (the submaps' own).
+    pub fn with_miss_rule(mut self, rule: MissRule) -> Self {
+        self.miss_rule = rule;
+        self
+    }
+
     /// An empty assembly whose submaps contribute `weigh(log_odds)` per cell instead of
     /// their log-odds (a vote, say; see [`hazard_vote`]).
     pub fn weighing(resolution_m: f64, weigh: fn(f32) -> f32) -> Self {
@@ -178,6 +187,7 @@ impl Assembly {
             sum: Vec::new(),
             placed: Vec::new(),
             weigh,
+            miss_rule: MissRule::default(),
             live: None,
         }
     }
@@ -422,7 +432,7 @@ impl Assembly {
             .map(|s| &mut s.cells)
             .collect();
         // One walk along each beam for every shadow it goes into.
-        trace_beams(&lattice, sensor, endpoints, |i, delta| {
+        trace_beams(&lattice, sensor, endpoints, self.miss_rule, |i, delta| {
             let mut change = 0.0;
             for shadow in targets.iter_mut() {
                 let before = shadow[i];

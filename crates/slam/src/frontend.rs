@@ -4,6 +4,7 @@
 
 use crate::carmen::LaserReading;
 use crate::matcher::{Match, MatcherConfig, MultiResMap, match_scan};
+use crate::occupancy::MissRule;
 use crate::trajectory::StampedPose;
 use realms_core::{Point2, Pose2};
 
@@ -25,6 +26,8 @@ pub struct FrontendConfig {
     /// Fill the gaps between neighbouring beams' endpoints before matching and mapping
     /// (`None`: use the endpoints as they are). See [`densify`].
     pub densify: Option<Densify>,
+    /// How each scan clears the cells its beams cross.
+    pub miss_rule: MissRule,
     /// Matcher tuning.
     pub matcher: MatcherConfig,
 }
@@ -39,6 +42,7 @@ impl Default for FrontendConfig {
             insert_translation_m: 0.05,
             insert_rotation_rad: 2f64.to_radians(),
             densify: None,
+            miss_rule: MissRule::EveryBeam,
             matcher: MatcherConfig::default(),
         }
     }
@@ -114,7 +118,7 @@ impl Frontend {
     /// A frontend with an empty map.
     pub fn new(cfg: FrontendConfig) -> Self {
         Frontend {
-            map: MultiResMap::new(cfg.resolution_m, cfg.levels),
+            map: MultiResMap::new(cfg.resolution_m, cfg.levels).with_miss_rule(cfg.miss_rule),
             cfg,
             pose: Pose2::IDENTITY,
             last_odom: None,

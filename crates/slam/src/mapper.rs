@@ -116,6 +116,10 @@ pub struct ClosureDrift {
     pub per_m: f64,
     /// Path length a closure already in the graph stands for, metres.
     pub hop_m: f64,
+    /// Turn always allowed, radians ...
+    pub base_rad: f64,
+    /// ... and per metre of path between the ends.
+    pub per_m_rad: f64,
 }
 
 /// Scans taken while the robot stands still carry nothing new, and matching them against a
@@ -263,7 +267,8 @@ impl Mapper {
             closures: 0,
             heading_holds: 0,
             relocalise_searches: 0,
-            assembly: Assembly::new(cfg.frontend.resolution_m),
+            assembly: Assembly::new(cfg.frontend.resolution_m)
+                .with_miss_rule(cfg.frontend.miss_rule),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
         }
     }
@@ -570,7 +575,7 @@ impl Mapper {
             let f = &self.cfg.frontend;
             self.submaps.push(Submap {
                 origin_node: node,
-                map: MultiResMap::new(f.resolution_m, f.levels),
+                map: MultiResMap::new(f.resolution_m, f.levels).with_miss_rule(f.miss_rule),
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
@@ -633,11 +638,7 @@ impl Mapper {
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
         let points = subsample(&self.keyframe_points[node], LOOP_POINTS);
         for (_, s) in candidates.into_iter().take(self.cfg.loop_candidates) {
-            let window = SearchWindow {
-                linear_m: self.cfg.loop_window_m,
-                angular_rad: self.cfg.loop_window_rad,
-                step_range_m: LOOP_STEP_RANGE_M,
-            };
+            let window = self.closure_window(self.submaps[s].origin_node, node);
             let full = std::mem::take(&mut self.keyframe_points[node]);
             let found = self.verified_match(s, &points, &full, pose, &window);
             self.keyframe_points[node] = full;
@@ -655,6 +656,35 @@ impl Mapper {
             }
         }
         added
+    }
+
+    /// The closure search window for joining keyframe `to` to the submap begun at keyframe
+    /// `from`: the configured window, narrowed to what the map can have drifted by between
+    /// them (see [`ClosureDrift`]). A pose outside that would be refused anyway, and most
+    /// searches join places a few metres of path apart, so the narrow window spares most of
+    /// the search (the rotations above all: each is a pass over the scan).
+    fn closure_window(&self, from: usize, to: usize) -> SearchWindow {
+        let mut window = SearchWindow {
+            linear_m: self.cfg.loop_window_m,
+            angular_rad: self.cfg.loop_window_rad,
+            step_range_m: LOOP_STEP_RANGE_M,
+        };
+        let Some(bound) = self.cfg.closure_drift else {
+            return window;
+        };
+        // Past this much path neither bound is narrower than the window.
+        let limit_m = ((window.linear_m - bound.base_m) / bound.per_m)
+            .max((window.angular_rad - bound.base_rad) / bound.per_m_rad);
+        if let Some(path_m) = self
+            .graph
+            .path_length_within(from, to, limit_m, bound.hop_m)
+        {
+            window.linear_m = window.linear_m.min(bound.base_m + bound.per_m * path_m);
+            window.angular_rad = window
+                .angular_rad
+                .min(bound.base_rad + bound.per_m_rad * path_m);
+        }
+        window
     }
 
     /// Whether the correction `closure` asks for is one the map can have drifted by (see
@@ -878,6 +908,8 @@ mod tests {
                 base_m: 0.3,
                 per_m: 0.05,
                 hop_m: 2.0,
+                base_rad: 3f64.to_radians(),
+                per_m_rad: 0.2f64.to_radians(),
             }),
             ..MapperConfig::default()
         });
@@ -909,6 +941,32 @@ mod tests {
             information: [400.0, 400.0, 2500.0],
             robust: true,
         }
+    }
+
+    #[test]
+    fn the_closure_search_looks_only_as_far_as_the_map_can_have_drifted() {
+        // 10 m of path: 0.3 + 0.05 * 10 = 0.8 m and 3 + 0.2 * 10 = 5 degrees.
+        let mut mapper = straight_drive(401);
+        let near = mapper.closure_window(0, 40);
+        assert!((near.linear_m - 0.8).abs() < 1e-9, "{}", near.linear_m);
+        assert!((near.angular_rad.to_degrees() - 5.0).abs() < 1e-9);
+        // 100 m: wider than the configured window, which then stands.
+        let far = mapper.closure_window(0, 400);
+        assert_eq!(far.linear_m, mapper.cfg.loop_window_m);
+        assert_eq!(far.angular_rad, mapper.cfg.loop_window_rad);
+        // A closure joining the two ends makes them near: 0.25 + 2 + 0.25 m.
+        mapper.graph.edges.push(closure(&mapper, 1, 399, 0.0));
+        let joined = mapper.closure_window(0, 400);
+        assert!(
+            (joined.linear_m - 0.425).abs() < 1e-9,
+            "{}",
+            joined.linear_m
+        );
+        mapper.cfg.closure_drift = None;
+        assert_eq!(
+            mapper.closure_window(0, 40).linear_m,
+            mapper.cfg.loop_window_m
+        );
     }
 
     /// A finished submap at the origin that saw a wall 4 m east, then a newer one at the

@@ -23,6 +23,16 @@ impl MultiResMap {
         }
     }
 
+    /// The maps clearing cells by `rule` from now on.
+    pub fn with_miss_rule(mut self, rule: crate::occupancy::MissRule) -> Self {
+        self.levels = self
+            .levels
+            .into_iter()
+            .map(|l| l.with_miss_rule(rule))
+            .collect();
+        self
+    }
+
     /// Inserts a scan into every level.
     pub fn insert(&mut self, sensor: Point2, endpoints: &[(Point2, bool)]) {
         for l in &mut self.levels {

@@ -13,6 +13,20 @@ const CLAMP: f32 = 4.0;
 /// Cells added on each side when the grid grows.
 const GROW_MARGIN_CELLS: usize = 128;
 
+/// How a scan's beams clear the cells they cross.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MissRule {
+    /// Every beam adds a miss to every cell it crosses, and to its end cell after its hit
+    /// (the textbook per-beam update).
+    #[default]
+    EveryBeam,
+    /// A cell gets at most one miss per scan, and none if a beam ends in it, as in
+    /// Cartographer's range data inserter: a cell near the sensor that a thousand beams cross
+    /// is one observation of free space, not a thousand, and a wall cell that a grazing beam
+    /// crosses on its way to the next wall cell stays a hit.
+    OncePerScan,
+}
+
 /// What a map cell is, for export.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CellState {
@@ -48,6 +62,7 @@ pub struct OccupancyGrid {
     prob: Vec<f32>,
     /// The world box holding every cell ever updated (none yet: `None`).
     content: Option<(Point2, Point2)>,
+    miss_rule: MissRule,
 }
 
 impl OccupancyGrid {
@@ -65,7 +80,14 @@ impl OccupancyGrid {
             log_odds: vec![0.0; side * side],
             prob: vec![0.5; side * side],
             content: None,
+            miss_rule: MissRule::default(),
         }
+    }
+
+    /// The grid clearing cells by `rule` from now on.
+    pub fn with_miss_rule(mut self, rule: MissRule) -> Self {
+        self.miss_rule = rule;
+        self
     }
 
     /// A grid holding `log_odds` (clamped) over `geometry`; `None` if the count is wrong.
@@ -90,6 +112,7 @@ impl OccupancyGrid {
             log_odds,
             prob,
             content: Some((geometry.origin, max)),
+            miss_rule: MissRule::default(),
         })
     }
 
@@ -174,7 +197,7 @@ impl OccupancyGrid {
             resolution_m: self.resolution_m,
             width: self.width,
         };
-        trace_beams(&lattice, sensor, endpoints, |i, delta| {
+        trace_beams(&lattice, sensor, endpoints, self.miss_rule, |i, delta| {
             self.update(i, delta)
         });
     }
@@ -328,12 +351,14 @@ pub(crate) struct Lattice {
 }
 
 /// Traces beams from `sensor` to each endpoint over the cells of `lattice` (which must hold
-/// them all), calling `update(cell index, log-odds evidence)` for each cell a beam passes
-/// through (a miss) and for its end (a hit, or a miss for a clipped max-range reading).
+/// them all), calling `update(cell index, log-odds evidence)`: a hit for each endpoint
+/// marked `hit`, and misses for the cells the beams cross (and the ends of clipped
+/// max-range readings) as `rule` says.
 pub(crate) fn trace_beams(
     lattice: &Lattice,
     sensor: Point2,
     endpoints: &[(Point2, bool)],
+    rule: MissRule,
     mut update: impl FnMut(usize, f32),
 ) {
     let r = lattice.resolution_m;
@@ -346,14 +371,13 @@ pub(crate) fn trace_beams(
     };
     let (sx, sy) = to_cell(sensor);
     let w = lattice.width as i64;
-    for (p, hit) in endpoints {
-        let (ex, ey) = to_cell(*p);
-        // Bresenham from the sensor cell to the endpoint cell, excluding the endpoint.
+    // Bresenham from the sensor cell to `end`, calling `visit` on every cell before it.
+    let walk = |(ex, ey): (i64, i64), visit: &mut dyn FnMut(i64, i64)| {
         let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
         let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
         let (mut x, mut y, mut err) = (sx, sy, dx + dy);
         while (x, y) != (ex, ey) {
-            update((y * w + x) as usize, MISS);
+            visit(x, y);
             let e2 = 2 * err;
             if e2 >= dy {
                 err += dy;
@@ -364,7 +388,45 @@ pub(crate) fn trace_beams(
                 y += sty;
             }
         }
-        update((ey * w + ex) as usize, if *hit { HIT } else { MISS });
+    };
+    match rule {
+        MissRule::EveryBeam => {
+            for (p, hit) in endpoints {
+                let end = to_cell(*p);
+                walk(end, &mut |x, y| update((y * w + x) as usize, MISS));
+                update((end.1 * w + end.0) as usize, if *hit { HIT } else { MISS });
+            }
+        }
+        MissRule::OncePerScan => {
+            // Cells already updated by this scan, one bit each over the scan's box of cells.
+            let (min, max) = beams_box(sensor, endpoints);
+            let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
+            let bw = tx - bx + 1;
+            let mut done = vec![0u64; ((bw * (ty - by + 1)) as usize).div_ceil(64)];
+            let mut first_time = |x: i64, y: i64| {
+                let k = ((y - by) * bw + (x - bx)) as usize;
+                let (word, bit) = (k / 64, 1u64 << (k % 64));
+                let fresh = done[word] & bit == 0;
+                done[word] |= bit;
+                fresh
+            };
+            let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
+            for (&(x, y), (_, hit)) in ends.iter().zip(endpoints) {
+                if *hit {
+                    first_time(x, y);
+                    update((y * w + x) as usize, HIT);
+                }
+            }
+            let mut miss = |x: i64, y: i64| {
+                if first_time(x, y) {
+                    update((y * w + x) as usize, MISS);
+                }
+            };
+            for &end in &ends {
+                walk(end, &mut miss);
+                miss(end.0, end.1);
+            }
+        }
     }
 }
 
@@ -454,5 +516,30 @@ mod tests {
         assert_eq!(at(5.05, 5.05), CellState::Unknown);
         let (p, _) = g.probability_and_gradient(Point2::new(30.05, 0.05));
         assert!(p > 0.9, "{p}");
+    }
+
+    #[test]
+    fn a_scan_clears_a_cell_once_and_never_where_a_beam_ends() {
+        let mut g = OccupancyGrid::new(0.1).with_miss_rule(MissRule::OncePerScan);
+        let sensor = Point2::new(0.05, 0.05);
+        // Two beams along the same row: the near one ends in a cell the far one crosses.
+        let beams = [
+            (Point2::new(1.05, 0.05), true),
+            (Point2::new(2.05, 0.05), true),
+            (Point2::new(2.05, 0.05), true),
+        ];
+        g.insert(sensor, &beams);
+        let at = |x: f64| g.log_odds_at(Point2::new(x, 0.05));
+        assert_eq!(at(0.55), MISS, "crossed by three beams, one observation");
+        assert_eq!(at(1.05), HIT, "a hit, though two beams pass through");
+        assert_eq!(at(1.55), MISS);
+        assert_eq!(at(2.05), 2.0 * HIT, "two endpoints in one cell");
+        assert_eq!(at(2.55), 0.0);
+        // Beam by beam, each crossing is a miss, and the far beams clear the near one's hit.
+        let mut g = OccupancyGrid::new(0.1);
+        g.insert(sensor, &beams);
+        let at = |x: f64| g.log_odds_at(Point2::new(x, 0.05));
+        assert_eq!(at(0.55), 3.0 * MISS);
+        assert_eq!(at(1.05), HIT + 2.0 * MISS);
     }
 }
