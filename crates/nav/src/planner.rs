@@ -94,9 +94,6 @@ pub struct Planner {
     seen: Vec<u32>,
     closed: Vec<u32>,
     generation: u32,
-    /// Every cell's price per metre for a flood of the whole map (negative: not enterable),
-    /// worked out once instead of at each of the eight to sixteen looks a flood takes at it.
-    prices: Vec<f32>,
     heap: RadixHeap,
 }
 
@@ -236,7 +233,7 @@ impl Planner {
             }
         };
         // Price per metre of entering a cell, or None where the rover may not go.
-        let price = |x: usize, y: usize| -> Option<f32> {
+        let factor = |x: usize, y: usize| -> Option<f32> {
             let i = y * w + x;
             let c = costs[i];
             let (dx, dy) = (x as f32 - start.x as f32, y as f32 - start.y as f32);
@@ -251,26 +248,6 @@ impl Planner {
             // stands and none dearer than its own (Nav2's rule), to get out.
             (near_start && start_cost > MAX_PASSABLE && c <= start_cost)
                 .then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
-        };
-        // A flood looks at nearly every cell, so its prices are worked out in one pass; a
-        // search for one goal looks at far fewer and prices them as it goes.
-        let flood = goal.is_none();
-        if flood {
-            self.prices.clear();
-            self.prices.extend(
-                (0..h)
-                    .flat_map(|y| (0..w).map(move |x| (x, y)))
-                    .map(|(x, y)| price(x, y).unwrap_or(-1.0)),
-            );
-        }
-        let prices = &self.prices;
-        let factor = |x: usize, y: usize| -> Option<f32> {
-            if flood {
-                let p = prices[y * w + x];
-                (p >= 0.0).then_some(p)
-            } else {
-                price(x, y)
-            }
         };
         let s = geo.index(start);
         self.g[s] = 0.0;
