@@ -94,6 +94,8 @@ pub struct Planner {
     seen: Vec<u32>,
     closed: Vec<u32>,
     generation: u32,
+    /// The search generation that marked each cell a target of a flood.
+    target: Vec<u32>,
     heap: RadixHeap,
 }
 
@@ -203,6 +205,7 @@ impl Planner {
     }
 
     /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
+    /// A flood (no `goal`) given `targets` stops once it has closed them all.
     fn search(
         &mut self,
         map: &Costmap,
@@ -210,10 +213,25 @@ impl Planner {
         goal: Option<Cell>,
         heuristic: bool,
         known_only: bool,
+        targets: Option<&[Cell]>,
     ) -> usize {
         let geo = *map.geometry();
         let (w, h) = (geo.width, geo.height);
         self.begin(geo.len());
+        if self.target.len() != geo.len() || self.generation == 1 {
+            self.target = vec![0; geo.len()];
+        }
+        let mut targets_open = usize::MAX;
+        if let Some(cells) = targets {
+            targets_open = 0;
+            for c in cells {
+                let i = geo.index(*c);
+                if self.target[i] != self.generation {
+                    self.target[i] = self.generation;
+                    targets_open += 1;
+                }
+            }
+        }
         let costs = map.costs();
         let known = map.known();
         let weight = self.cfg.cost_weight as f32 / MAX_PASSABLE as f32;
@@ -265,6 +283,12 @@ impl Planner {
             self.closed[i] = gen_;
             expanded += 1;
             if Some(i) == goal_index {
+                break;
+            }
+            if self.target[i] == gen_ {
+                targets_open -= 1;
+            }
+            if targets_open == 0 {
                 break;
             }
             let (x, y) = (i % w, i / w);
@@ -343,7 +367,7 @@ impl Planner {
     /// The cheapest path from `start` to `goal` (A*).
     pub fn plan(&mut self, map: &Costmap, start: Point2, goal: Point2) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), true, false);
+        let expanded = self.search(map, s, Some(g), true, false, None);
         self.path_to(map.geometry(), g, expanded)
     }
 
@@ -355,7 +379,7 @@ impl Planner {
         goal: Point2,
     ) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), false, false);
+        let expanded = self.search(map, s, Some(g), false, false, None);
         self.path_to(map.geometry(), g, expanded)
     }
 
@@ -369,6 +393,21 @@ impl Planner {
         start: Point2,
         known_only: bool,
     ) -> Result<Vec<f32>, PlanError> {
+        self.travel_costs_until(map, start, known_only, None)
+    }
+
+    /// [`travel_costs`](Self::travel_costs), but given `targets` the flood stops once it
+    /// has reached them all (or everything it can reach): their costs, and those of every
+    /// cell nearer than the farthest of them, are exact; the cells beyond read `INFINITY`.
+    /// Exploration needs the costs of the frontiers and of its goal only, and a rover with
+    /// no frontier left needs none.
+    pub fn travel_costs_until(
+        &mut self,
+        map: &Costmap,
+        start: Point2,
+        known_only: bool,
+        targets: Option<&[Cell]>,
+    ) -> Result<Vec<f32>, PlanError> {
         let s = map
             .geometry()
             .world_to_cell(start)
@@ -376,7 +415,7 @@ impl Planner {
                 x_m: start.x_m,
                 y_m: start.y_m,
             })?;
-        self.search(map, s, None, false, known_only);
+        self.search(map, s, None, false, known_only, targets);
         let gen_ = self.generation;
         Ok(self
             .g
@@ -544,6 +583,46 @@ mod tests {
                 Err(e) => {
                     prop_assert!(!optimum.is_finite(), "{} but Dijkstra reached it at {}", e, optimum);
                 }
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        /// A flood stopped at its targets gives every target, and every cell it settled on
+        /// the way, exactly the full flood's cost; with no targets it settles the start only.
+        #[test]
+        fn a_flood_stopped_at_its_targets_costs_them_as_the_full_flood_does(
+            width in 2usize..40,
+            height in 2usize..30,
+            raw in proptest::collection::vec(0u8..=255, 40 * 30),
+            start in (0usize..40, 0usize..30),
+            picks in proptest::collection::vec((0usize..40, 0usize..30), 0..6),
+        ) {
+            let mut costs: Vec<u8> = raw[..width * height]
+                .iter()
+                .map(|&r| if r < 70 { LETHAL } else { r - 70 })
+                .collect();
+            let (sx, sy) = (start.0 % width, start.1 % height);
+            costs[sy * width + sx] = 0;
+            let map = costmap(width, height, costs);
+            let mut planner = Planner::new(PlannerConfig::default());
+            let s = centre(&map, sx, sy);
+            let full = planner.travel_costs(&map, s, false).expect("start inside");
+            let targets: Vec<Cell> =
+                picks.iter().map(|(x, y)| Cell { x: x % width, y: y % height }).collect();
+            let part = planner
+                .travel_costs_until(&map, s, false, Some(&targets))
+                .expect("start inside");
+            for t in &targets {
+                prop_assert_eq!(part[t.y * width + t.x].to_bits(), full[t.y * width + t.x].to_bits());
+            }
+            let settled = part.iter().filter(|c| c.is_finite()).count();
+            for (p, f) in part.iter().zip(&full) {
+                prop_assert!(!p.is_finite() || p.to_bits() == f.to_bits());
+            }
+            if targets.is_empty() {
+                prop_assert_eq!(settled, 1);
             }
         }
     }

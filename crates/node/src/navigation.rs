@@ -14,7 +14,7 @@
 //! beside the lander) and stops there.
 
 use realms_core::msgs::ExploredArea;
-use realms_core::{CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Time};
+use realms_core::{Cell, CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
 use realms_nav::frontier::FrontierTracker;
@@ -366,16 +366,12 @@ impl Navigator {
         self.replan_now = false;
         let costmap = Costmap::from_map(map, &self.cfg.costmap);
         let here = pose.position();
-        let Ok(field) = self.planner.travel_costs(&costmap, here, true) else {
+        let geo = *costmap.geometry();
+        if geo.world_to_cell(here).is_none() {
             self.event(now, "the rover is off its own map".into());
             self.costmap = Some(costmap);
             return;
-        };
-        let geo = *costmap.geometry();
-        let reachable = |p: Point2| {
-            geo.world_to_cell(p)
-                .is_some_and(|c| field[geo.index(c)].is_finite())
-        };
+        }
         let stalled = self.stalled(now, map);
         // Operator goals first.
         if let Some(op) = self.operator_goal
@@ -384,15 +380,40 @@ impl Navigator {
             self.start_goal(now, op, GoalKind::Operator);
         }
         let current = self.goal.map(|g| g.point);
-        if self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous {
-            let claims = self.claims(now, current);
+        let exploring =
+            self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous;
+        let frontiers = if exploring {
             let seen = self.seen_by_peers(now, map);
-            let frontiers = self.frontiers.update(
+            self.frontiers.update(
                 map,
                 &costmap,
                 self.cfg.explore.min_frontier_cells,
                 seen.as_deref(),
-            );
+            )
+        } else {
+            Vec::new()
+        };
+        // The travel costs are read at the frontiers and at the goal only, so the flood
+        // stops once it has reached them (at once, for a rover with none).
+        let targets: Vec<Cell> = frontiers
+            .iter()
+            .flat_map(|f| f.cells.iter().copied())
+            .chain(current.and_then(|p| geo.world_to_cell(p)))
+            .collect();
+        let Ok(field) = self
+            .planner
+            .travel_costs_until(&costmap, here, true, Some(&targets))
+        else {
+            self.event(now, "the rover is off its own map".into());
+            self.costmap = Some(costmap);
+            return;
+        };
+        let reachable = |p: Point2| {
+            geo.world_to_cell(p)
+                .is_some_and(|c| field[geo.index(c)].is_finite())
+        };
+        if exploring {
+            let claims = self.claims(now, current);
             let options = candidates(
                 &frontiers,
                 &geo,
