@@ -66,8 +66,9 @@ pub fn rover_mapper_config() -> MapperConfig {
         max_gap_m: 0.3,
         spacing_m: 0.05,
     });
-    // Each keyframe clears a cell once, however many beams cross it: the rovers' maps and
-    // paths come out better, and SLAM cheaper (BENCHMARKS.md, "A narrower closure search").
+    // Each keyframe clears a cell once, however many beams cross it: the rovers' paths come
+    // out better, and slip is reported more often (BENCHMARKS.md, "A narrower closure
+    // search").
     cfg.frontend.miss_rule = realms_slam::occupancy::MissRule::OncePerScan;
     cfg.keyframe_translation_m = 0.3;
     cfg.keyframe_rotation_rad = 10f64.to_radians();

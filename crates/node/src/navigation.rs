@@ -359,6 +359,12 @@ impl Navigator {
             .collect()
     }
 
+    /// The rover stands outside its own map: nothing to plan on but the costmap kept.
+    fn off_map(&mut self, now: Time, costmap: Costmap) {
+        self.event(now, "the rover is off its own map".into());
+        self.costmap = Some(costmap);
+    }
+
     /// A fresh map (-1 unknown, 0 free, 90 hazard, 100 obstacle) with the rover at `pose`:
     /// revises the goal and the path.
     pub fn on_map(&mut self, now: Time, map: &Grid<i8>, pose: Pose2) {
@@ -367,10 +373,9 @@ impl Navigator {
         let costmap = Costmap::from_map(map, &self.cfg.costmap);
         let here = pose.position();
         let geo = *costmap.geometry();
+        // Checked before anything below changes state; the flood's own check then holds.
         if geo.world_to_cell(here).is_none() {
-            self.event(now, "the rover is off its own map".into());
-            self.costmap = Some(costmap);
-            return;
+            return self.off_map(now, costmap);
         }
         let stalled = self.stalled(now, map);
         // Operator goals first.
@@ -404,9 +409,7 @@ impl Navigator {
             .planner
             .travel_costs_until(&costmap, here, true, Some(&targets))
         else {
-            self.event(now, "the rover is off its own map".into());
-            self.costmap = Some(costmap);
-            return;
+            return self.off_map(now, costmap);
         };
         let reachable = |p: Point2| {
             geo.world_to_cell(p)

@@ -369,31 +369,13 @@ pub(crate) fn trace_beams(
             ((p.y_m - origin.y_m) / r).floor() as i64,
         )
     };
-    let (sx, sy) = to_cell(sensor);
+    let start = to_cell(sensor);
     let w = lattice.width as i64;
-    // Bresenham from the sensor cell to `end`, calling `visit` on every cell before it.
-    let walk = |(ex, ey): (i64, i64), visit: &mut dyn FnMut(i64, i64)| {
-        let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
-        let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
-        let (mut x, mut y, mut err) = (sx, sy, dx + dy);
-        while (x, y) != (ex, ey) {
-            visit(x, y);
-            let e2 = 2 * err;
-            if e2 >= dy {
-                err += dy;
-                x += stx;
-            }
-            if e2 <= dx {
-                err += dx;
-                y += sty;
-            }
-        }
-    };
     match rule {
         MissRule::EveryBeam => {
             for (p, hit) in endpoints {
                 let end = to_cell(*p);
-                walk(end, &mut |x, y| update((y * w + x) as usize, MISS));
+                walk(start, end, |x, y| update((y * w + x) as usize, MISS));
                 update((end.1 * w + end.0) as usize, if *hit { HIT } else { MISS });
             }
         }
@@ -423,9 +405,29 @@ pub(crate) fn trace_beams(
                 }
             };
             for &end in &ends {
-                walk(end, &mut miss);
+                walk(start, end, &mut miss);
                 miss(end.0, end.1);
             }
+        }
+    }
+}
+
+/// Bresenham's line from cell `from` to cell `to`, calling `visit` on every cell before `to`.
+fn walk(from: (i64, i64), (ex, ey): (i64, i64), mut visit: impl FnMut(i64, i64)) {
+    let (sx, sy) = from;
+    let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
+    let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
+    let (mut x, mut y, mut err) = (sx, sy, dx + dy);
+    while (x, y) != (ex, ey) {
+        visit(x, y);
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x += stx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y += sty;
         }
     }
 }
