@@ -219,6 +219,35 @@ struct Run {
     slam_wall_s: f64,
     /// Per rover: the final trajectory's RMS error in the arena frame, and aligned, metres.
     slam: Vec<(f64, f64)>,
+    /// Over all rovers' final maps: true hazard cells the maps know and those they flag;
+    /// true hazard cells near the rovers' paths and those flagged.
+    hazards: HazardTally,
+}
+
+/// True hazard cells counted over a fleet's maps (a cell counts once per map).
+#[derive(Clone, Copy, Debug, Default)]
+struct HazardTally {
+    known: usize,
+    known_flagged: f64,
+    near_path: usize,
+    near_path_flagged: f64,
+}
+
+impl HazardTally {
+    fn add(&mut self, g: &realms_mission::slam_record::MapGrade) {
+        self.known += g.true_hazards_known;
+        self.known_flagged += g.true_hazards_flagged * g.true_hazards_known as f64;
+        self.near_path += g.path_hazards;
+        self.near_path_flagged += g.path_hazards_flagged * g.path_hazards as f64;
+    }
+
+    /// The fractions flagged: of those the maps know, of those near the paths.
+    fn fractions(&self) -> (f64, f64) {
+        (
+            self.known_flagged / self.known.max(1) as f64,
+            self.near_path_flagged / self.near_path.max(1) as f64,
+        )
+    }
 }
 
 impl Run {
@@ -297,6 +326,12 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         };
         let mission = crate::bench::explore_to_end(&s, options, limit_s);
         let bodies: Vec<_> = mission.world().rovers().collect();
+        let mut hazards = HazardTally::default();
+        for record in mission.slam_records() {
+            if let Some(grade) = record.summary(mission.world().truth(), None).map {
+                hazards.add(&grade);
+            }
+        }
         let run = Run {
             rovers: n,
             seed,
@@ -318,6 +353,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                     ))
                 })
                 .collect(),
+            hazards,
         };
         let worst = run.worst_slam();
         eprintln!(
@@ -339,14 +375,16 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     runs.sort_by_key(|r| (r.rovers, r.seed));
 
     println!(
-        "| seed | rovers | coverage | 90 % at | 95 % at | done at | complete | collisions | hazard entries | stuck | SLAM RMS, worst rover (aligned) | wall | SLAM's wall, all rovers |"
+        "| seed | rovers | coverage | 90 % at | 95 % at | done at | complete | collisions | hazard entries | stuck | SLAM RMS, worst rover (aligned) | true hazards flagged: known / near the paths | wall | SLAM's wall, all rovers |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     let minutes = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{:.1} min", t / 60.0));
     for r in &runs {
         let worst = r.worst_slam();
         println!(
-            "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.2} m ({:.2} m) | {:.0} s | {:.0} s ({:.0}x real time) |",
+            "| {} | {} | {:.1} % | {} | {} | {:.1} min | {} | {} | {} | {} | {:.2} m ({:.2} m) | {:.0} / {:.0} % | {:.0} s | {:.0} s ({:.0}x real time) |",
             r.seed,
             r.rovers,
             100.0 * r.series.last().map_or(0.0, |s| s.1),
@@ -359,6 +397,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
             r.stuck,
             worst.0,
             worst.1,
+            100.0 * r.hazards.fractions().0,
+            100.0 * r.hazards.fractions().1,
             r.wall_s,
             r.slam_wall_s,
             r.end_s / r.slam_wall_s.max(1e-9)
@@ -368,9 +408,9 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
     println!("Median over seeds (a run that never got there counts as the time limit):");
     println!();
     println!(
-        "| rovers | 50 % at | 90 % at | 95 % at | coverage at 15 / 30 / 60 / 90 min | collisions | hazard entries | SLAM RMS per rover, median (aligned) |"
+        "| rovers | 50 % at | 90 % at | 95 % at | coverage at 15 / 30 / 60 / 90 min | collisions | hazard entries | SLAM RMS per rover, median (aligned) | true hazards flagged: known / near the paths |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let median_time = |set: &[&Run], level: f64| {
         crate::bench::median(
             set.iter()
@@ -386,7 +426,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         let m90 = median_time(&set, 0.9);
         t90.push((*n, m90));
         println!(
-            "| {n} | {:.1} min | {:.1} min | {:.1} min | {:.0} / {:.0} / {:.0} / {:.0} % | {} | {} | {:.2} m ({:.2} m) |",
+            "| {n} | {:.1} min | {:.1} min | {:.1} min | {:.0} / {:.0} / {:.0} / {:.0} % | {} | {} | {:.2} m ({:.2} m) | {:.0} / {:.0} % |",
             median_time(&set, 0.5) / 60.0,
             m90 / 60.0,
             median_time(&set, 0.95) / 60.0,
@@ -406,6 +446,8 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
                     .flat_map(|r| r.slam.iter().map(|s| s.1))
                     .collect()
             ),
+            100.0 * crate::bench::median(set.iter().map(|r| r.hazards.fractions().0).collect()),
+            100.0 * crate::bench::median(set.iter().map(|r| r.hazards.fractions().1).collect()),
         );
         let points = (0..=(limit_s / 30.0) as usize)
             .map(|i| {
