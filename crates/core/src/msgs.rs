@@ -227,8 +227,9 @@ pub struct NavStatus {
 }
 
 /// Which ground a rover's map knows, coarsely (`nav/explored`; no ROS counterpart): one bit
-/// per cell, set where most of the cell is known. Peers use it so they do not drive to
-/// frontiers another rover has already seen past. Sent every few seconds.
+/// per cell, set where most of the cell is known (and, where the lidar saw it free, judged
+/// by the depth camera). Peers use it so they do not drive to frontiers another rover has
+/// already seen past. Sent every few seconds.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ExploredArea {
     /// When, and the rover's map frame.

@@ -2,7 +2,9 @@
 //! heard of its peers.
 //!
 //! A frontier is worth its length (what the rover will see there) less the cost of driving
-//! to it. Coordination follows Burgard et al., "Coordinated Multi-Robot Exploration" (IEEE
+//! to it; a stretch beside ground the lidar already saw, still to be judged by the depth
+//! camera, is worth less than one beside unknown ground, so the map spreads first and the
+//! ground is looked at on the way and after. Coordination follows Burgard et al., "Coordinated Multi-Robot Exploration" (IEEE
 //! T-RO 21, 2005): a target a peer has claimed lowers the worth of every frontier near it, in
 //! proportion to how much of it the peer will see, so rovers spread out without a central
 //! allocator. Rovers that hear nothing from their peers still explore, only less well
@@ -21,6 +23,10 @@ pub struct ExploreConfig {
     /// A frontier is only worth it up to this length, metres: a rover sees about this much
     /// of a long frontier from one spot.
     pub max_gain_m: f64,
+    /// A metre of frontier beside ground only the lidar saw is worth this fraction of one
+    /// beside unknown ground: there the rover adds the depth camera's verdict on a strip a
+    /// few metres deep, where the lidar would map a wide new stretch.
+    pub unjudged_gain_fraction: f64,
     /// A peer's target discounts frontiers within this distance, metres (about what the
     /// peer will map on arrival).
     pub peer_radius_m: f64,
@@ -52,6 +58,7 @@ impl Default for ExploreConfig {
             min_frontier_cells: 8,
             gain_per_m: 3.0,
             max_gain_m: 4.0,
+            unjudged_gain_fraction: 0.25,
             peer_radius_m: 6.0,
             blacklist_radius_m: 1.0,
         }
@@ -128,7 +135,10 @@ fn score(
     {
         return None;
     }
-    let gain = cfg.gain_per_m * f.length_m(geo.resolution_m).min(cfg.max_gain_m);
+    let unjudged = f.cells.len() - f.beside_unknown;
+    let length_m =
+        (f.beside_unknown as f64 + cfg.unjudged_gain_fraction * unjudged as f64) * geo.resolution_m;
+    let gain = cfg.gain_per_m * length_m.min(cfg.max_gain_m);
     let discount: f64 = peers
         .iter()
         .map(|p| {

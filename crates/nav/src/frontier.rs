@@ -1,11 +1,26 @@
 //! Frontiers (Yamauchi, "A Frontier-Based Approach for Autonomous Exploration", CIRA 1997):
-//! known free cells beside unknown ones, where driving up and looking adds to the map.
+//! known free cells beside unknown ones, where driving up and looking adds to the map. On a
+//! planetary rover "known" means judged by the ground sensor too: ground the 2D lidar alone
+//! saw free ([`UNJUDGED`]) may be a crater bowl, so it is explored like unknown ground.
 //! Frontier cells the rover cannot stand on (inscribed in the costmap) are left out, and
 //! 8-connected frontier cells are grouped so each group is one candidate target.
 //! [`FrontierTracker`] finds the same frontiers map after map, examining only what changed.
 
 use crate::costmap::{Costmap, MAX_PASSABLE, OCCUPIED_THRESHOLD};
 use realms_core::{Cell, Grid, GridGeometry, Point2};
+
+/// A map value for ground the 2D lidar saw free but no ground sensor has judged yet: its
+/// beams pass over crater bowls and rocks lower than its plane, so it cannot tell. The
+/// planner drives on it as on free ground; exploration counts it as still to be seen, so a
+/// rover goes to look at it with its depth camera. (Occupancy 1 %: any reader that does not
+/// know the value takes it for free ground.)
+pub const UNJUDGED: i8 = 1;
+
+/// Whether a map value leaves the ground still to be explored: unknown, or only seen free
+/// by the lidar ([`UNJUDGED`]).
+pub fn still_to_explore(v: i8) -> bool {
+    v < 0 || v == UNJUDGED
+}
 
 /// One connected stretch of frontier.
 #[derive(Clone, Debug, PartialEq)]
@@ -14,6 +29,9 @@ pub struct Frontier {
     pub cells: Vec<Cell>,
     /// Their mean position.
     pub centroid: Point2,
+    /// How many of them border unknown ground; the rest border only ground the lidar saw
+    /// ([`UNJUDGED`]), where driving up shows the depth camera's verdict and no new map.
+    pub beside_unknown: usize,
 }
 
 impl Frontier {
@@ -23,9 +41,10 @@ impl Frontier {
     }
 }
 
-/// Every frontier of `map` (-1 unknown, 0..=100 occupancy) with at least `min_cells` cells,
-/// largest first; `costmap` must share the map's geometry. Unknown cells that `seen_by_others`
-/// (per map cell, if given) marks are not worth driving to: a peer has mapped them.
+/// Every frontier of `map` (-1 unknown, 0..=100 occupancy, [`UNJUDGED`]) with at least
+/// `min_cells` cells, largest first; `costmap` must share the map's geometry. Cells still to
+/// explore that `seen_by_others` (per map cell, if given) marks are not worth driving to: a
+/// peer has mapped them.
 ///
 /// This examines every cell; [`FrontierTracker`] gives the same answer examining only what
 /// changed since its last call.
@@ -39,11 +58,12 @@ pub fn detect(
     let inputs = Inputs::new(map, costmap, seen_by_others);
     let flags: Vec<bool> = (0..geo.len()).map(|i| inputs.is_frontier(i)).collect();
     let mut visited = vec![false; geo.len()];
-    group(&geo, &flags, &mut visited, 0..geo.len(), min_cells)
+    group(&inputs, &flags, &mut visited, 0..geo.len(), min_cells)
 }
 
 /// What decides whether a cell is a frontier, borrowed from the caller.
 struct Inputs<'a> {
+    geo: GridGeometry,
     width: usize,
     height: usize,
     map: &'a [i8],
@@ -55,6 +75,7 @@ impl<'a> Inputs<'a> {
     fn new(map: &'a Grid<i8>, costmap: &'a Costmap, seen: Option<&'a [bool]>) -> Self {
         let geo = map.geometry();
         Inputs {
+            geo: *geo,
             width: geo.width,
             height: geo.height,
             map: map.cells(),
@@ -63,22 +84,38 @@ impl<'a> Inputs<'a> {
         }
     }
 
-    /// Unknown, and no peer has mapped it.
+    /// Still to explore, and no peer has mapped it.
     fn open(&self, j: usize) -> bool {
-        self.map[j] < 0 && !self.seen.is_some_and(|s| s[j])
+        still_to_explore(self.map[j]) && !self.seen.is_some_and(|s| s[j])
     }
 
-    /// Known free, passable, and beside open ground (4-connected).
-    fn is_frontier(&self, i: usize) -> bool {
-        if !(0..OCCUPIED_THRESHOLD).contains(&self.map[i]) || self.costs[i] > MAX_PASSABLE {
-            return false;
-        }
+    /// Whether any of cell `i`'s four neighbours satisfies `pred`.
+    fn any_neighbour(&self, i: usize, pred: impl Fn(usize) -> bool) -> bool {
         let (w, h) = (self.width, self.height);
         let (x, y) = (i % w, i / w);
-        (x > 0 && self.open(i - 1))
-            || (x + 1 < w && self.open(i + 1))
-            || (y > 0 && self.open(i - w))
-            || (y + 1 < h && self.open(i + w))
+        (x > 0 && pred(i - 1))
+            || (x + 1 < w && pred(i + 1))
+            || (y > 0 && pred(i - w))
+            || (y + 1 < h && pred(i + w))
+    }
+
+    /// Beside unknown ground no peer has mapped (4-connected).
+    fn beside_unknown(&self, i: usize) -> bool {
+        self.any_neighbour(i, |j| self.map[j] < 0 && !self.seen.is_some_and(|s| s[j]))
+    }
+
+    /// Known free, passable, and beside open ground (4-connected): judged ground beside
+    /// unknown or unjudged ground, unjudged ground beside unknown ground.
+    fn is_frontier(&self, i: usize) -> bool {
+        let v = self.map[i];
+        if !(0..OCCUPIED_THRESHOLD).contains(&v) || self.costs[i] > MAX_PASSABLE {
+            return false;
+        }
+        if v == UNJUDGED {
+            self.beside_unknown(i)
+        } else {
+            self.any_neighbour(i, |j| self.open(j))
+        }
     }
 }
 
@@ -87,13 +124,13 @@ impl<'a> Inputs<'a> {
 /// each group is walked from its lowest cell whichever caller asks. `visited` (one per cell,
 /// all false) is scratch, left all false again.
 fn group(
-    geo: &GridGeometry,
+    inputs: &Inputs,
     flags: &[bool],
     visited: &mut [bool],
     seeds: impl Iterator<Item = usize>,
     min_cells: usize,
 ) -> Vec<Frontier> {
-    let (w, h) = (geo.width, geo.height);
+    let (w, h) = (inputs.width, inputs.height);
     let mut walked = Vec::new();
     let mut out = Vec::new();
     let mut stack = Vec::new();
@@ -130,13 +167,18 @@ fn group(
         if cells.len() >= min_cells {
             let n = cells.len() as f64;
             let (sx, sy) = cells.iter().fold((0.0, 0.0), |(sx, sy), c| {
-                let p = geo.cell_center(*c);
+                let p = inputs.geo.cell_center(*c);
                 (sx + p.x_m, sy + p.y_m)
             });
             cells.sort();
+            let beside_unknown = cells
+                .iter()
+                .filter(|c| inputs.beside_unknown(c.y * w + c.x))
+                .count();
             out.push(Frontier {
                 cells,
                 centroid: Point2::new(sx / n, sy / n),
+                beside_unknown,
             });
         }
     }
@@ -228,8 +270,9 @@ impl FrontierTracker {
                 for i in r {
                     let (m, c, s) = (inputs.map[i], inputs.costs[i], seen[i]);
                     let own = m != self.map[i] || c != self.costs[i];
-                    let was_open = self.map[i] < 0 && !self.seen[i];
-                    let neighbours = was_open != (m < 0 && !s);
+                    // The neighbours' flags depend on whether this cell is unknown or
+                    // unjudged, and on whether a peer has seen it.
+                    let neighbours = m != self.map[i] || s != self.seen[i];
                     // Kept even where it changes nothing (peers' coverage of known ground),
                     // so the run compares equal next time.
                     self.seen[i] = s;
@@ -238,8 +281,8 @@ impl FrontierTracker {
                     }
                     self.map[i] = m;
                     self.costs[i] = c;
-                    // A cell's flag depends on its own state and on whether its four
-                    // neighbours are open; a change of openness touches their flags.
+                    // A cell's flag depends on its own state and on its four neighbours'
+                    // values and coverage; a change of those touches their flags.
                     let (x, y) = (i % w, i / w);
                     let mut touch = |j: usize| {
                         examined += 1;
@@ -277,7 +320,7 @@ impl FrontierTracker {
         });
         self.listed.sort_unstable();
         group(
-            &geo,
+            &inputs,
             &self.flags,
             &mut self.visited,
             self.listed.iter().copied(),
@@ -287,7 +330,7 @@ impl FrontierTracker {
 }
 
 /// The map coarsened `factor` times: a coarse cell is known where at least half its cells
-/// are (what a rover tells its peers it has seen).
+/// are known and not [`still_to_explore`] (what a rover tells its peers it has seen).
 pub fn coarse_known(map: &Grid<i8>, factor: usize) -> Grid<bool> {
     let f = factor.max(1);
     let g = *map.geometry();
@@ -305,7 +348,7 @@ pub fn coarse_known(map: &Grid<i8>, factor: usize) -> Grid<bool> {
             for y in cy * f..((cy + 1) * f).min(g.height) {
                 for x in cx * f..((cx + 1) * f).min(g.width) {
                     all += 1;
-                    known += usize::from(v[y * g.width + x] >= 0);
+                    known += usize::from(!still_to_explore(v[y * g.width + x]));
                 }
             }
             cells.push(2 * known >= all);
@@ -354,6 +397,45 @@ mod tests {
         assert!(f.cells.iter().all(|c| c.x == 29), "{:?}", f.cells);
         assert_eq!(f.cells.len(), 40 - 4);
         assert!((f.centroid.x_m - 2.95).abs() < 1e-9);
+    }
+
+    #[test]
+    fn ground_only_the_lidar_saw_is_explored_until_judged() {
+        // Columns 0-9 judged free, 10-29 only seen free by the lidar, 30-59 unknown.
+        let mut map = map_with(0..30, 0..40, UNJUDGED);
+        for y in 0..40 {
+            for x in 0..10 {
+                *map.get_mut(x, y).expect("inside") = 0;
+            }
+        }
+        let cm = Costmap::from_map(&map, &CostmapConfig::default());
+        let mut frontiers = detect(&map, &cm, 8, None);
+        frontiers.sort_by_key(|f| f.cells[0].x);
+        assert_eq!(frontiers.len(), 2, "{frontiers:?}");
+        // The judged edge faces unjudged ground: no new map there, only the ground's verdict.
+        assert!(frontiers[0].cells.iter().all(|c| c.x == 9));
+        assert_eq!(frontiers[0].beside_unknown, 0);
+        // The lidar's edge faces unknown ground, judged or not.
+        assert!(frontiers[1].cells.iter().all(|c| c.x == 29));
+        assert_eq!(frontiers[1].beside_unknown, 40);
+        // Once all of it is judged, only the edge to the unknown is left.
+        let judged = map_with(0..30, 0..40, 0);
+        let cm = Costmap::from_map(&judged, &CostmapConfig::default());
+        let frontiers = detect(&judged, &cm, 8, None);
+        assert_eq!(frontiers.len(), 1);
+        assert!(frontiers[0].cells.iter().all(|c| c.x == 29));
+        // A peer that judged the unjudged part takes the judged edge away too.
+        let peer = coarse_known(&map_with(0..60, 0..40, 0), 5);
+        let seen: Vec<bool> = map
+            .iter()
+            .map(|(c, _)| {
+                *peer
+                    .at_world(map.geometry().cell_center(c))
+                    .expect("same extent")
+            })
+            .collect();
+        let cm = Costmap::from_map(&map, &CostmapConfig::default());
+        assert!(detect(&map, &cm, 8, Some(&seen)).is_empty());
     }
 
     #[test]

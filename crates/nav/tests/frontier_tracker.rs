@@ -21,7 +21,7 @@ fn step() -> impl Strategy<Value = Step> {
         0usize..40,
         1usize..20,
         1usize..20,
-        prop::sample::select(vec![-1i8, 0, 0, 0, 30, 90, 100]),
+        prop::sample::select(vec![-1i8, 0, 0, 0, 1, 1, 30, 90, 100]),
     );
     (
         prop::bool::weighted(0.1),

@@ -5,9 +5,14 @@
 //! the tiles around the rover change. So a layer is kept between calls and redrawn only in
 //! the tiles where the SLAM map changed state ([`LiveView::changed_since`]) or the hazard
 //! layer did.
+//!
+//! The planner's layer also tells ground the lidar alone saw free from ground the depth
+//! camera judged ([`UNJUDGED`]), so exploration goes on until the rover has looked at the
+//! ground it will report as safe; the published map keeps the ROS values.
 
 use realms_core::msgs::OccupancyGrid;
 use realms_core::{CentreLookup, Grid, GridGeometry};
+use realms_nav::frontier::UNJUDGED;
 use realms_slam::assembly::{LIVE_TILE_CELLS, LiveView};
 use realms_slam::occupancy::CellState;
 
@@ -15,6 +20,8 @@ use realms_slam::occupancy::CellState;
 #[derive(Clone, Debug)]
 pub struct TiledLayer {
     factor: usize,
+    /// Whether ground only the lidar saw free is drawn [`UNJUDGED`] rather than free.
+    mark_unjudged: bool,
     drawn: Option<Drawn>,
 }
 
@@ -37,7 +44,17 @@ impl TiledLayer {
         }
         TiledLayer {
             factor: f,
+            mark_unjudged: false,
             drawn: None,
+        }
+    }
+
+    /// The same layer, drawing ground only the lidar saw free as [`UNJUDGED`] (the
+    /// planner's layer).
+    pub fn marking_unjudged(self) -> Self {
+        TiledLayer {
+            mark_unjudged: true,
+            ..self
         }
     }
 
@@ -49,7 +66,7 @@ impl TiledLayer {
     /// The layer drawn from `view` and `hazards`, redrawn only where either changed since
     /// the last call: a cell is an obstacle if any of its SLAM cells is, else hazard if the
     /// hazard layer says so at its centre, else free if any SLAM cell (or the depth camera)
-    /// saw it free, else unknown.
+    /// saw it free (unjudged, if so marked, where only the lidar did), else unknown.
     pub fn refresh(&mut self, view: &LiveView, hazards: Grid<CellState>) -> &Grid<i8> {
         let f = self.factor;
         let g = view.geometry;
@@ -82,7 +99,13 @@ impl TiledLayer {
                     _ => true,
                 };
                 if stale {
-                    draw_tile(&mut grid, view, &hazards, &lookup, f, fine);
+                    let source = Source {
+                        view,
+                        hazards: &hazards,
+                        lookup: &lookup,
+                        mark_unjudged: self.mark_unjudged,
+                    };
+                    draw_tile(&mut grid, &source, f, fine);
                 }
             }
         }
@@ -96,15 +119,23 @@ impl TiledLayer {
     }
 }
 
+/// What a layer is drawn from.
+struct Source<'a> {
+    view: &'a LiveView<'a>,
+    hazards: &'a Grid<CellState>,
+    /// Where each layer cell's centre lies in `hazards`.
+    lookup: &'a CentreLookup,
+    mark_unjudged: bool,
+}
+
 /// Redraws the layer's cells inside SLAM cells `[x0, x1) x [y0, y1)` (`fine`).
-fn draw_tile(
-    grid: &mut Grid<i8>,
-    view: &LiveView,
-    hazards: &Grid<CellState>,
-    lookup: &CentreLookup,
-    f: usize,
-    fine: [usize; 4],
-) {
+fn draw_tile(grid: &mut Grid<i8>, source: &Source, f: usize, fine: [usize; 4]) {
+    let Source {
+        view,
+        hazards,
+        lookup,
+        mark_unjudged,
+    } = *source;
     let [x0, y0, x1, y1] = fine;
     let geo = *grid.geometry();
     let source_width = view.geometry.width;
@@ -119,8 +150,11 @@ fn draw_tile(
                     free |= *c == CellState::Free;
                 }
             }
-            grid.cells_mut()[cy * geo.width + cx] =
-                cell_value(occupied, hazard_at(hazards, lookup, cx, cy), free);
+            let hazard = hazard_at(hazards, lookup, cx, cy);
+            grid.cells_mut()[cy * geo.width + cx] = match cell_value(occupied, hazard, free) {
+                OccupancyGrid::FREE if mark_unjudged && hazard.is_none() => UNJUDGED,
+                v => v,
+            };
         }
     }
 }
@@ -219,6 +253,43 @@ mod tests {
             }
         }
         g
+    }
+
+    #[test]
+    fn the_planners_layer_tells_ground_only_the_lidar_saw_from_judged_ground() {
+        let mut asm = Assembly::new(0.05);
+        let mut sub = LogOdds::new(0.05);
+        let sensor = Point2::new(0.0123, 0.0271);
+        let scan = beams(sensor);
+        sub.insert(sensor, &scan);
+        asm.trace(&[(0, Pose2::IDENTITY)], sensor, &scan);
+        let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+        // The depth camera judged the ground east of x = 0 safe and has not seen the west.
+        let mut judged = hazards(&[]);
+        let geo = *judged.geometry();
+        for (i, c) in judged.cells_mut().iter_mut().enumerate() {
+            if geo
+                .cell_center(realms_core::Cell {
+                    x: i % geo.width,
+                    y: i / geo.width,
+                })
+                .x_m
+                < 0.0
+            {
+                *c = CellState::Unknown;
+            }
+        }
+        let planner = TiledLayer::new(2)
+            .marking_unjudged()
+            .refresh(&view, judged.clone())
+            .clone();
+        let published = TiledLayer::new(2).refresh(&view, judged).clone();
+        let at = |g: &Grid<i8>, x: f64| *g.at_world(Point2::new(x, 0.55)).expect("inside");
+        assert_eq!(at(&planner, -1.05), UNJUDGED);
+        assert_eq!(at(&planner, 1.05), OccupancyGrid::FREE);
+        // The published map keeps the ROS values: free either way.
+        assert_eq!(at(&published, -1.05), OccupancyGrid::FREE);
+        assert_eq!(at(&published, 1.05), OccupancyGrid::FREE);
     }
 
     #[test]

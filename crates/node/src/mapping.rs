@@ -500,14 +500,16 @@ impl Mapping {
     /// The map at `factor` times the SLAM resolution (a power of two up to
     /// [`LIVE_TILE_CELLS`](realms_slam::assembly::LIVE_TILE_CELLS)), for navigation: a cell
     /// is an obstacle if any of its SLAM cells is, else hazard if the hazard layer says so at
-    /// its centre, else free if any SLAM cell (or the depth camera) saw it free, else unknown.
+    /// its centre, else free if the depth camera judged it safe, else
+    /// [`UNJUDGED`](realms_nav::frontier::UNJUDGED) if any SLAM cell saw it free, else
+    /// unknown.
     pub fn nav_map(&mut self, factor: usize) -> Grid<i8> {
         let hazards = self.hazard_states();
         let layer = self
             .planner_layer
             .take()
             .filter(|l| l.factor() == TiledLayer::new(factor).factor())
-            .unwrap_or_else(|| TiledLayer::new(factor));
+            .unwrap_or_else(|| TiledLayer::new(factor).marking_unjudged());
         let view = self.mapper.live_map();
         let layer = self.planner_layer.insert(layer);
         layer.refresh(&view, hazards).clone()

@@ -17,7 +17,7 @@ use realms_core::msgs::ExploredArea;
 use realms_core::{Cell, CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
-use realms_nav::frontier::FrontierTracker;
+use realms_nav::frontier::{FrontierTracker, still_to_explore};
 use realms_nav::planner::{PlannerConfig, smooth};
 use realms_nav::{Costmap, CostmapConfig, Planner};
 use std::collections::{BTreeMap, VecDeque};
@@ -335,7 +335,7 @@ impl Navigator {
         let mut seen = vec![false; geo.len()];
         for (y, row) in map.cells().chunks(geo.width).enumerate() {
             for (x, v) in row.iter().enumerate() {
-                seen[y * geo.width + x] = *v < 0
+                seen[y * geo.width + x] = still_to_explore(*v)
                     && lookups
                         .iter()
                         .any(|(a, l)| l.index(x, y).is_some_and(|i| a.is_known_at(i)));
@@ -365,7 +365,8 @@ impl Navigator {
         self.costmap = Some(costmap);
     }
 
-    /// A fresh map (-1 unknown, 0 free, 90 hazard, 100 obstacle) with the rover at `pose`:
+    /// A fresh map (-1 unknown, 0 free, 1 free but unjudged, 90 hazard, 100 obstacle) with
+    /// the rover at `pose`:
     /// revises the goal and the path.
     pub fn on_map(&mut self, now: Time, map: &Grid<i8>, pose: Pose2) {
         self.next_map = now + self.cfg.replan_period;
@@ -507,10 +508,15 @@ impl Navigator {
         self.costmap = Some(costmap);
     }
 
-    /// Whether `map` has not grown by [`NavigationConfig::stall_growth_m2`] for the stall
-    /// window: no frontier is then worth a drive until it grows again.
+    /// Whether the explored part of `map` (known, and judged where the lidar alone saw it)
+    /// has not grown by [`NavigationConfig::stall_growth_m2`] for the stall window: no
+    /// frontier is then worth a drive until it grows again.
     fn stalled(&mut self, now: Time, map: &Grid<i8>) -> bool {
-        let known = map.cells().iter().filter(|v| **v >= 0).count();
+        let known = map
+            .cells()
+            .iter()
+            .filter(|v| !still_to_explore(**v))
+            .count();
         let r = map.geometry().resolution_m;
         let step = (self.cfg.stall_growth_m2 / (r * r)).ceil() as usize;
         let since = match self.grown {

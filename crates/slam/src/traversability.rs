@@ -50,6 +50,9 @@ impl Default for TraversabilityConfig {
 const FLOOR_REACH_M: f64 = 0.25;
 /// Height differences up to this are depth noise, not slope, metres.
 const SLOPE_NOISE_M: f64 = 0.02;
+/// The ground a hidden stretch is compared with lies this far in front of it, metres: past
+/// a rock's top or a crater's rim, back to the floor they stand on.
+pub const GROUND_BEFORE_GAP_M: f64 = 1.0;
 
 #[derive(Clone, Copy, Debug, Default)]
 struct Column {
@@ -146,8 +149,11 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
 /// Negative obstacles: the ground the camera cannot see behind a crater's rim. Along each
 /// image column (`columns[c]`: that column's points in the levelled frame, any order), the
 /// ground points are walked outwards; where they stop and resume more than `min_gap_m`
-/// farther out *and lower*, the ground in between dropped out of sight, and every cell of the
-/// gap is judged hazardous. A rise (a rock's shadow) is left to [`judge_frame`].
+/// farther out *and lower than the ground before the gap* (the lowest point within
+/// [`GROUND_BEFORE_GAP_M`] of its near end), the ground in between dropped out of sight, and
+/// every cell of the gap is judged hazardous. A rock hides the ground behind it too, but
+/// there the ground resumes at the height of the ground in front of it, only lower than the
+/// rock's top: that shadow is left to [`judge_frame`].
 pub fn shadow_gaps(
     columns: &[Vec<[f64; 3]>],
     cfg: &TraversabilityConfig,
@@ -162,9 +168,17 @@ pub fn shadow_gaps(
             .filter(|(d, _)| *d <= cfg.max_range_m)
             .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for w in pts.windows(2) {
+        for (k, w) in pts.windows(2).enumerate() {
             let ((d0, near), (d1, far)) = (w[0], w[1]);
-            if d1 - d0 < min_gap_m || far[2] > near[2] - cfg.max_step_m {
+            if d1 - d0 < min_gap_m {
+                continue;
+            }
+            let ground_before = pts[..=k]
+                .iter()
+                .rev()
+                .take_while(|(d, _)| *d >= d0 - GROUND_BEFORE_GAP_M)
+                .fold(near[2], |low, (_, p)| low.min(p[2]));
+            if far[2] > ground_before - cfg.max_step_m {
                 continue;
             }
             // Cells along the hidden stretch, at the resolution of the layer.
@@ -385,12 +399,20 @@ mod tests {
             "{v:?}"
         );
         assert!(v.iter().all(|(p, _)| p.x_m > 2.0 && p.x_m < 3.6));
-        // The same gap with the far ground at the same height (a rock's shadow on the
-        // floor, or just sparse points): nothing.
+        // The same gap with the far ground at the same height (sparse points): nothing.
         for p in col.iter_mut().skip(20) {
             p[2] = 0.0;
         }
-        assert!(shadow_gaps(&[col], &cfg, 0.5).is_empty());
+        assert!(shadow_gaps(&[col.clone()], &cfg, 0.5).is_empty());
+        // A rock 15 cm tall ends the near stretch: its top is higher than the ground that
+        // resumes beyond its shadow, but that ground is the floor in front of it.
+        col.extend((0..3).map(|k| [2.0 + k as f64 * 0.08, 0.0, 0.15]));
+        assert!(shadow_gaps(&[col.clone()], &cfg, 0.5).is_empty());
+        // Behind a raised rim the ground resumes lower than the floor: a hazard again.
+        for p in col.iter_mut().skip(20).take(4) {
+            p[2] = -0.12;
+        }
+        assert!(shadow_gaps(&[col], &cfg, 0.5).iter().any(|(_, h)| *h));
     }
 
     #[test]
