@@ -34,13 +34,6 @@ pub struct Frontier {
     pub beside_unknown: usize,
 }
 
-impl Frontier {
-    /// Its length, metres (cells times the cell edge, near enough for ranking).
-    pub fn length_m(&self, resolution_m: f64) -> f64 {
-        self.cells.len() as f64 * resolution_m
-    }
-}
-
 /// Every frontier of `map` (-1 unknown, 0..=100 occupancy, [`UNJUDGED`]) with at least
 /// `min_cells` cells, largest first; `costmap` must share the map's geometry. Cells still to
 /// explore that `seen_by_others` (per map cell, if given) marks are not worth driving to: a
@@ -64,8 +57,6 @@ pub fn detect(
 /// What decides whether a cell is a frontier, borrowed from the caller.
 struct Inputs<'a> {
     geo: GridGeometry,
-    width: usize,
-    height: usize,
     map: &'a [i8],
     costs: &'a [u8],
     seen: Option<&'a [bool]>,
@@ -76,8 +67,6 @@ impl<'a> Inputs<'a> {
         let geo = map.geometry();
         Inputs {
             geo: *geo,
-            width: geo.width,
-            height: geo.height,
             map: map.cells(),
             costs: costmap.costs(),
             seen,
@@ -91,7 +80,7 @@ impl<'a> Inputs<'a> {
 
     /// Whether any of cell `i`'s four neighbours satisfies `pred`.
     fn any_neighbour(&self, i: usize, pred: impl Fn(usize) -> bool) -> bool {
-        let (w, h) = (self.width, self.height);
+        let (w, h) = (self.geo.width, self.geo.height);
         let (x, y) = (i % w, i / w);
         (x > 0 && pred(i - 1))
             || (x + 1 < w && pred(i + 1))
@@ -130,7 +119,7 @@ fn group(
     seeds: impl Iterator<Item = usize>,
     min_cells: usize,
 ) -> Vec<Frontier> {
-    let (w, h) = (inputs.width, inputs.height);
+    let (w, h) = (inputs.geo.width, inputs.geo.height);
     let mut walked = Vec::new();
     let mut out = Vec::new();
     let mut stack = Vec::new();
