@@ -73,9 +73,14 @@ impl<'a> Inputs<'a> {
         }
     }
 
+    /// Whether a peer has mapped cell `j`.
+    fn seen_by_peer(&self, j: usize) -> bool {
+        self.seen.is_some_and(|s| s[j])
+    }
+
     /// Still to explore, and no peer has mapped it.
     fn open(&self, j: usize) -> bool {
-        still_to_explore(self.map[j]) && !self.seen.is_some_and(|s| s[j])
+        still_to_explore(self.map[j]) && !self.seen_by_peer(j)
     }
 
     /// Whether any of cell `i`'s four neighbours satisfies `pred`.
@@ -90,7 +95,7 @@ impl<'a> Inputs<'a> {
 
     /// Beside unknown ground no peer has mapped (4-connected).
     fn beside_unknown(&self, i: usize) -> bool {
-        self.any_neighbour(i, |j| self.map[j] < 0 && !self.seen.is_some_and(|s| s[j]))
+        self.any_neighbour(i, |j| self.map[j] < 0 && !self.seen_by_peer(j))
     }
 
     /// Known free, passable, and beside open ground (4-connected): judged ground beside
