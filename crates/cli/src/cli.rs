@@ -161,6 +161,34 @@ pub enum BenchCommand {
     Merge(BenchMergeArgs),
     /// Slip bursts during whole missions: how soon they are reported, false alarms, the pose after.
     Slip(BenchSlipArgs),
+    /// The rovers' SLAM replayed on a mission's captured sensor input: error against the truth and cost, per variant.
+    Slam(BenchSlamArgs),
+}
+
+/// `realms bench slam`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchSlamArgs {
+    /// Missions, one per seed.
+    #[arg(long, default_value_t = 3)]
+    pub seeds: u64,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub first_seed: u64,
+    /// Length of each mission, e.g. `10m`.
+    #[arg(long, default_value = "10m")]
+    pub duration: String,
+    /// SLAM variants to replay beside the setup as it is (repeat the flag for several).
+    #[arg(long)]
+    pub variant: Vec<String>,
+    /// Drop the scenario's scheduled faults (slip bursts, sensor dropouts, power loss).
+    #[arg(long)]
+    pub no_faults: bool,
+    /// Seeds run at once (default: one per core).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
 }
 
 /// `realms bench slip`.

@@ -11,6 +11,7 @@ mod bench;
 mod bench_merge;
 mod bench_nav;
 mod bench_net;
+mod bench_slam;
 mod bench_slip;
 mod cli;
 mod merge;

@@ -81,6 +81,44 @@ impl Default for MissionOptions {
     }
 }
 
+/// The on-board SLAM setup of `world`'s rovers in a mission run with `options`.
+pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingConfig {
+    let spec = &world.scenario().rovers;
+    let base_from_optical = world.base_from_optical();
+    MappingConfig {
+        lidar_x_m: spec.lidar.mount_x_m,
+        lidar_height_m: spec.lidar.mount_height_m,
+        ground_clearance_m: GROUND_CLEARANCE_M,
+        mapper: rover_mapper_config(),
+        map_period: MAP_PERIOD,
+        delta_period: MAP_DELTA_PERIOD,
+        gyro_calibration: options.gyro_calibration,
+        depth_rot: base_from_optical.rot,
+        depth_origin_m: base_from_optical.origin,
+        traversability: TraversabilityConfig {
+            max_step_m: spec.max_step_m,
+            max_slope_rad: spec.max_slope_deg.to_radians(),
+            ..TraversabilityConfig::default()
+        },
+    }
+}
+
+/// A sensor message a rover's SLAM took in, kept with the rover's true pose when the
+/// simulator published it, so SLAM can be run again on exactly the same input
+/// ([`Mission::capture_slam_inputs`]).
+#[derive(Clone, Debug)]
+pub struct CapturedInput {
+    /// When it was published.
+    pub t: Time,
+    /// The rover's true pose then, arena frame.
+    pub truth: realms_core::Pose2,
+    /// A scan, odometry, IMU reading or depth frame.
+    pub message: Message,
+}
+
+/// The topics whose messages feed a rover's SLAM.
+const SLAM_INPUTS: [&str; 4] = ["scan", "odom", "imu", "depth/points"];
+
 /// One sampled true pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseSample {
@@ -115,6 +153,8 @@ pub struct Mission {
     /// Each rover's map updates to the ground.
     downlink: Vec<MapDownlink>,
     next_net_stats: Time,
+    /// Each rover's SLAM input, once asked for ([`Mission::capture_slam_inputs`]).
+    capture: Option<Vec<Vec<CapturedInput>>>,
 }
 
 /// A rover's map updates on their way to the ground, for the report.
@@ -161,22 +201,7 @@ impl Mission {
                     // ground the map calls drivable.
                     max_drop_m: TraversabilityConfig::default().max_drop_m,
                 };
-                let mapping = MappingConfig {
-                    lidar_x_m: spec.lidar.mount_x_m,
-                    lidar_height_m: spec.lidar.mount_height_m,
-                    ground_clearance_m: GROUND_CLEARANCE_M,
-                    mapper: rover_mapper_config(),
-                    map_period: MAP_PERIOD,
-                    delta_period: MAP_DELTA_PERIOD,
-                    gyro_calibration: options.gyro_calibration,
-                    depth_rot: base_from_optical.rot,
-                    depth_origin_m: base_from_optical.origin,
-                    traversability: TraversabilityConfig {
-                        max_step_m: spec.max_step_m,
-                        max_slope_rad: spec.max_slope_deg.to_radians(),
-                        ..TraversabilityConfig::default()
-                    },
-                };
+                let mapping = rover_mapping_config(&world, &options);
                 let mut navigation = NavigationConfig::new(body.pose.position());
                 navigation.follower.max_speed_m_s = 0.3_f64.min(spec.max_speed_m_s);
                 navigation.follower.max_yaw_rate_rad_s = 0.8_f64.min(spec.max_yaw_rate_rad_s);
@@ -244,6 +269,7 @@ impl Mission {
             downlink: vec![MapDownlink::default(); n_rovers],
             next_net_stats: Time::ZERO,
             nav_log: vec![Vec::new(); n_rovers],
+            capture: None,
         };
         mission.update_camera_wants();
         mission
@@ -308,8 +334,42 @@ impl Mission {
         self.run_network(end);
     }
 
+    /// Keeps every sensor message the rovers' SLAM takes in from now on, with the true pose
+    /// at the time (see [`Mission::take_capture`]). Depth frames make this about 0.5 MB per
+    /// simulated second for three rovers.
+    pub fn capture_slam_inputs(&mut self) {
+        self.capture
+            .get_or_insert_with(|| vec![Vec::new(); self.slam.len()]);
+    }
+
+    /// Each rover's captured SLAM input so far, in the order it was delivered (empty lists
+    /// without [`Mission::capture_slam_inputs`]).
+    pub fn take_capture(&mut self) -> Vec<Vec<CapturedInput>> {
+        self.capture
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_else(|| vec![Vec::new(); self.slam.len()])
+    }
+
     /// What the world published, each message from the rover whose sensor made it.
     fn take_world_messages(&mut self) -> Vec<(NodeAddr, Topic, Message)> {
+        if let Some(capture) = &mut self.capture {
+            for (topic, message) in &self.published {
+                let Some(rover) = topic.rover() else { continue };
+                if !SLAM_INPUTS.contains(&topic.leaf()) {
+                    continue;
+                }
+                if let Some((i, body)) =
+                    self.world.rovers().enumerate().find(|(_, b)| b.id == rover)
+                {
+                    capture[i].push(CapturedInput {
+                        t: self.world.now(),
+                        truth: body.pose,
+                        message: message.clone(),
+                    });
+                }
+            }
+        }
         std::mem::take(&mut self.published)
             .into_iter()
             .map(|(topic, message)| {

@@ -1,0 +1,266 @@
+//! `realms bench slam`: the rovers' SLAM run again on exactly what their sensors gave in a
+//! mission, graded against the truth, and timed on its own.
+//!
+//! A mission's SLAM steers its rover, so two missions with different SLAM drive different
+//! paths, and a change's effect on the error drowns in the chaos of exploration (single runs
+//! move by a factor of two either way, BENCHMARKS.md). Here each seed's mission is run once
+//! with its sensor messages captured ([`Mission::capture_slam_inputs`]); then every SLAM
+//! variant asked for is fed the same messages in the same order, so differences between
+//! variants are SLAM's alone. The wall time of each replay is SLAM's cost alone too (the
+//! mission's own figure also counts drawing the planner's map).
+
+use crate::bench::{in_parallel, median};
+use crate::cli::BenchSlamArgs;
+use crate::mission::{load_scenario, parse_duration_s};
+use anyhow::{Result, bail};
+use realms_core::msgs::{LocalisationState, Message};
+use realms_core::{Duration, Pose2, RoverId, Time};
+use realms_mission::{CapturedInput, Mission, MissionOptions, rover_mapping_config};
+use realms_node::mapping::{Mapping, MappingConfig};
+use realms_sim::World;
+use std::time::Instant;
+
+/// A named change to the rovers' SLAM setup, compared against the setup as it is.
+struct Variant {
+    name: &'static str,
+    what: &'static str,
+    apply: fn(&mut MappingConfig),
+}
+
+/// The variants `--variant` may name (the setup as it is, `baseline`, always runs).
+const VARIANTS: &[Variant] = &[
+    Variant {
+        name: "no-loop-closure",
+        what: "no closure search (tracking against submaps only)",
+        apply: |c| c.mapper.loop_candidates = 0,
+    },
+    Variant {
+        name: "no-densify",
+        what: "scans not filled in between beams",
+        apply: |c| c.mapper.frontend.densify = None,
+    },
+];
+
+/// One rover's replay under one variant.
+#[derive(Clone, Debug)]
+struct Replay {
+    seed: u64,
+    rover: RoverId,
+    variant: &'static str,
+    /// Position error of the pose as tracked at each scan, RMS, metres.
+    online_rms_m: f64,
+    /// ... of the final trajectory (after every closure), RMS and worst, metres.
+    final_rms_m: f64,
+    final_max_m: f64,
+    /// Heading error of the final trajectory, RMS, degrees.
+    final_heading_deg: f64,
+    /// Times the rover declared itself lost.
+    lost: usize,
+    /// Simulated seconds of input and SLAM's wall seconds on them.
+    sim_s: f64,
+    wall_s: f64,
+}
+
+/// Runs SLAM for one rover over its captured input.
+fn replay(
+    seed: u64,
+    rover: RoverId,
+    variant: &'static str,
+    cfg: &MappingConfig,
+    input: &[CapturedInput],
+) -> Replay {
+    let mut mapping = Mapping::new(rover, cfg.clone());
+    let mut out = Vec::new();
+    // Each scan's time, true pose and pose as tracked.
+    let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
+    let mut lost = 0;
+    let mut was_lost = false;
+    let started = Instant::now();
+    for c in input {
+        match &c.message {
+            Message::LaserScan(scan) => {
+                mapping.on_scan(scan, &mut out);
+                out.clear();
+                scans.push((scan.header.stamp.as_secs_f64(), c.truth, mapping.pose()));
+                let is_lost = mapping.state() == LocalisationState::Lost;
+                lost += usize::from(is_lost && !was_lost);
+                was_lost = is_lost;
+            }
+            Message::Odometry(odom) => mapping.on_odometry(odom),
+            Message::Imu(imu) => mapping.on_imu(imu),
+            Message::PointCloud(cloud) => mapping.on_depth(cloud),
+            _ => {}
+        }
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    let rms = |errors: &[f64]| {
+        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt()
+    };
+    let online: Vec<f64> = scans
+        .iter()
+        .map(|(_, truth, est)| est.position().distance_m(truth.position()))
+        .collect();
+    // The final trajectory has a pose for every scan SLAM took (not those before the first
+    // odometry), in the same order.
+    let truth_at = |t: f64| {
+        let k = scans.partition_point(|s| s.0 < t);
+        scans.get(k).filter(|s| s.0 == t).map(|s| s.1)
+    };
+    let (mut final_pos, mut final_yaw) = (Vec::new(), Vec::new());
+    for s in mapping.trajectory() {
+        if let Some(truth) = truth_at(s.timestamp_s) {
+            final_pos.push(s.pose.position().distance_m(truth.position()));
+            final_yaw.push(
+                realms_core::geometry::normalize_angle_rad(s.pose.yaw_rad - truth.yaw_rad)
+                    .to_degrees(),
+            );
+        }
+    }
+    let sim_s = match (input.first(), input.last()) {
+        (Some(a), Some(b)) => (b.t - a.t).as_secs_f64(),
+        _ => 0.0,
+    };
+    Replay {
+        seed,
+        rover,
+        variant,
+        online_rms_m: rms(&online),
+        final_rms_m: rms(&final_pos),
+        final_max_m: final_pos.iter().copied().fold(0.0, f64::max),
+        final_heading_deg: rms(&final_yaw),
+        lost,
+        sim_s,
+        wall_s,
+    }
+}
+
+pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
+    let (base, source) = load_scenario(args.scenario.as_deref())?;
+    let limit_s = parse_duration_s(&args.duration)?;
+    let mut variants: Vec<&Variant> = Vec::new();
+    for name in &args.variant {
+        match VARIANTS.iter().find(|v| v.name == name) {
+            Some(v) => variants.push(v),
+            None => bail!(
+                "unknown variant `{name}`; known: {}",
+                VARIANTS
+                    .iter()
+                    .map(|v| v.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+    let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
+    let workers = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    println!("# realms bench slam");
+    println!();
+    println!(
+        "scenario: {source}, {} rovers; seeds {}..{}; missions of {:.0} min{}, ideal communication; each rover's SLAM replayed on the mission's captured sensor input; {workers} seeds at a time; machine: {}",
+        base.rovers.count,
+        args.first_seed,
+        args.first_seed + args.seeds,
+        limit_s / 60.0,
+        if args.no_faults {
+            ", no faults"
+        } else {
+            ", the scenario's faults"
+        },
+        crate::bench::machine()
+    );
+    for v in &variants {
+        println!("variant {}: {}", v.name, v.what);
+    }
+    println!();
+    let results = in_parallel(&seeds, workers, |&seed| {
+        let mut s = base.clone();
+        s.seed = seed;
+        s.duration_s = limit_s;
+        if args.no_faults {
+            s.faults.clear();
+        }
+        let options = MissionOptions {
+            ideal_comms: true,
+            ..MissionOptions::default()
+        };
+        let world = World::new(&s);
+        let cfg = rover_mapping_config(&world, &options);
+        let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
+        let mut mission = Mission::with_options(world, options);
+        mission.capture_slam_inputs();
+        let end = Time::from_secs_f64(limit_s);
+        while mission.now() < end {
+            mission.run_until((mission.now() + Duration::from_secs(30)).min(end));
+        }
+        let capture = mission.take_capture();
+        drop(mission);
+        let mut replays = Vec::new();
+        for (id, input) in ids.iter().zip(&capture) {
+            replays.push(replay(seed, *id, "baseline", &cfg, input));
+            for v in &variants {
+                let mut changed = cfg.clone();
+                (v.apply)(&mut changed);
+                replays.push(replay(seed, *id, v.name, &changed, input));
+            }
+        }
+        replays
+    });
+    let mut all: Vec<Replay> = results.into_iter().flatten().collect();
+    all.sort_by_key(|r| (r.seed, r.rover.0));
+    println!(
+        "| seed | rover | variant | tracked RMS | final RMS | final max | final heading RMS | lost | SLAM speed |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for r in &all {
+        println!(
+            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {:.0}x |",
+            r.seed,
+            r.rover,
+            r.variant,
+            r.online_rms_m,
+            r.final_rms_m,
+            r.final_max_m,
+            r.final_heading_deg,
+            r.lost,
+            r.sim_s / r.wall_s.max(1e-9)
+        );
+    }
+    println!();
+    println!(
+        "| variant | final RMS, median rover | final RMS, worst rover per seed (median) | tracked RMS, median rover | fleet SLAM speed, median seed (sim s / wall s of all rovers) |"
+    );
+    println!("| --- | --- | --- | --- | --- |");
+    let names: Vec<&str> = std::iter::once("baseline")
+        .chain(variants.iter().map(|v| v.name))
+        .collect();
+    for name in names {
+        let of: Vec<&Replay> = all.iter().filter(|r| r.variant == name).collect();
+        let worst: Vec<f64> = seeds
+            .iter()
+            .map(|s| {
+                of.iter()
+                    .filter(|r| r.seed == *s)
+                    .map(|r| r.final_rms_m)
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        let fleet_speed: Vec<f64> = seeds
+            .iter()
+            .map(|s| {
+                let fleet = of.iter().filter(|r| r.seed == *s);
+                let sim = fleet.clone().map(|r| r.sim_s).fold(0.0, f64::max);
+                sim / fleet.map(|r| r.wall_s).sum::<f64>().max(1e-9)
+            })
+            .collect();
+        println!(
+            "| {name} | {:.3} m | {:.3} m | {:.3} m | {:.0}x |",
+            median(of.iter().map(|r| r.final_rms_m).collect()),
+            median(worst),
+            median(of.iter().map(|r| r.online_rms_m).collect()),
+            median(fleet_speed)
+        );
+    }
+    Ok(())
+}
