@@ -187,7 +187,9 @@ fn slam_replayed_on_the_captured_input_tracks_exactly_as_on_board() {
             .map(|s| (Time::from_secs_f64(s.timestamp_s), s.pose))
             .collect();
         for c in checks {
-            let on_board = tracked.get(&c.t).expect("every published pose has its scan");
+            let on_board = tracked
+                .get(&c.t)
+                .expect("every published pose has its scan");
             let off = |a: realms_core::Pose2, b: realms_core::Pose2| {
                 a.position().distance_m(b.position()) + (a.yaw_rad - b.yaw_rad).abs()
             };

@@ -163,6 +163,11 @@ impl Mapping {
         }
     }
 
+    /// The SLAM itself, for inspection (its counters, its graph).
+    pub fn mapper(&self) -> &Mapper {
+        &self.mapper
+    }
+
     /// Lidar returns dropped so far as hits on the floor.
     pub fn floor_hits(&self) -> u64 {
         self.floor_hits
