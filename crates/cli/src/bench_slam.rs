@@ -40,9 +40,9 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.densify = None,
     },
     Variant {
-        name: "one-level",
-        what: "scans matched on the finest grid only, not coarse to fine",
-        apply: |c| c.mapper.frontend.levels = 1,
+        name: "three-levels",
+        what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
+        apply: |c| c.mapper.frontend.levels = 3,
     },
 ];
 
