@@ -40,6 +40,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.densify = None,
     },
     Variant {
+        name: "closures-every-4",
+        what: "closures searched at every fourth keyframe, not every second",
+        apply: |c| c.mapper.loop_every_keyframes = 4,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

@@ -28,8 +28,6 @@ use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Cell, Point2, Pose2};
 
-/// Loop closures are searched at every this many keyframes.
-const LOOP_EVERY_KEYFRAMES: usize = 2;
 /// Accepted closures are folded into the graph at every this many keyframes.
 const OPTIMIZE_EVERY_KEYFRAMES: usize = 20;
 /// A closure is confirmed by another found at most this many keyframes earlier...
@@ -62,6 +60,8 @@ pub struct MapperConfig {
     pub keyframe_rotation_rad: f64,
     /// Keyframes per submap.
     pub submap_keyframes: usize,
+    /// Loop closures are searched at every this many keyframes.
+    pub loop_every_keyframes: usize,
     /// Finished submaps whose origin is within this distance are searched for closures, m.
     pub loop_search_radius_m: f64,
     /// Half-width of the translation window of the closure search, metres.
@@ -141,6 +141,7 @@ impl Default for MapperConfig {
             keyframe_translation_m: 0.2,
             keyframe_rotation_rad: 6f64.to_radians(),
             submap_keyframes: 30,
+            loop_every_keyframes: 2,
             loop_search_radius_m: 8.0,
             loop_window_m: 2.5,
             loop_window_rad: 15f64.to_radians(),
@@ -602,7 +603,7 @@ impl Mapper {
         self.assembly.trace(&into, self.pose.position(), &beams);
         // Closures are searched every few keyframes and the graph re-optimised in batches:
         // both cost far more than tracking.
-        if node.is_multiple_of(LOOP_EVERY_KEYFRAMES) && self.close_loops(node) {
+        if node.is_multiple_of(self.cfg.loop_every_keyframes.max(1)) && self.close_loops(node) {
             self.pending_closures = true;
         }
         if self.pending_closures && node.is_multiple_of(OPTIMIZE_EVERY_KEYFRAMES) {
