@@ -58,6 +58,11 @@ pub(crate) fn in_parallel<J: Sync, R: Send>(
 
 /// Runs a mission of `scenario` until its rovers have explored the arena or `limit_s` has
 /// passed, and lets the nodes publish their final products.
+/// How many jobs to run at once: as asked, or one per core.
+pub(crate) fn workers(jobs: Option<usize>) -> usize {
+    jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 pub(crate) fn explore_to_end(
     scenario: &realms_sim::scenario::Scenario,
     options: realms_mission::MissionOptions,

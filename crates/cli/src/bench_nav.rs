@@ -292,9 +292,7 @@ pub fn explore(args: BenchExploreArgs) -> Result<()> {
         .iter()
         .flat_map(|n| (0..args.seeds).map(move |k| (*n, args.first_seed + k)))
         .collect();
-    let workers = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = crate::bench::workers(args.jobs);
     println!("# realms bench explore");
     println!();
     println!(

@@ -14,7 +14,8 @@ use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Result, bail};
 use realms_core::msgs::{LocalisationState, Message};
-use realms_core::{Duration, Point2, Pose2, RoverId, Time};
+use realms_core::{Duration, Pose2, RoverId, Time};
+use realms_mission::slam_record::aligned_rmse;
 use realms_mission::{CapturedInput, Mission, MissionOptions, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig};
 use realms_sim::World;
@@ -143,49 +144,13 @@ fn replay(
         online_rms_m: rms(&online),
         final_rms_m: rms(&final_pos),
         final_max_m: final_pos.iter().copied().fold(0.0, f64::max),
-        aligned_rms_m: aligned_rms(&pairs),
+        aligned_rms_m: aligned_rmse(&pairs).unwrap_or(f64::NAN),
         final_heading_deg: rms(&final_yaw),
         lost,
         closures: mapping.mapper().closures,
         sim_s,
         wall_s,
     }
-}
-
-/// RMS distance between estimated and true positions after the rigid motion that brings the
-/// estimates closest to the truth (closed form in the plane: Horn's method).
-fn aligned_rms(pairs: &[(Point2, Point2)]) -> f64 {
-    let n = pairs.len().max(1) as f64;
-    let mean = |f: fn(&(Point2, Point2)) -> Point2| {
-        let (x, y) = pairs
-            .iter()
-            .map(f)
-            .fold((0.0, 0.0), |(x, y), p| (x + p.x_m, y + p.y_m));
-        Point2::new(x / n, y / n)
-    };
-    let (me, mt) = (mean(|p| p.0), mean(|p| p.1));
-    // The rotation taking the centred estimates onto the centred truths.
-    let (mut dot, mut cross) = (0.0, 0.0);
-    for (e, t) in pairs {
-        let (ex, ey, tx, ty) = (
-            e.x_m - me.x_m,
-            e.y_m - me.y_m,
-            t.x_m - mt.x_m,
-            t.y_m - mt.y_m,
-        );
-        dot += ex * tx + ey * ty;
-        cross += ex * ty - ey * tx;
-    }
-    let (s, c) = cross.atan2(dot).sin_cos();
-    let sum: f64 = pairs
-        .iter()
-        .map(|(e, t)| {
-            let (ex, ey) = (e.x_m - me.x_m, e.y_m - me.y_m);
-            let (ax, ay) = (c * ex - s * ey + mt.x_m, s * ex + c * ey + mt.y_m);
-            (ax - t.x_m).powi(2) + (ay - t.y_m).powi(2)
-        })
-        .sum();
-    (sum / n).sqrt()
 }
 
 pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
@@ -206,9 +171,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         }
     }
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
-    let workers = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = crate::bench::workers(args.jobs);
     println!("# realms bench slam");
     println!();
     println!(
@@ -320,39 +283,4 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn alignment_forgives_a_rigid_motion_of_the_whole_trajectory_and_nothing_else() {
-        let truth: Vec<Point2> = (0..40)
-            .map(|k| {
-                let a = k as f64 * 0.3;
-                Point2::new(20.0 + 5.0 * a.cos(), 8.0 + 3.0 * (2.0 * a).sin())
-            })
-            .collect();
-        // The same path turned 2 degrees about the start and shifted: aligned, no error.
-        let moved = Pose2::new(0.4, -0.3, 2f64.to_radians());
-        let pairs: Vec<(Point2, Point2)> = truth
-            .iter()
-            .map(|t| (moved.transform_point(*t), *t))
-            .collect();
-        assert!(aligned_rms(&pairs) < 1e-9, "{}", aligned_rms(&pairs));
-        // Every other point 0.1 m off to the side, the rest exact: alignment cannot remove
-        // that, and the best fit leaves an RMS of 0.05 m (the offsets' own RMS about their
-        // mean, which the alignment's shift takes).
-        let pairs: Vec<(Point2, Point2)> = truth
-            .iter()
-            .enumerate()
-            .map(|(k, t)| {
-                let off = if k % 2 == 0 { 0.1 } else { 0.0 };
-                (Point2::new(t.x_m + off, t.y_m), *t)
-            })
-            .collect();
-        let rms = aligned_rms(&pairs);
-        assert!((rms - 0.05).abs() < 0.005, "{rms}");
-    }
 }

@@ -266,9 +266,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         args.period_s
     );
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
-    let workers = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = crate::bench::workers(args.jobs);
     println!("# realms bench slip");
     println!();
     println!(

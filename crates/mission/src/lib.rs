@@ -345,10 +345,11 @@ impl Mission {
     /// Each rover's captured SLAM input so far, in the order it was delivered (empty lists
     /// without [`Mission::capture_slam_inputs`]).
     pub fn take_capture(&mut self) -> Vec<Vec<CapturedInput>> {
-        self.capture
-            .as_mut()
-            .map(std::mem::take)
-            .unwrap_or_else(|| vec![Vec::new(); self.slam.len()])
+        match &mut self.capture {
+            // Each rover's list is emptied, not the list of rovers: capturing goes on.
+            Some(capture) => capture.iter_mut().map(std::mem::take).collect(),
+            None => vec![Vec::new(); self.slam.len()],
+        }
     }
 
     /// What the world published, each message from the rover whose sensor made it.

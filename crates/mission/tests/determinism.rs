@@ -199,4 +199,9 @@ fn slam_replayed_on_the_captured_input_tracks_exactly_as_on_board() {
             assert!(off(*replayed, optimised) < 1e-9, "{id} at {:?}", c.t);
         }
     }
+    // Taking what was captured does not stop the capture.
+    mission.run_until(Time::from_secs_f64(61.0));
+    let more = mission.take_capture();
+    assert_eq!(more.len(), ids.len());
+    assert!(more.iter().all(|c| !c.is_empty()), "capture goes on");
 }
