@@ -13,10 +13,10 @@ use crate::bench::{in_parallel, median};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Result, bail};
-use realms_core::msgs::{LocalisationState, Message};
-use realms_core::{Duration, Pose2, RoverId, Time};
-use realms_mission::slam_record::aligned_rmse;
-use realms_mission::{CapturedInput, Mission, MissionOptions, rover_mapping_config};
+use realms_core::msgs::LocalisationState;
+use realms_core::{Pose2, RoverId, Time};
+use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
+use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig};
 use realms_sim::World;
 use std::time::Instant;
@@ -58,16 +58,13 @@ struct Replay {
     seed: u64,
     rover: RoverId,
     variant: &'static str,
-    /// Position error of the pose as tracked at each scan, RMS, metres.
-    online_rms_m: f64,
-    /// ... of the final trajectory (after every closure), RMS and worst, metres.
-    final_rms_m: f64,
-    final_max_m: f64,
+    /// The pose as tracked at each scan, against the truth.
+    tracked: PoseErrors,
+    /// The final trajectory (after every closure), against the truth.
+    last: PoseErrors,
     /// ... after the best rigid alignment to the truth (the ATE of Sturm et al., IROS 2012,
     /// which forgives a drift of the whole map against the start), RMS, metres.
     aligned_rms_m: f64,
-    /// Heading error of the final trajectory, RMS, degrees.
-    final_heading_deg: f64,
     /// Times the rover declared itself lost.
     lost: usize,
     /// Loop closures accepted.
@@ -86,53 +83,31 @@ fn replay(
     input: &[CapturedInput],
 ) -> Replay {
     let mut mapping = Mapping::new(rover, cfg.clone());
-    let mut out = Vec::new();
     // Each scan's time, true pose and pose as tracked.
     let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
-    let mut lost = 0;
-    let mut was_lost = false;
+    let (mut lost, mut was_lost) = (0, false);
     let started = Instant::now();
-    for c in input {
-        match &c.message {
-            Message::LaserScan(scan) => {
-                mapping.on_scan(scan, &mut out);
-                out.clear();
-                scans.push((scan.header.stamp.as_secs_f64(), c.truth, mapping.pose()));
-                let is_lost = mapping.state() == LocalisationState::Lost;
-                lost += usize::from(is_lost && !was_lost);
-                was_lost = is_lost;
-            }
-            Message::Odometry(odom) => mapping.on_odometry(odom),
-            Message::Imu(imu) => mapping.on_imu(imu),
-            Message::PointCloud(cloud) => mapping.on_depth(cloud),
-            _ => {}
-        }
-    }
+    replay_slam(&mut mapping, input, |c, m| {
+        scans.push((c.t.as_secs_f64(), c.truth, m.pose()));
+        let is_lost = m.state() == LocalisationState::Lost;
+        lost += usize::from(is_lost && !was_lost);
+        was_lost = is_lost;
+    });
     let wall_s = started.elapsed().as_secs_f64();
-    let rms = |errors: &[f64]| {
-        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt()
-    };
-    let online: Vec<f64> = scans
-        .iter()
-        .map(|(_, truth, est)| est.position().distance_m(truth.position()))
-        .collect();
-    // The final trajectory has a pose for every scan SLAM took (not those before the first
-    // odometry), in the same order.
+    // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
         let k = scans.partition_point(|s| s.0 < t);
         scans.get(k).filter(|s| s.0 == t).map(|s| s.1)
     };
-    let (mut final_pos, mut final_yaw, mut pairs) = (Vec::new(), Vec::new(), Vec::new());
-    for s in mapping.trajectory() {
-        if let Some(truth) = truth_at(s.timestamp_s) {
-            pairs.push((s.pose.position(), truth.position()));
-            final_pos.push(s.pose.position().distance_m(truth.position()));
-            final_yaw.push(
-                realms_core::geometry::normalize_angle_rad(s.pose.yaw_rad - truth.yaw_rad)
-                    .to_degrees(),
-            );
-        }
-    }
+    let last: Vec<(Pose2, Pose2)> = mapping
+        .trajectory()
+        .iter()
+        .filter_map(|s| truth_at(s.timestamp_s).map(|truth| (s.pose, truth)))
+        .collect();
+    let positions: Vec<_> = last
+        .iter()
+        .map(|(e, t)| (e.position(), t.position()))
+        .collect();
     let sim_s = match (input.first(), input.last()) {
         (Some(a), Some(b)) => (b.t - a.t).as_secs_f64(),
         _ => 0.0,
@@ -141,11 +116,9 @@ fn replay(
         seed,
         rover,
         variant,
-        online_rms_m: rms(&online),
-        final_rms_m: rms(&final_pos),
-        final_max_m: final_pos.iter().copied().fold(0.0, f64::max),
-        aligned_rms_m: aligned_rmse(&pairs).unwrap_or(f64::NAN),
-        final_heading_deg: rms(&final_yaw),
+        tracked: pose_errors(scans.iter().map(|(_, truth, est)| (*est, *truth))),
+        last: pose_errors(last.into_iter()),
+        aligned_rms_m: aligned_rmse(&positions).unwrap_or(f64::NAN),
         lost,
         closures: mapping.mapper().closures,
         sim_s,
@@ -207,10 +180,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let mut mission = Mission::with_options(world, options);
         mission.capture_slam_inputs();
-        let end = Time::from_secs_f64(limit_s);
-        while mission.now() < end {
-            mission.run_until((mission.now() + Duration::from_secs(30)).min(end));
-        }
+        mission.run_until(Time::from_secs_f64(limit_s));
         let capture = mission.take_capture();
         drop(mission);
         let mut replays = Vec::new();
@@ -236,11 +206,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             r.seed,
             r.rover,
             r.variant,
-            r.online_rms_m,
-            r.final_rms_m,
-            r.final_max_m,
+            r.tracked.rmse_m,
+            r.last.rmse_m,
+            r.last.max_m,
             r.aligned_rms_m,
-            r.final_heading_deg,
+            r.last.heading_rmse_deg,
             r.lost,
             r.closures,
             r.sim_s / r.wall_s.max(1e-9)
@@ -261,7 +231,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             .map(|s| {
                 of.iter()
                     .filter(|r| r.seed == *s)
-                    .map(|r| r.final_rms_m)
+                    .map(|r| r.last.rmse_m)
                     .fold(0.0, f64::max)
             })
             .collect();
@@ -275,10 +245,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             .collect();
         println!(
             "| {name} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.0}x |",
-            median(of.iter().map(|r| r.final_rms_m).collect()),
+            median(of.iter().map(|r| r.last.rmse_m).collect()),
             median(worst),
             median(of.iter().map(|r| r.aligned_rms_m).collect()),
-            median(of.iter().map(|r| r.online_rms_m).collect()),
+            median(of.iter().map(|r| r.tracked.rmse_m).collect()),
             median(fleet_speed)
         );
     }

@@ -19,7 +19,7 @@ use realms_core::msgs::{Message, NavActivity, NavStatus, NetworkStats, NodeTraff
 use realms_core::{Duration, Point2, RoverId, Time, Topic};
 use realms_net::{NodeAddr, Qos, SimNetwork, Transport};
 use realms_node::guard::GuardConfig;
-use realms_node::mapping::{MappingConfig, rover_mapper_config};
+use realms_node::mapping::{Mapping, MappingConfig, rover_mapper_config};
 use realms_node::navigation::NavigationConfig;
 use realms_node::rover::{RoverConfig, RoverNode};
 use realms_node::station::{StationNode, StationRole};
@@ -114,6 +114,29 @@ pub struct CapturedInput {
     pub truth: realms_core::Pose2,
     /// A scan, odometry, IMU reading or depth frame.
     pub message: Message,
+}
+
+/// Feeds a rover's captured input to `mapping` in order, as the rover node does, calling
+/// `after_scan` with each scan's capture once SLAM has taken it.
+pub fn replay_slam(
+    mapping: &mut Mapping,
+    input: &[CapturedInput],
+    mut after_scan: impl FnMut(&CapturedInput, &Mapping),
+) {
+    let mut out = Vec::new();
+    for c in input {
+        match &c.message {
+            Message::LaserScan(scan) => {
+                mapping.on_scan(scan, &mut out);
+                out.clear();
+                after_scan(c, mapping);
+            }
+            Message::Odometry(odom) => mapping.on_odometry(odom),
+            Message::Imu(imu) => mapping.on_imu(imu),
+            Message::PointCloud(cloud) => mapping.on_depth(cloud),
+            _ => {}
+        }
+    }
 }
 
 /// The topics whose messages feed a rover's SLAM.

@@ -75,7 +75,7 @@ impl RoverSlamRecord {
     /// The final trajectory's errors against the truth, once attached.
     pub fn trajectory_error(&self) -> Option<PoseErrors> {
         self.checks.iter().any(|c| c.optimised.is_some()).then(|| {
-            errors(
+            pose_errors(
                 self.checks
                     .iter()
                     .filter_map(|c| c.optimised.map(|o| (o, c.truth))),
@@ -125,7 +125,7 @@ pub struct PoseErrors {
 }
 
 /// The errors of `(estimate, truth)` pairs in time order.
-fn errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
+pub fn pose_errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
     let (mut sq, mut max, mut sq_yaw, mut n) = (0.0, 0.0f64, 0.0, 0usize);
     let mut last = 0.0;
     for (estimate, truth) in pairs {
@@ -391,10 +391,10 @@ impl RoverSlamRecord {
     /// The summary for the report.
     pub fn summary(&self, truth: &GroundTruth, map_png: Option<String>) -> RoverSlamSummary {
         RoverSlamSummary {
-            pose_error: errors(self.checks.iter().map(|c| (c.estimate, c.truth))),
+            pose_error: pose_errors(self.checks.iter().map(|c| (c.estimate, c.truth))),
             trajectory_error: self.trajectory_error(),
             trajectory_error_aligned_m: self.trajectory_error_aligned_m(),
-            odometry_error: errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
+            odometry_error: pose_errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
             checks: self.checks.len(),
             localisation: self.changes.clone(),
             map: self.map.as_ref().map(|m| {

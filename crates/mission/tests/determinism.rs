@@ -159,21 +159,20 @@ fn slam_replayed_on_the_captured_input_tracks_exactly_as_on_board() {
     assert_eq!(capture.len(), ids.len());
     for (k, (id, input)) in ids.iter().zip(&capture).enumerate() {
         let mut mapping = realms_node::mapping::Mapping::new(*id, cfg.clone());
-        let mut out = Vec::new();
         let mut tracked = std::collections::BTreeMap::new();
-        for c in input {
-            match &c.message {
-                realms_core::msgs::Message::LaserScan(scan) => {
-                    mapping.on_scan(scan, &mut out);
-                    out.clear();
-                    tracked.insert(scan.header.stamp, mapping.pose());
-                }
-                realms_core::msgs::Message::Odometry(o) => mapping.on_odometry(o),
-                realms_core::msgs::Message::Imu(i) => mapping.on_imu(i),
-                realms_core::msgs::Message::PointCloud(p) => mapping.on_depth(p),
-                other => panic!("{id}: captured a message SLAM does not take: {other:?}"),
-            }
-        }
+        realms_mission::replay_slam(&mut mapping, input, |c, m| {
+            tracked.insert(c.t, m.pose());
+        });
+        assert!(
+            input.iter().all(|c| matches!(
+                c.message,
+                realms_core::msgs::Message::LaserScan(_)
+                    | realms_core::msgs::Message::Odometry(_)
+                    | realms_core::msgs::Message::Imu(_)
+                    | realms_core::msgs::Message::PointCloud(_)
+            )),
+            "{id}: only SLAM's input is captured"
+        );
         let checks = &mission.slam_records()[k].checks;
         // The rover drove: the comparison is not of poses standing at the start.
         let last = checks.last().expect("poses were published");
