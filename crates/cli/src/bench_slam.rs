@@ -13,7 +13,7 @@ use crate::bench::{in_parallel, median};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Result, bail};
-use realms_core::msgs::LocalisationState;
+use realms_core::msgs::{LocalisationState, Message};
 use realms_core::{Pose2, RoverId, Time};
 use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
@@ -44,6 +44,16 @@ const VARIANTS: &[Variant] = &[
         name: "closures-every-4",
         what: "closures searched at every fourth keyframe, not every second",
         apply: |c| c.mapper.loop_every_keyframes = 4,
+    },
+    Variant {
+        name: "no-gyro-edges",
+        what: "graph edges between keyframes take the matched turn, weighted like closures",
+        apply: |c| c.mapper.gyro_heading = None,
+    },
+    Variant {
+        name: "heading-prior-x100",
+        what: "the matcher's pull towards the gyro's heading 100 times as strong",
+        apply: |c| c.mapper.frontend.matcher.prior_rotation_weight *= 100.0,
     },
     Variant {
         name: "three-levels",
@@ -88,7 +98,15 @@ fn replay(
     let (mut lost, mut was_lost) = (0, false);
     let started = Instant::now();
     replay_slam(&mut mapping, input, |c, m| {
-        scans.push((c.t.as_secs_f64(), c.truth, m.pose()));
+        if !m.placed() {
+            return;
+        }
+        // The final trajectory is stamped as the scans are (the time of what they show).
+        let stamp = match &c.message {
+            Message::LaserScan(scan) => scan.header.stamp,
+            _ => c.t,
+        };
+        scans.push((stamp.as_secs_f64(), c.truth, m.pose()));
         let is_lost = m.state() == LocalisationState::Lost;
         lost += usize::from(is_lost && !was_lost);
         was_lost = is_lost;

@@ -27,6 +27,10 @@ use realms_slam::traversability::{SubmapHazards, TraversabilityConfig, judge_fra
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
 const SHADOW_MIN_GAP_M: f64 = 0.5;
 
+/// How far past its latest sample the gyro's heading is carried on at its latest rate: a
+/// few of its samples; a gyro silent longer than that leaves the heading where it was.
+const GYRO_EXTRAPOLATION: Duration = Duration::from_millis(100);
+
 /// Setup of the on-board SLAM.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MappingConfig {
@@ -102,6 +106,13 @@ pub fn rover_mapper_config() -> MapperConfig {
     // Loose regolith: the wheels over-report by 3-20 %, and where the lidar sees little
     // the prediction carries the pose (BENCHMARKS.md, "Wheel slip learnt on line").
     cfg.slip_calibration = Some(realms_slam::slip::SlipCalibration::default());
+    // The rovers' gyro (BENCHMARKS.md): 0.003 rad/s of noise at 50 Hz walks 4e-4 rad in a
+    // second, and a minute's calibration leaves ~6e-5 rad/s of bias; both taken a few times
+    // larger, since a real gyro's bias also wanders with temperature.
+    cfg.gyro_heading = Some(realms_slam::mapper::GyroHeading {
+        rad_per_sqrt_s: 1e-3,
+        bias_rad_s: 2e-4,
+    });
     cfg
 }
 
@@ -117,8 +128,11 @@ pub struct Mapping {
     /// interpolate at a scan's stamp.
     odometry: Vec<(Time, Pose2)>,
     last_wheel: Option<Pose2>,
+    /// The gyro's integrated heading at its latest sample, and when that was.
     gyro_yaw_rad: f64,
     last_gyro: Option<Time>,
+    /// ... and at the sample before, to read the heading between or just after them.
+    prev_gyro: Option<(Time, f64)>,
     gyro_heard: bool,
     bias_sum: f64,
     bias_samples: u64,
@@ -152,6 +166,7 @@ impl Mapping {
             last_wheel: None,
             gyro_yaw_rad: 0.0,
             last_gyro: None,
+            prev_gyro: None,
             gyro_heard: false,
             bias_sum: 0.0,
             bias_samples: 0,
@@ -182,6 +197,12 @@ impl Mapping {
         self.mapper.state()
     }
 
+    /// Whether a scan has placed the rover yet (before that, [`Mapping::pose`] is only the
+    /// map frame's origin).
+    pub fn placed(&self) -> bool {
+        self.tracked_once
+    }
+
     /// The pose estimate now, in the map frame.
     pub fn pose(&self) -> Pose2 {
         self.mapper.pose()
@@ -199,22 +220,25 @@ impl Mapping {
     pub fn on_odometry(&mut self, odom: &Odometry) {
         let p = &odom.pose.pose;
         let wheel = Pose2::new(p.position.x, p.position.y, p.orientation.yaw_rad());
+        let stamp = odom.header.stamp;
         let fused = match (self.last_wheel, self.odometry.last()) {
             (Some(prev), Some((_, fused_prev))) if self.gyro_heard => {
                 // The wheel motion in the wheel frame, replayed along the gyro's heading.
                 let step = prev.inverse() * wheel;
-                let turned = normalize_angle_rad(self.gyro_yaw_rad - fused_prev.yaw_rad);
+                let yaw = self.gyro_yaw_at(stamp);
+                let turned = normalize_angle_rad(yaw - fused_prev.yaw_rad);
                 let mid_yaw = fused_prev.yaw_rad + turned / 2.0;
                 let (s, c) = mid_yaw.sin_cos();
                 let forward = step.x_m;
                 Pose2::new(
                     fused_prev.x_m + c * forward,
                     fused_prev.y_m + s * forward,
-                    self.gyro_yaw_rad,
+                    yaw,
                 )
             }
             _ => {
                 self.gyro_yaw_rad = wheel.yaw_rad;
+                self.prev_gyro = None;
                 wheel
             }
         };
@@ -222,7 +246,33 @@ impl Mapping {
         if self.odometry.len() == 2 {
             self.odometry.remove(0);
         }
-        self.odometry.push((odom.header.stamp, fused));
+        self.odometry.push((stamp, fused));
+    }
+
+    /// The gyro's heading at `t`: between its two latest samples, read on the line through
+    /// them; after the latest, carried on at the latest rate for at most
+    /// [`GYRO_EXTRAPOLATION`]. Sensors stamped alike arrive in no fixed order (in the
+    /// simulator a scan comes before the IMU sample of the same instant), and a heading read
+    /// one sample late is a tenth of a degree off for every 0.1 rad/s of turn; as the turn
+    /// speeds up or slows down that error changes, and the matcher keeps part of each change
+    /// (BENCHMARKS.md, "A scan's heading at its own stamp").
+    fn gyro_yaw_at(&self, t: Time) -> f64 {
+        let (Some(last_t), Some((prev_t, prev_yaw))) = (self.last_gyro, self.prev_gyro) else {
+            return self.gyro_yaw_rad;
+        };
+        let span = (last_t - prev_t).as_secs_f64();
+        if span <= 0.0 || t <= prev_t {
+            return if t <= prev_t {
+                prev_yaw
+            } else {
+                self.gyro_yaw_rad
+            };
+        }
+        let rate = (self.gyro_yaw_rad - prev_yaw) / span;
+        let ahead = (t - prev_t)
+            .as_secs_f64()
+            .min(span + GYRO_EXTRAPOLATION.as_secs_f64());
+        prev_yaw + rate * ahead
     }
 
     /// Takes an IMU reading: integrates the gyro's yaw rate since the previous one, and
@@ -245,15 +295,19 @@ impl Mapping {
             // Standing still: what the gyro reads is its bias (and noise), not a turn.
             self.bias_sum += rate;
             self.bias_samples += 1;
+            self.prev_gyro = self.last_gyro.map(|prev| (prev, self.gyro_yaw_rad));
             self.last_gyro = Some(t);
             self.gyro_heard = true;
             return;
         } else if self.bias_samples > 0 && self.gyro_bias_rad_s.is_none() {
             self.gyro_bias_rad_s = Some(self.bias_sum / self.bias_samples as f64);
         }
-        if let Some(prev) = self.last_gyro
-            && t > prev
-        {
+        if let Some(prev) = self.last_gyro {
+            if t <= prev {
+                // Out of order or repeated: the heading already covers it.
+                return;
+            }
+            self.prev_gyro = Some((prev, self.gyro_yaw_rad));
             let bias = self.gyro_bias_rad_s.unwrap_or(0.0);
             self.gyro_yaw_rad += (rate - bias) * (t - prev).as_secs_f64();
         }
@@ -368,10 +422,14 @@ impl Mapping {
     /// to `out`.
     pub fn on_scan(&mut self, scan: &LaserScan, out: &mut Vec<Outgoing>) {
         let stamp = scan.header.stamp;
-        let Some(odom) = self.odometry_at(stamp) else {
+        let Some(mut odom) = self.odometry_at(stamp) else {
             // No odometry yet: nothing to anchor the map frame to.
             return;
         };
+        if self.gyro_heard {
+            // The gyro samples five times as often as the wheels report.
+            odom.yaw_rad = self.gyro_yaw_at(stamp);
+        }
         let max = (self.cfg.mapper.frontend.max_range_m as f32).min(scan.range_max_m);
         let min = (self.cfg.mapper.frontend.min_range_m as f32).max(scan.range_min_m);
         // A point's height after levelling is the last row of the levelling rotation
@@ -624,6 +682,73 @@ mod tests {
             m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.34), &mut out);
             assert_eq!(m.floor_hits() == 1, expect_drop, "pitch {pitch_rad}");
         }
+    }
+
+    /// The heading a turn has reached at `t`: from 6 s it speeds up to 0.8 rad/s at
+    /// 2 rad/s^2, holds that for 0.6 s and slows down again, as the rovers turn.
+    fn turned_rad(t: f64) -> f64 {
+        let s = t - 6.0;
+        if s <= 0.0 {
+            0.0
+        } else if s < 0.4 {
+            s * s
+        } else if s < 1.0 {
+            0.16 + 0.8 * (s - 0.4)
+        } else if s < 1.4 {
+            0.64 + 0.8 * (s - 1.0) - (s - 1.0).powi(2)
+        } else {
+            0.8
+        }
+    }
+
+    /// The worst heading error of scans (without returns, so the pose is the odometry's
+    /// prediction) taken through the turn, with each scan arriving before or after the
+    /// gyro and wheel readings of its own instant.
+    fn worst_scan_heading_error(scan_first: bool) -> f64 {
+        let mut m = mapping();
+        let mut out = Vec::new();
+        let mut worst: f64 = 0.0;
+        for k in 0..=1000 {
+            let t = 0.01 * k as f64;
+            let stamp = Time::from_secs_f64(t);
+            let scan = |m: &mut Mapping, out: &mut Vec<Outgoing>| {
+                m.on_scan(&crate::test_scan(stamp, vec![f32::INFINITY; 360]), out);
+                if t > 5.5 {
+                    normalize_angle_rad(m.pose().yaw_rad - turned_rad(t)).abs()
+                } else {
+                    0.0
+                }
+            };
+            // Scans at 10 Hz, wheels at 20 Hz, the gyro at 50 Hz.
+            let scan_due = k % 10 == 0;
+            if scan_due && scan_first {
+                worst = worst.max(scan(&mut m, &mut out));
+            }
+            if k % 5 == 0 {
+                m.on_odometry(&odom(stamp));
+            }
+            if k % 2 == 0 {
+                // Each 20 ms step's mean rate at its end, as the simulator's gyro reports.
+                let rate = (turned_rad(t) - turned_rad(t - 0.02)) / 0.02;
+                m.on_imu(&imu(stamp, rate, 0.0));
+            }
+            if scan_due && !scan_first {
+                worst = worst.max(scan(&mut m, &mut out));
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn a_scans_heading_is_the_gyros_at_the_scans_own_stamp() {
+        // Read one gyro sample late, the heading would lag 0.016 rad at full turn; read off
+        // the wheels' 20 Hz poses, it errs by 6e-3 rad while the turn speeds up.
+        let after = worst_scan_heading_error(false);
+        assert!(after < 1e-9, "{after}");
+        // Before the gyro's sample of its instant: carried on from the two before, off by
+        // the rate's change over one sample (2 rad/s^2 * 0.02 s * 0.02 s = 8e-4 rad).
+        let before = worst_scan_heading_error(true);
+        assert!(before < 1e-3, "{before}");
     }
 
     #[test]

@@ -1,18 +1,30 @@
 //! A discrete-event queue on the integer-nanosecond mission clock. Events at the same time
-//! come out in the order they were scheduled, so a run never depends on heap internals.
+//! come out in the order they were scheduled, so a run never depends on heap internals;
+//! events pushed with [`Scheduler::push_first`] come out before the others of their time
+//! (the world's physics step at t, so every sensor stamped t sees the world of time t).
 
 use realms_core::Time;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-/// Events ordered by (time, insertion order).
+/// Events ordered by (time, rank, insertion order).
 #[derive(Debug)]
 pub struct Scheduler<E> {
-    heap: BinaryHeap<Reverse<(Time, u64, Slot<E>)>>,
+    heap: BinaryHeap<Reverse<Entry<E>>>,
     seq: u64,
 }
 
-/// Wraps an event so the heap orders only by (time, seq), never by the event itself.
+/// A queued event with its sort key: time, rank, insertion order.
+type Entry<E> = (Time, Rank, u64, Slot<E>);
+
+/// Which events of one instant come out first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Rank {
+    First,
+    InOrder,
+}
+
+/// Wraps an event so the heap orders only by (time, rank, seq), never by the event itself.
 #[derive(Debug)]
 struct Slot<E>(E);
 
@@ -48,15 +60,25 @@ impl<E> Scheduler<E> {
         Self::default()
     }
 
-    /// Schedules `event` at `at`.
+    /// Schedules `event` at `at`, after everything already scheduled then.
     pub fn push(&mut self, at: Time, event: E) {
-        self.heap.push(Reverse((at, self.seq, Slot(event))));
+        self.push_ranked(at, Rank::InOrder, event);
+    }
+
+    /// Schedules `event` at `at`, before every event of that time pushed with
+    /// [`Scheduler::push`] (and after those pushed here earlier).
+    pub fn push_first(&mut self, at: Time, event: E) {
+        self.push_ranked(at, Rank::First, event);
+    }
+
+    fn push_ranked(&mut self, at: Time, rank: Rank, event: E) {
+        self.heap.push(Reverse((at, rank, self.seq, Slot(event))));
         self.seq += 1;
     }
 
     /// Time of the next event.
     pub fn peek_time(&self) -> Option<Time> {
-        self.heap.peek().map(|Reverse((t, _, _))| *t)
+        self.heap.peek().map(|Reverse((t, _, _, _))| *t)
     }
 
     /// Removes and returns the next event if it is due at or before `until`.
@@ -64,7 +86,7 @@ impl<E> Scheduler<E> {
         if self.peek_time()? > until {
             return None;
         }
-        self.heap.pop().map(|Reverse((t, _, Slot(e)))| (t, e))
+        self.heap.pop().map(|Reverse((t, _, _, Slot(e)))| (t, e))
     }
 
     /// Number of pending events.
@@ -94,5 +116,19 @@ mod tests {
         assert_eq!(s.pop_due(Time(5)), Some((Time(5), "b2")));
         assert_eq!(s.pop_due(Time(5)), None);
         assert_eq!(s.peek_time(), Some(Time(9)));
+    }
+
+    #[test]
+    fn events_pushed_first_lead_their_instant_whenever_pushed() {
+        let mut s = Scheduler::new();
+        s.push(Time(5), "sensor");
+        s.push(Time(3), "earlier");
+        s.push_first(Time(5), "physics");
+        s.push_first(Time(5), "physics again");
+        assert_eq!(s.pop_due(Time(5)), Some((Time(3), "earlier")));
+        assert_eq!(s.pop_due(Time(5)), Some((Time(5), "physics")));
+        assert_eq!(s.pop_due(Time(5)), Some((Time(5), "physics again")));
+        assert_eq!(s.pop_due(Time(5)), Some((Time(5), "sensor")));
+        assert_eq!(s.pop_due(Time(5)), None);
     }
 }

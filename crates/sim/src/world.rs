@@ -81,6 +81,8 @@ pub struct World {
     rovers: Vec<RoverSlot>,
     queue: Scheduler<Due>,
     now: Time,
+    /// The time of the world's state: the latest physics step's.
+    state_time: Time,
     events: Vec<SimEvent>,
     physics_dt: Duration,
 }
@@ -119,10 +121,14 @@ impl World {
             .collect();
         let mut queue = Scheduler::new();
         let physics_dt = Duration::from_secs_f64(spec.physics_step_s);
-        // The step at time t integrates (t - dt, t], so the state at t is the state of time t.
-        queue.push(Time::ZERO + physics_dt, Due::Physics);
+        // The step at time t integrates (t - dt, t], so the state at t is the state of time t;
+        // it runs before the sensors due at t, which must see that state.
+        queue.push_first(Time::ZERO + physics_dt, Due::Physics);
         for i in 0..rovers.len() {
-            // Stagger phases so the fleet's sensors do not all fire on the same nanosecond.
+            // Stagger phases so the fleet's sensors do not all fire on the same nanosecond. A
+            // sensor firing between physics steps sees the state of the latest step, and its
+            // message is stamped with that step's time: like a real sensor's latency, and
+            // every stamp is the time of what it shows.
             let phase = |ms: i64| Time::ZERO + Duration::from_millis(ms * i as i64);
             queue.push(phase(7), Due::Sensor(i, SensorKind::Lidar));
             queue.push(
@@ -151,6 +157,7 @@ impl World {
             rovers,
             queue,
             now: Time::ZERO,
+            state_time: Time::ZERO,
             events: Vec::new(),
         }
     }
@@ -245,7 +252,8 @@ impl World {
             match due {
                 Due::Physics => {
                     self.physics(t);
-                    self.queue.push(t + self.physics_dt, Due::Physics);
+                    self.state_time = t;
+                    self.queue.push_first(t + self.physics_dt, Due::Physics);
                 }
                 Due::Sensor(i, kind) => {
                     let spec = &self.scenario.rovers;
@@ -256,7 +264,7 @@ impl World {
                         SensorKind::Odometry => spec.odometry.rate_hz,
                         SensorKind::Imu => spec.imu.rate_hz,
                     });
-                    if let Some(msg) = self.sense(i, kind, t) {
+                    if let Some(msg) = self.sense(i, kind, self.state_time) {
                         out.push(msg);
                     }
                     self.queue.push(t + period, Due::Sensor(i, kind));

@@ -5,7 +5,7 @@ mod common;
 
 use common::{drive, flat_world, idle_until, scenario};
 use realms_core::msgs::Message;
-use realms_core::{Point2, Pose2, RoverId, Time};
+use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_sim::SimEventKind;
 use realms_sim::terrain::{Crater, Rect};
 
@@ -275,4 +275,65 @@ fn commands_a_driver_cannot_execute_are_refused() {
     idle_until(&mut world, Time::from_secs_f64(1.2));
     let body = world.rovers().next().expect("rover");
     assert!(body.pose.x_m.is_finite() && body.pose.x_m > 3.0);
+}
+
+#[test]
+fn every_sensor_message_is_stamped_with_the_time_of_the_state_it_shows() {
+    // Two rovers driven alike, side by side, with exact encoders. Their sensors fire at
+    // staggered instants, but each message is stamped with the physics step whose state it
+    // shows, so at any stamp both have the same odometry. Stamped when they fire, rover2's
+    // readings would carry stamps 3 ms late and none would meet rover1's.
+    let mut s = firm(scenario(2));
+    s.rovers.odometry.speed_noise_frac = 0.0;
+    s.rovers.odometry.yaw_scale_error_std = 0.0;
+    let starts = [Pose2::new(3.0, 5.0, 0.0), Pose2::new(3.0, 12.0, 0.0)];
+    let mut world = flat_world(&s, &starts, |_| {});
+    let mut out = Vec::new();
+    for k in 1..=30 {
+        let t = Time::from_secs_f64(0.1 * k as f64);
+        for id in [R1, RoverId(2)] {
+            world.command(
+                id,
+                realms_core::msgs::TwistStamped {
+                    header: realms_core::msgs::Header {
+                        stamp: world.now(),
+                        frame_id: format!("{id}/base_link"),
+                    },
+                    twist: realms_core::msgs::Twist {
+                        linear: realms_core::geometry::Vec3::new(0.3, 0.0, 0.0),
+                        angular: realms_core::geometry::Vec3::new(0.0, 0.0, 0.2),
+                    },
+                },
+            );
+        }
+        world.advance_to(t, &mut out);
+    }
+    let step = Duration::from_secs_f64(s.rovers.physics_step_s);
+    let mut travelled: [std::collections::BTreeMap<Time, Pose2>; 2] = Default::default();
+    for (topic, message) in &out {
+        let stamp = message.stamp();
+        assert_eq!(
+            stamp.0 % step.0,
+            0,
+            "{topic} at {stamp:?}: not a physics step"
+        );
+        if let Message::Odometry(o) = message {
+            let rover = topic.rover().expect("a rover's topic").0 as usize - 1;
+            let p = &o.pose.pose;
+            let start = starts[rover];
+            let moved = Pose2::new(p.position.x - start.x_m, p.position.y - start.y_m, 0.0);
+            travelled[rover].insert(stamp, moved);
+        }
+    }
+    let mut met = 0;
+    for (stamp, a) in &travelled[0] {
+        if let Some(b) = travelled[1].get(stamp) {
+            met += 1;
+            assert!(
+                (a.x_m - b.x_m).abs() < 1e-9 && (a.y_m - b.y_m).abs() < 1e-9,
+                "{stamp:?}: {a:?} against {b:?}"
+            );
+        }
+    }
+    assert!(met >= 20, "{met} shared stamps");
 }

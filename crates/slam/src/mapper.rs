@@ -95,6 +95,36 @@ pub struct MapperConfig {
     /// Scale the wheels' translation by the share the scan matches found real (`None`: take
     /// the wheels at their word, as for a recorded log's calibrated odometry).
     pub slip_calibration: Option<SlipCalibration>,
+    /// The odometry's heading is a gyro's: the graph edge between consecutive keyframes
+    /// takes its turn from the odometry, weighted by this model of the gyro's error (`None`:
+    /// the turn as matched, weighted like a closure; right for wheel-only headings).
+    pub gyro_heading: Option<GyroHeading>,
+}
+
+/// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
+/// from its white noise, `rad_per_sqrt_s * sqrt(dt)`, plus what is left of its bias after
+/// calibration, `bias_rad_s * dt` (standard deviations).
+///
+/// Over the second between two keyframes a gyro's turn is good to a few hundredths of a
+/// degree, while two matches against a noisy map differ by tenths. Weighting both alike let
+/// every closure turn the chain of keyframes about as far as it liked, and the matches' noise
+/// walked the map's heading by a degree in minutes (BENCHMARKS.md, "A scan's heading at its
+/// own stamp").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GyroHeading {
+    /// Angle random walk, rad / sqrt(s).
+    pub rad_per_sqrt_s: f64,
+    /// Residual bias, rad / s.
+    pub bias_rad_s: f64,
+}
+
+impl GyroHeading {
+    /// Information (inverse variance) of the heading change over `dt_s` seconds, 1 / rad^2.
+    pub fn information(&self, dt_s: f64) -> f64 {
+        let dt = dt_s.max(1e-3);
+        let var = self.rad_per_sqrt_s.powi(2) * dt + (self.bias_rad_s * dt).powi(2);
+        1.0 / var.max(1e-12)
+    }
 }
 
 /// How far a loop closure may move a keyframe: `base_m + per_m * d`, where `d` is the length
@@ -155,6 +185,7 @@ impl Default for MapperConfig {
             max_heading_step_rad: None,
             closure_drift: None,
             slip_calibration: None,
+            gyro_heading: None,
         }
     }
 }
@@ -219,6 +250,8 @@ pub struct Mapper {
     cfg: MapperConfig,
     graph: PoseGraph,
     keyframe_points: Vec<Vec<Point2>>,
+    /// Each keyframe's time and odometry pose.
+    keyframe_odom: Vec<(f64, Pose2)>,
     submaps: Vec<Submap>,
     scans: Vec<ScanPose>,
     pose: Pose2,
@@ -253,6 +286,7 @@ impl Mapper {
             cfg,
             graph: PoseGraph::default(),
             keyframe_points: Vec::new(),
+            keyframe_odom: Vec::new(),
             submaps: Vec::new(),
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
@@ -422,7 +456,7 @@ impl Mapper {
         let keyframe_added = new_keyframe && !lost && points.len() >= MIN_POINTS;
         if keyframe_added {
             let dense = dense.into_owned();
-            self.add_keyframe(points, &dense);
+            self.add_keyframe(time_s, odom, points, &dense);
         }
         let keyframe = self.graph.nodes.len().saturating_sub(1);
         let kf_pose = self.graph.nodes.get(keyframe).copied().unwrap_or(self.pose);
@@ -552,17 +586,25 @@ impl Mapper {
         self.last_information
     }
 
-    fn add_keyframe(&mut self, points: Vec<Point2>, dense: &[Point2]) {
+    fn add_keyframe(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>, dense: &[Point2]) {
         let node = self.graph.nodes.len();
         self.graph.nodes.push(self.pose);
         self.keyframe_points.push(points);
+        self.keyframe_odom.push((time_s, odom));
         if node > 0 {
-            let measurement = self.graph.nodes[node - 1].inverse() * self.pose;
+            let mut measurement = self.graph.nodes[node - 1].inverse() * self.pose;
+            let mut information = [400.0, 400.0, 2500.0];
+            if let Some(gyro) = self.cfg.gyro_heading {
+                let (t0, odom0) = self.keyframe_odom[node - 1];
+                let turned = normalize_angle_rad(odom.yaw_rad - odom0.yaw_rad);
+                measurement = Pose2::new(measurement.x_m, measurement.y_m, turned);
+                information[2] = gyro.information(time_s - t0).max(information[2]);
+            }
             self.graph.edges.push(Edge {
                 from: node - 1,
                 to: node,
                 measurement,
-                information: [400.0, 400.0, 2500.0],
+                information,
                 robust: false,
             });
         }
@@ -1024,6 +1066,50 @@ mod tests {
         // Without a bound, any correction the window finds is allowed.
         mapper.cfg.closure_drift = None;
         assert!(mapper.within_drift(&closure(&mapper, 0, 400, 2.4)));
+    }
+
+    #[test]
+    fn with_a_gyro_the_edges_between_keyframes_take_its_turn_at_its_weight() {
+        let gyro = GyroHeading {
+            rad_per_sqrt_s: 1e-3,
+            bias_rad_s: 2e-4,
+        };
+        // Over one second: (1e-3)^2 + (2e-4)^2 = 1.04e-6 rad^2.
+        assert!((gyro.information(1.0) - 1.0 / 1.04e-6).abs() < 1e-3);
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.gyro_heading = Some(gyro);
+        let mut mapper = Mapper::new(cfg);
+        // A curving drive; the odometry's frame is its own, so only its motion counts.
+        let truth_at = |k: usize| {
+            let k = k as f64;
+            Pose2::new(0.05 * k, 0.01 * k, (0.8 * k).to_radians())
+        };
+        let odom_frame = Pose2::new(5.0, -3.0, 0.4);
+        for k in 0..80 {
+            let truth = truth_at(k);
+            mapper.add_points(0.1 * k as f64, odom_frame * truth, sparse_hall_scan(truth));
+        }
+        let sequential: Vec<&Edge> = mapper
+            .graph
+            .edges
+            .iter()
+            .filter(|e| e.to == e.from + 1)
+            .collect();
+        assert!(
+            sequential.len() >= 5,
+            "{} keyframes",
+            mapper.graph.nodes.len()
+        );
+        for e in sequential {
+            let (t0, _) = mapper.keyframe_odom[e.from];
+            let (t1, _) = mapper.keyframe_odom[e.to];
+            let step = |t: f64| (t / 0.1).round() as usize;
+            let turned = truth_at(step(t1)).yaw_rad - truth_at(step(t0)).yaw_rad;
+            // Exactly the odometry's turn: a match is never this exact.
+            assert!((e.measurement.yaw_rad - turned).abs() < 1e-9, "{e:?}");
+            assert!((e.information[2] - gyro.information(t1 - t0)).abs() < 1e-6);
+        }
     }
 
     /// A noise-free 1-degree, 12 m scan from `pose` in a sparse hall like the simulated
