@@ -51,6 +51,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.gyro_heading = None,
     },
     Variant {
+        name: "blind-travel-as-matched",
+        what: "wheel travel with too few returns to match counts as matched travel (edges and closure bounds)",
+        apply: |c| c.mapper.blind_travel_uncertain = false,
+    },
+    Variant {
         name: "heading-prior-x100",
         what: "the matcher's pull towards the gyro's heading 100 times as strong",
         apply: |c| c.mapper.frontend.matcher.prior_rotation_weight *= 100.0,

@@ -99,6 +99,10 @@ pub struct MapperConfig {
     /// takes its turn from the odometry, weighted by this model of the gyro's error (`None`:
     /// the turn as matched, weighted like a closure; right for wheel-only headings).
     pub gyro_heading: Option<GyroHeading>,
+    /// Wheel travel with nothing to match against (too few returns) counts as wholly
+    /// uncertain: the graph edge across it is loosened by its length, and a closure may
+    /// correct the pose by up to all of it (`false`: such travel counts as matched travel).
+    pub blind_travel_uncertain: bool,
 }
 
 /// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
@@ -186,6 +190,7 @@ impl Default for MapperConfig {
             closure_drift: None,
             slip_calibration: None,
             gyro_heading: None,
+            blind_travel_uncertain: true,
         }
     }
 }
@@ -227,6 +232,10 @@ const MAX_REFINE_SHIFT_M: f64 = 0.2;
 /// The heading prior's weight (per point, per square radian) when a match's turn is refused:
 /// far above what the map's gradients give a point, so the heading stays put.
 const HELD_HEADING_WEIGHT: f64 = 1e7;
+/// Position standard deviation of the edge between consecutive matched keyframes, metres ...
+const SEQUENTIAL_SIGMA_M: f64 = 0.05;
+/// ... as information, 1 / m^2.
+const SEQUENTIAL_POSITION_INFORMATION: f64 = 400.0;
 /// Scans with fewer endpoints than this are neither matched nor mapped.
 const MIN_POINTS: usize = 10;
 /// A finished submap is dropped for a newer one starting nearby only if the newer one knows
@@ -252,6 +261,11 @@ pub struct Mapper {
     keyframe_points: Vec<Vec<Point2>>,
     /// Each keyframe's time and odometry pose.
     keyframe_odom: Vec<(f64, Pose2)>,
+    /// Wheel travel since the previous keyframe with nothing to match against (too few
+    /// returns, or no map yet), per keyframe: the wheels alone carried the pose there.
+    keyframe_unmatched_m: Vec<f64>,
+    /// ... and since the latest keyframe.
+    unmatched_m: f64,
     submaps: Vec<Submap>,
     scans: Vec<ScanPose>,
     pose: Pose2,
@@ -287,6 +301,8 @@ impl Mapper {
             graph: PoseGraph::default(),
             keyframe_points: Vec::new(),
             keyframe_odom: Vec::new(),
+            keyframe_unmatched_m: Vec::new(),
+            unmatched_m: 0.0,
             submaps: Vec::new(),
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
@@ -383,6 +399,10 @@ impl Mapper {
                 }
                 _ => true,
             };
+            if self.cfg.blind_travel_uncertain && (tracking.is_none() || points.len() < MIN_POINTS)
+            {
+                self.unmatched_m += odom_delta.x_m.hypot(odom_delta.y_m);
+            }
             self.pose = match tracking {
                 Some(i) if points.len() >= MIN_POINTS && moved => {
                     self.last_matched_odom = Some(odom);
@@ -591,9 +611,17 @@ impl Mapper {
         self.graph.nodes.push(self.pose);
         self.keyframe_points.push(points);
         self.keyframe_odom.push((time_s, odom));
+        let unmatched_m = std::mem::take(&mut self.unmatched_m);
+        self.keyframe_unmatched_m.push(unmatched_m);
         if node > 0 {
             let mut measurement = self.graph.nodes[node - 1].inverse() * self.pose;
-            let mut information = [400.0, 400.0, 2500.0];
+            // Travel the wheels alone carried may be all slip (a burst: 90 %).
+            let position = if unmatched_m > 0.0 {
+                1.0 / (SEQUENTIAL_SIGMA_M + unmatched_m).powi(2)
+            } else {
+                SEQUENTIAL_POSITION_INFORMATION
+            };
+            let mut information = [position, position, 2500.0];
             if let Some(gyro) = self.cfg.gyro_heading {
                 let (t0, odom0) = self.keyframe_odom[node - 1];
                 let turned = normalize_angle_rad(odom.yaw_rad - odom0.yaw_rad);
@@ -718,9 +746,9 @@ impl Mapper {
         // Past this much path neither bound is narrower than the window.
         let limit_m = ((window.linear_m - bound.base_m) / bound.per_m)
             .max((window.angular_rad - bound.base_rad) / bound.per_m_rad);
-        if let Some(path_m) = self
-            .graph
-            .path_length_within(from, to, limit_m, bound.hop_m)
+        if let Some(path_m) =
+            self.graph
+                .path_length_within(from, to, limit_m, self.drift_length(&bound))
         {
             window.linear_m = window.linear_m.min(bound.base_m + bound.per_m * path_m);
             window.angular_rad = window
@@ -745,8 +773,29 @@ impl Mapper {
         }
         let needed_m = (asked_m - bound.base_m) / bound.per_m;
         self.graph
-            .path_length_within(closure.from, closure.to, needed_m, bound.hop_m)
+            .path_length_within(
+                closure.from,
+                closure.to,
+                needed_m,
+                self.drift_length(&bound),
+            )
             .is_none()
+    }
+
+    /// How far an edge counts towards the drift a path can have built up: its travel (a
+    /// closure [`ClosureDrift::hop_m`]). Travel the wheels alone carried counts as wholly
+    /// uncertain: a slip burst where the lidar sees nothing leaves the pose off by up to all
+    /// of it, however short the path.
+    fn drift_length(&self, bound: &ClosureDrift) -> impl Fn(&Edge) -> f64 + '_ {
+        let (hop_m, per_m) = (bound.hop_m, bound.per_m);
+        move |e: &Edge| {
+            let unmatched_m = if e.to == e.from + 1 {
+                self.keyframe_unmatched_m.get(e.to).copied().unwrap_or(0.0)
+            } else {
+                0.0
+            };
+            PoseGraph::travelled_m(e, hop_m) + unmatched_m / per_m.max(1e-6)
+        }
     }
 
     /// The correction a closure asks of its keyframe: where the closure puts the keyframe,
@@ -1110,6 +1159,57 @@ mod tests {
             assert!((e.measurement.yaw_rad - turned).abs() < 1e-9, "{e:?}");
             assert!((e.information[2] - gyro.information(t1 - t0)).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn travel_with_nothing_to_match_may_be_corrected_by_all_of_it() {
+        // 10 m of path allow 0.3 + 0.05 * 10 = 0.8 m; 0.5 m of it carried by the wheels
+        // alone (a slip burst in an empty stretch may have eaten all of it) allow 1.3 m.
+        let mut mapper = straight_drive(41);
+        mapper.keyframe_unmatched_m = vec![0.0; 41];
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 1.2)));
+        mapper.keyframe_unmatched_m[20] = 0.5;
+        assert!(mapper.within_drift(&closure(&mapper, 0, 40, 1.2)));
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 1.4)));
+    }
+
+    #[test]
+    fn wheel_travel_without_returns_is_counted_and_loosens_its_edge() {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        let mut mapper = Mapper::new(cfg);
+        let mut k = 0;
+        let mut drive = |mapper: &mut Mapper, to_x: f64, see: bool| {
+            while 0.05 * k as f64 <= to_x {
+                let truth = Pose2::new(0.05 * k as f64, 0.0, 0.0);
+                let points = if see {
+                    sparse_hall_scan(truth)
+                } else {
+                    Vec::new()
+                };
+                mapper.add_points(0.1 * k as f64, truth, points);
+                k += 1;
+            }
+        };
+        drive(&mut mapper, 1.0, true);
+        let before = mapper.graph.nodes.len();
+        // A metre with no returns, then the hall again.
+        drive(&mut mapper, 2.0, false);
+        drive(&mut mapper, 2.4, true);
+        let edge = mapper
+            .graph
+            .edges
+            .iter()
+            .find(|e| e.from + 1 == e.to && e.to == before)
+            .expect("an edge across the blind stretch");
+        let unmatched = mapper.keyframe_unmatched_m[before];
+        assert!((unmatched - 1.0).abs() < 0.06, "{unmatched}");
+        let expected = 1.0 / (SEQUENTIAL_SIGMA_M + unmatched).powi(2);
+        assert!((edge.information[0] - expected).abs() < 1e-9, "{edge:?}");
+        // Matched keyframes keep the firm edge.
+        let matched = &mapper.graph.edges[0];
+        assert_eq!(mapper.keyframe_unmatched_m[1], 0.0);
+        assert_eq!(matched.information[0], SEQUENTIAL_POSITION_INFORMATION);
     }
 
     /// A noise-free 1-degree, 12 m scan from `pose` in a sparse hall like the simulated

@@ -33,9 +33,19 @@ pub struct PoseGraph {
 }
 
 impl PoseGraph {
+    /// An edge's length for [`PoseGraph::path_length_within`]: a sequential edge counts its
+    /// measured translation, a robust edge (a loop closure) `closure_m`.
+    pub fn travelled_m(edge: &Edge, closure_m: f64) -> f64 {
+        if edge.robust {
+            closure_m
+        } else {
+            edge.measurement.x_m.hypot(edge.measurement.y_m)
+        }
+    }
+
     /// The length of the shortest path from node `a` to node `b` through the graph, if it is
-    /// at most `limit_m`: a sequential edge counts its measured translation, a robust edge (a
-    /// loop closure) `closure_m`. Dijkstra's search, abandoned past the limit. Each call
+    /// at most `limit_m`, each edge counting `edge_length_m(edge)` (see
+    /// [`PoseGraph::travelled_m`]). Dijkstra's search, abandoned past the limit. Each call
     /// rebuilds the adjacency from every edge, so it suits occasional questions (the mapper
     /// asks only about closures that want more than a small correction), not one per scan.
     pub fn path_length_within(
@@ -43,7 +53,7 @@ impl PoseGraph {
         a: usize,
         b: usize,
         limit_m: f64,
-        closure_m: f64,
+        edge_length_m: impl Fn(&Edge) -> f64,
     ) -> Option<f64> {
         use std::cmp::Reverse;
         use std::collections::BinaryHeap;
@@ -53,11 +63,7 @@ impl PoseGraph {
         }
         let mut adjacent: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
         for e in &self.edges {
-            let length_m = if e.robust {
-                closure_m
-            } else {
-                e.measurement.x_m.hypot(e.measurement.y_m)
-            };
+            let length_m = edge_length_m(e);
             if e.from < n && e.to < n {
                 adjacent[e.from].push((e.to, length_m));
                 adjacent[e.to].push((e.from, length_m));
@@ -346,15 +352,16 @@ mod tests {
 
     #[test]
     fn path_length_takes_closures_as_shortcuts_and_stops_at_the_limit() {
+        let hop = |e: &Edge| PoseGraph::travelled_m(e, 2.0);
         let mut graph = PoseGraph {
             nodes: vec![Pose2::IDENTITY; 11],
             edges: (0..10)
                 .map(|k| odometry_edge(k, Pose2::new(1.0, 0.0, 0.0)))
                 .collect(),
         };
-        assert_eq!(graph.path_length_within(0, 10, 100.0, 2.0), Some(10.0));
-        assert_eq!(graph.path_length_within(10, 3, 100.0, 2.0), Some(7.0));
-        assert_eq!(graph.path_length_within(0, 10, 9.5, 2.0), None);
+        assert_eq!(graph.path_length_within(0, 10, 100.0, hop), Some(10.0));
+        assert_eq!(graph.path_length_within(10, 3, 100.0, hop), Some(7.0));
+        assert_eq!(graph.path_length_within(0, 10, 9.5, hop), None);
         // A closure from node 1 to node 9: 1 + 2 + 1 beats the 10 m along the chain.
         graph.edges.push(Edge {
             from: 1,
@@ -363,9 +370,9 @@ mod tests {
             information: [400.0, 400.0, 2500.0],
             robust: true,
         });
-        assert_eq!(graph.path_length_within(0, 10, 100.0, 2.0), Some(4.0));
-        assert_eq!(graph.path_length_within(0, 10, 3.9, 2.0), None);
-        assert_eq!(graph.path_length_within(0, 11, 100.0, 2.0), None);
+        assert_eq!(graph.path_length_within(0, 10, 100.0, hop), Some(4.0));
+        assert_eq!(graph.path_length_within(0, 10, 3.9, hop), None);
+        assert_eq!(graph.path_length_within(0, 11, 100.0, hop), None);
     }
 
     /// A square loop of 4 x 10 steps of 1 m, odometry turning 2 % too little at each corner
