@@ -61,6 +61,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.matcher.prior_rotation_weight *= 100.0,
     },
     Variant {
+        name: "raw-ranges",
+        what: "ranges as the lidar gave them, not averaged with their neighbours",
+        apply: |c| c.smooth_ranges = false,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

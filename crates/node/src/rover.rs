@@ -366,6 +366,7 @@ mod tests {
                     depth_rot,
                     depth_origin_m: [0.2, 0.0, 0.3],
                     traversability: TraversabilityConfig::default(),
+                    smooth_ranges: false,
                 },
                 navigation: NavigationConfig::new(Point2::new(0.0, 0.0)),
                 guard: GuardConfig {
