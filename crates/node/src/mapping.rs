@@ -293,13 +293,12 @@ impl Mapping {
         let (Some(last_t), Some((prev_t, prev_yaw))) = (self.last_gyro, self.prev_gyro) else {
             return self.gyro_yaw_rad;
         };
+        if t <= prev_t {
+            return prev_yaw;
+        }
         let span = (last_t - prev_t).as_secs_f64();
-        if span <= 0.0 || t <= prev_t {
-            return if t <= prev_t {
-                prev_yaw
-            } else {
-                self.gyro_yaw_rad
-            };
+        if span <= 0.0 {
+            return self.gyro_yaw_rad;
         }
         let rate = (self.gyro_yaw_rad - prev_yaw) / span;
         let ahead = (t - prev_t)
