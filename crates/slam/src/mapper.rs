@@ -236,6 +236,8 @@ const HELD_HEADING_WEIGHT: f64 = 1e7;
 const SEQUENTIAL_SIGMA_M: f64 = 0.05;
 /// ... as information, 1 / m^2.
 const SEQUENTIAL_POSITION_INFORMATION: f64 = 400.0;
+/// Heading information of that edge as matched, 1 / rad^2 (a gyro's turn is firmer).
+const SEQUENTIAL_HEADING_INFORMATION: f64 = 2500.0;
 /// Scans with fewer endpoints than this are neither matched nor mapped.
 const MIN_POINTS: usize = 10;
 /// A finished submap is dropped for a newer one starting nearby only if the newer one knows
@@ -621,7 +623,7 @@ impl Mapper {
             } else {
                 SEQUENTIAL_POSITION_INFORMATION
             };
-            let mut information = [position, position, 2500.0];
+            let mut information = [position, position, SEQUENTIAL_HEADING_INFORMATION];
             if let Some(gyro) = self.cfg.gyro_heading {
                 let (t0, odom0) = self.keyframe_odom[node - 1];
                 let turned = normalize_angle_rad(odom.yaw_rad - odom0.yaw_rad);
