@@ -66,6 +66,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.smooth_ranges = false,
     },
     Variant {
+        name: "chain-solver",
+        what: "the pose graph solved to its optimum (chain preconditioner), not stopped after 500 block-Jacobi iterations",
+        apply: |c| c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

@@ -80,6 +80,10 @@ pub struct SlamArgs {
     /// (Cartographer's update), instead of once per beam crossing it.
     #[arg(long)]
     pub miss_once_per_scan: bool,
+    /// Solve the pose graph to its optimum at every optimisation (the chain preconditioner)
+    /// instead of stopping after 500 block-Jacobi iterations.
+    #[arg(long, conflicts_with = "no_loop_closure")]
+    pub chain_solver: bool,
     /// Scan matching against one global map only: no submaps, pose graph or loop closures.
     #[arg(long)]
     pub no_loop_closure: bool,

@@ -46,6 +46,11 @@ pub fn run(args: SlamArgs) -> Result<()> {
     let mcfg = realms_slam::mapper::MapperConfig {
         frontend: cfg,
         loop_min_score: args.loop_min_score,
+        graph_preconditioner: if args.chain_solver {
+            realms_slam::posegraph::Preconditioner::Chain
+        } else {
+            realms_slam::posegraph::Preconditioner::BlockJacobi
+        },
         ..Default::default()
     };
     let mut mapper = realms_slam::mapper::Mapper::new(mcfg);

@@ -239,9 +239,20 @@ pub fn search(
                 .map(|(x, y)| cells[(y * w + x + shift) as usize] as u32)
                 .sum()
         } else {
+            // As `map.at` per point, with the level and its bounds looked up once.
+            let cells = &map.levels[d];
+            let h = map.height + pad;
+            let (ox, oy) = (c.dx + pad, c.dy + pad);
             scans[c.angle]
                 .iter()
-                .map(|(x, y)| map.at(d, x + c.dx, y + c.dy) as u32)
+                .map(|(x, y)| {
+                    let (ix, iy) = (x + ox, y + oy);
+                    if (ix as u64) < w as u64 && (iy as u64) < h as u64 {
+                        cells[(iy * w + ix) as usize] as u32
+                    } else {
+                        UNKNOWN as u32
+                    }
+                })
                 .sum()
         }
     };

@@ -22,7 +22,7 @@ use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
 use crate::occupancy::CellState;
-use crate::posegraph::{Edge, PoseGraph};
+use crate::posegraph::{Edge, PoseGraph, Preconditioner};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
@@ -103,6 +103,8 @@ pub struct MapperConfig {
     /// uncertain: the graph edge across it is loosened by its length, and a closure may
     /// correct the pose by up to all of it (`false`: such travel counts as matched travel).
     pub blind_travel_uncertain: bool,
+    /// How the pose graph's linear solver is preconditioned.
+    pub graph_preconditioner: Preconditioner,
 }
 
 /// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
@@ -191,6 +193,7 @@ impl Default for MapperConfig {
             slip_calibration: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
+            graph_preconditioner: Preconditioner::BlockJacobi,
         }
     }
 }
@@ -300,7 +303,10 @@ impl Mapper {
     pub fn new(cfg: MapperConfig) -> Self {
         Mapper {
             cfg,
-            graph: PoseGraph::default(),
+            graph: PoseGraph {
+                preconditioner: cfg.graph_preconditioner,
+                ..PoseGraph::default()
+            },
             keyframe_points: Vec::new(),
             keyframe_odom: Vec::new(),
             keyframe_unmatched_m: Vec::new(),
