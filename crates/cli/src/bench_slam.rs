@@ -71,6 +71,19 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain,
     },
     Variant {
+        name: "track-in-submap",
+        what: "after an optimisation, tracking resumes from the pose in the tracked submap's frame (as on the recorded logs)",
+        apply: |c| c.mapper.track_in_submap_frame = true,
+    },
+    Variant {
+        name: "chain-and-track-in-submap",
+        what: "both of the above",
+        apply: |c| {
+            c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain;
+            c.mapper.track_in_submap_frame = true;
+        },
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

@@ -51,6 +51,7 @@ pub fn run(args: SlamArgs) -> Result<()> {
         } else {
             realms_slam::posegraph::Preconditioner::BlockJacobi
         },
+        track_in_submap_frame: !args.no_track_in_submap,
         ..Default::default()
     };
     let mut mapper = realms_slam::mapper::Mapper::new(mcfg);

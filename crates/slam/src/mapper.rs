@@ -105,6 +105,11 @@ pub struct MapperConfig {
     pub blind_travel_uncertain: bool,
     /// How the pose graph's linear solver is preconditioned.
     pub graph_preconditioner: Preconditioner,
+    /// After an optimisation, tracking resumes from the newest keyframe's pose relative to
+    /// the submap it was tracked in (whose cells still show the old geometry), moved with
+    /// that submap's origin, rather than from the keyframe's optimised pose (Cartographer's
+    /// split of local and global SLAM).
+    pub track_in_submap_frame: bool,
 }
 
 /// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
@@ -194,6 +199,7 @@ impl Default for MapperConfig {
             gyro_heading: None,
             blind_travel_uncertain: true,
             graph_preconditioner: Preconditioner::BlockJacobi,
+            track_in_submap_frame: true,
         }
     }
 }
@@ -685,8 +691,29 @@ impl Mapper {
             self.pending_closures = true;
         }
         if self.pending_closures && node.is_multiple_of(OPTIMIZE_EVERY_KEYFRAMES) {
+            // The newest keyframe relative to the submap it was tracked in, before the
+            // optimisation bends that submap's keyframes.
+            let local = self
+                .cfg
+                .track_in_submap_frame
+                .then(|| {
+                    self.submaps
+                        .iter()
+                        .find(|s| !s.finished && s.keyframes > 0 && s.origin_node != node)
+                })
+                .flatten()
+                .map(|s| {
+                    let o = s.origin_node;
+                    (o, self.graph.nodes[o].inverse() * self.graph.nodes[node])
+                });
             self.graph.optimize(3);
             self.pose = self.graph.nodes[node];
+            if let Some((o, local)) = local {
+                // The submap's cells were drawn at the keyframes' old poses: tracking goes on
+                // from where the scans put the rover in them.
+                self.pose = self.graph.nodes[o] * local;
+                self.graph.nodes[node] = self.pose;
+            }
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();
             }
