@@ -72,7 +72,7 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "track-in-submap",
-        what: "after an optimisation, tracking resumes from the pose in the tracked submap's frame (as on the recorded logs)",
+        what: "after an optimisation, the active submaps' keyframes keep the poses their cells were drawn with, moved as one block (as on the recorded logs)",
         apply: |c| c.mapper.track_in_submap_frame = true,
     },
     Variant {

@@ -84,8 +84,9 @@ pub struct SlamArgs {
     /// instead of stopping after 500 block-Jacobi iterations.
     #[arg(long, conflicts_with = "no_loop_closure")]
     pub chain_solver: bool,
-    /// After each optimisation, resume tracking from the newest keyframe's optimised pose
-    /// rather than from its pose in the frame of the submap it was tracked in.
+    /// After each optimisation, give the keyframes of the submaps still being built their
+    /// optimised poses, rather than keeping the poses their cells were drawn with and moving
+    /// them as one block.
     #[arg(long, conflicts_with = "no_loop_closure")]
     pub no_track_in_submap: bool,
     /// Scan matching against one global map only: no submaps, pose graph or loop closures.

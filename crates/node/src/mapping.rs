@@ -111,9 +111,9 @@ pub fn rover_mapper_config() -> MapperConfig {
     // Loose regolith: the wheels over-report by 3-20 %, and where the lidar sees little
     // the prediction carries the pose (BENCHMARKS.md, "Wheel slip learnt on line").
     cfg.slip_calibration = Some(realms_slam::slip::SlipCalibration::default());
-    // Tracking in the submap's frame after an optimisation helps on the recorded logs, but
-    // on the rovers' replays it left the final trajectory as it was and the pose as tracked
-    // 10 % worse (BENCHMARKS.md, "Solving the pose graph to its optimum").
+    // Keeping the active submaps' keyframes as they were drawn helps on the recorded logs,
+    // but on the rovers' replays it left the final trajectory as it was and the pose as
+    // tracked 8 % worse (BENCHMARKS.md, "Solving the pose graph to its optimum").
     cfg.track_in_submap_frame = false;
     // The rovers' gyro (BENCHMARKS.md): 0.003 rad/s of noise at 50 Hz walks 4e-4 rad in a
     // second, and a minute's calibration leaves ~6e-5 rad/s of bias; both taken a few times

@@ -105,10 +105,11 @@ pub struct MapperConfig {
     pub blind_travel_uncertain: bool,
     /// How the pose graph's linear solver is preconditioned.
     pub graph_preconditioner: Preconditioner,
-    /// After an optimisation, tracking resumes from the newest keyframe's pose relative to
-    /// the submap it was tracked in (whose cells still show the old geometry), moved with
-    /// that submap's origin, rather than from the keyframe's optimised pose (Cartographer's
-    /// split of local and global SLAM).
+    /// After an optimisation, the keyframes of the submaps still being built keep their
+    /// poses relative to each other (the geometry their cells were drawn with) and move as
+    /// one block with the oldest of them, so tracking resumes in cells that agree with its
+    /// pose (Cartographer's split of local and global SLAM); otherwise they take their
+    /// optimised poses.
     pub track_in_submap_frame: bool,
 }
 
@@ -691,29 +692,29 @@ impl Mapper {
             self.pending_closures = true;
         }
         if self.pending_closures && node.is_multiple_of(OPTIMIZE_EVERY_KEYFRAMES) {
-            // The newest keyframe relative to the submap it was tracked in, before the
-            // optimisation bends that submap's keyframes.
-            let local = self
+            // The active submaps' keyframes as they were drawn into them, before the
+            // optimisation bends them.
+            let active = self
                 .cfg
                 .track_in_submap_frame
                 .then(|| {
                     self.submaps
                         .iter()
-                        .find(|s| !s.finished && s.keyframes > 0 && s.origin_node != node)
+                        .filter(|s| !s.finished && s.keyframes > 0)
+                        .map(|s| s.origin_node)
+                        .min()
                 })
                 .flatten()
-                .map(|s| {
-                    let o = s.origin_node;
-                    (o, self.graph.nodes[o].inverse() * self.graph.nodes[node])
-                });
+                .map(|first| (first, self.graph.nodes[first..].to_vec()));
             self.graph.optimize(3);
-            self.pose = self.graph.nodes[node];
-            if let Some((o, local)) = local {
-                // The submap's cells were drawn at the keyframes' old poses: tracking goes on
-                // from where the scans put the rover in them.
-                self.pose = self.graph.nodes[o] * local;
-                self.graph.nodes[node] = self.pose;
+            if let Some((first, drawn)) = active {
+                // The active submaps' cells show those keyframes where they were: move them
+                // with the oldest one as a block, so tracking goes on in cells that agree
+                // with it. Once their submaps are finished, the optimisation is free to bend
+                // them.
+                move_as_block(&mut self.graph.nodes[first..], &drawn);
             }
+            self.pose = self.graph.nodes[node];
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();
             }
@@ -1023,10 +1024,48 @@ impl Mapper {
     }
 }
 
+/// Puts `nodes` back in the relative poses of `drawn` (the same nodes before they moved),
+/// moved as one block so the first keeps its pose now.
+fn move_as_block(nodes: &mut [Pose2], drawn: &[Pose2]) {
+    let (Some(first), Some(first_drawn)) = (nodes.first(), drawn.first()) else {
+        return;
+    };
+    let moved = *first * first_drawn.inverse();
+    for (n, d) in nodes.iter_mut().zip(drawn) {
+        *n = moved * *d;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::frontend::Densify;
+
+    #[test]
+    fn the_active_keyframes_move_as_one_block_with_the_first() {
+        let drawn = [
+            Pose2::new(1.0, 0.0, 0.0),
+            Pose2::new(1.3, 0.1, 0.2),
+            Pose2::new(1.5, 0.4, 0.5),
+        ];
+        // The optimisation turned the first by 0.1 rad and bent the others differently.
+        let mut nodes = [
+            Pose2::new(1.0, 0.2, 0.1),
+            Pose2::new(1.2, 0.5, 0.1),
+            Pose2::new(1.9, 0.1, 0.9),
+        ];
+        move_as_block(&mut nodes, &drawn);
+        let first = Pose2::new(1.0, 0.2, 0.1).inverse() * nodes[0];
+        assert!(first.x_m.abs() < 1e-12 && first.y_m.abs() < 1e-12 && first.yaw_rad.abs() < 1e-12);
+        for k in 1..3 {
+            let was = drawn[0].inverse() * drawn[k];
+            let now = nodes[0].inverse() * nodes[k];
+            assert!((was.x_m - now.x_m).abs() < 1e-12 && (was.y_m - now.y_m).abs() < 1e-12);
+            assert!((was.yaw_rad - now.yaw_rad).abs() < 1e-12);
+        }
+        // The block turned with the first: the last keyframe swung round it.
+        assert!((nodes[2].yaw_rad - 0.6).abs() < 1e-12, "{:?}", nodes[2]);
+    }
 
     /// A mapper whose graph is a straight drive of `n` keyframes 0.25 m apart along x.
     fn straight_drive(n: usize) -> Mapper {
