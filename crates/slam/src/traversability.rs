@@ -75,6 +75,8 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         (ix >= 0 && iy >= 0 && ix < side as i64 && iy < side as i64)
             .then(|| iy as usize * side + ix as usize)
     };
+    // The box of columns any point fell in: a frame covers a wedge of the square.
+    let mut touched = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
     for p in points {
         if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
             || p[0].hypot(p[1]) > cfg.max_range_m
@@ -82,6 +84,13 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             continue;
         }
         let Some(i) = index(p[0], p[1]) else { continue };
+        let (ix, iy) = ((i % side) as i64, (i / side) as i64);
+        touched = [
+            touched[0].min(ix),
+            touched[1].min(iy),
+            touched[2].max(ix),
+            touched[3].max(iy),
+        ];
         let c = &mut cols[i];
         if c.n == 0 {
             c.min_z = p[2];
@@ -105,8 +114,8 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         })
         .collect();
     let mut out = Vec::new();
-    for iy in 0..side as i64 {
-        for ix in 0..side as i64 {
+    for iy in touched[1]..=touched[3] {
+        for ix in touched[0]..=touched[2] {
             let i = iy as usize * side + ix as usize;
             if !judged(i) {
                 continue;
