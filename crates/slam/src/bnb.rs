@@ -98,15 +98,41 @@ impl PrecomputedMap {
         self.levels.len() - 1
     }
 
+    /// Level `d`, for looking up many cells.
+    fn level(&self, d: usize) -> Level<'_> {
+        let pad = (1i64 << d) - 1;
+        Level {
+            cells: &self.levels[d],
+            pad,
+            width: self.width + pad,
+            height: self.height + pad,
+        }
+    }
+
     /// Level `d` at cell `(x, y)`; unknown outside.
     fn at(&self, d: usize, x: i64, y: i64) -> u8 {
-        let pad = (1i64 << d) - 1;
-        let (ix, iy) = (x + pad, y + pad);
-        let w = self.width + pad;
-        if ix < 0 || iy < 0 || ix >= w || iy >= self.height + pad {
-            return UNKNOWN;
+        self.level(d).at(x, y)
+    }
+}
+
+/// One level of a [`PrecomputedMap`] with its padded bounds.
+struct Level<'a> {
+    cells: &'a [u8],
+    pad: i64,
+    width: i64,
+    height: i64,
+}
+
+impl Level<'_> {
+    /// The cell `(x, y)` (map cells, before padding); unknown outside.
+    fn at(&self, x: i64, y: i64) -> u8 {
+        let (ix, iy) = (x + self.pad, y + self.pad);
+        // Negative indices wrap to huge unsigned ones, so one comparison per axis.
+        if (ix as u64) < self.width as u64 && (iy as u64) < self.height as u64 {
+            self.cells[(iy * self.width + ix) as usize]
+        } else {
+            UNKNOWN
         }
-        self.levels[d][(iy * w + ix) as usize]
     }
 }
 
@@ -239,20 +265,10 @@ pub fn search(
                 .map(|(x, y)| cells[(y * w + x + shift) as usize] as u32)
                 .sum()
         } else {
-            // As `map.at` per point, with the level and its bounds looked up once.
-            let cells = &map.levels[d];
-            let h = map.height + pad;
-            let (ox, oy) = (c.dx + pad, c.dy + pad);
+            let level = map.level(d);
             scans[c.angle]
                 .iter()
-                .map(|(x, y)| {
-                    let (ix, iy) = (x + ox, y + oy);
-                    if (ix as u64) < w as u64 && (iy as u64) < h as u64 {
-                        cells[(iy * w + ix) as usize] as u32
-                    } else {
-                        UNKNOWN as u32
-                    }
-                })
+                .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
                 .sum()
         }
     };

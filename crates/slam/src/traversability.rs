@@ -70,10 +70,10 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     let half = (cfg.max_range_m / r).ceil() as i64;
     let side = (2 * half + 1) as usize;
     let mut cols = vec![Column::default(); side * side];
-    let index = |x: f64, y: f64| -> Option<usize> {
+    // The column under a point, if within the square.
+    let column = |x: f64, y: f64| -> Option<(i64, i64)> {
         let (ix, iy) = ((x / r).floor() as i64 + half, (y / r).floor() as i64 + half);
-        (ix >= 0 && iy >= 0 && ix < side as i64 && iy < side as i64)
-            .then(|| iy as usize * side + ix as usize)
+        (ix >= 0 && iy >= 0 && ix < side as i64 && iy < side as i64).then_some((ix, iy))
     };
     // The box of columns any point fell in: a frame covers a wedge of the square.
     let mut touched = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
@@ -83,8 +83,10 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         {
             continue;
         }
-        let Some(i) = index(p[0], p[1]) else { continue };
-        let (ix, iy) = ((i % side) as i64, (i / side) as i64);
+        let Some((ix, iy)) = column(p[0], p[1]) else {
+            continue;
+        };
+        let i = iy as usize * side + ix as usize;
         touched = [
             touched[0].min(ix),
             touched[1].min(iy),
