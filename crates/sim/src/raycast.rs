@@ -61,7 +61,13 @@ struct Clearance {
     z0_m: f64,
     dz_m: f64,
     count: usize,
-    /// Layer `k` is `layers[k * cells .. (k + 1) * cells]`, row-major like the heights.
+    /// Cells per layer, padded to whole tiles.
+    layer_len: usize,
+    /// Tiles per row.
+    tiles_w: usize,
+    /// Layer `k` is `layers[k * layer_len .. (k + 1) * layer_len]`, in 8 x 8 tiles of one
+    /// cache line each: steps along a beam and along its neighbours, a few cells apart, then
+    /// land on lines already loaded instead of one line per row.
     layers: Vec<u8>,
 }
 
@@ -80,16 +86,24 @@ impl Clearance {
         let (lo, hi) = (lo as f64, hi as f64);
         let dz_m = ((hi - lo) / MAX_LAYERS as f64).max(MIN_LAYER_STEP_M);
         let count = (((hi - lo) / dz_m).ceil() as usize).clamp(1, MAX_LAYERS);
-        let layers = (0..count)
-            .flat_map(|k| {
-                let z = (lo + k as f64 * dz_m) as f32;
-                chessboard_distance(g.width, g.height, |i| heights.cells()[i] >= z)
-            })
-            .collect();
+        let tiles_w = g.width.div_ceil(8);
+        let layer_len = tiles_w * g.height.div_ceil(8) * 64;
+        let mut layers = vec![255u8; count * layer_len];
+        for (k, layer) in layers.chunks_exact_mut(layer_len).enumerate() {
+            let z = (lo + k as f64 * dz_m) as f32;
+            let d = chessboard_distance(g.width, g.height, |i| heights.cells()[i] >= z);
+            for y in 0..g.height {
+                for x in 0..g.width {
+                    layer[Level::tiled(tiles_w, x, y)] = d[y * g.width + x];
+                }
+            }
+        }
         Clearance {
             z0_m: lo,
             dz_m,
             count,
+            layer_len,
+            tiles_w,
             layers,
         }
     }
@@ -234,7 +248,6 @@ impl HeightPyramid {
             return Some(t_min_m);
         }
         let (w, h) = (g.width, g.height);
-        let cells = w * h;
         // Inverses up front: the loop's step depends on the previous one, so a division in it
         // would sit on the critical path.
         let t_per_cell = 1.0 / horiz;
@@ -260,7 +273,9 @@ impl HeightPyramid {
             let k = (layer as usize - 1).min(c.count - 1);
             let z_k = c.z0_m + k as f64 * c.dz_m;
             // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
-            let d = c.layers[k * cells + y as usize * w + x as usize] as f64 - 1.5;
+            let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, x as usize, y as usize)]
+                as f64
+                - 1.5;
             let mut step = d * t_per_cell;
             let drop_limit = (z - z_k) * t_per_drop_m;
             if drop_limit < step {
