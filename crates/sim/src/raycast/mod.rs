@@ -9,7 +9,10 @@
 //!   Mipmaps for Fast, Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008) for
 //!   the last stretch before a hit, where it skips any block the ray passes entirely above.
 
+mod walk;
+
 use realms_core::{Grid, GridGeometry};
+use walk::ClearStep;
 
 const MAX_LEVEL: usize = 6;
 
@@ -241,52 +244,15 @@ impl HeightPyramid {
         let Some(c) = &self.clearance else {
             return Some(t_min_m);
         };
-        let g = &self.geometry;
-        let inv_res = 1.0 / g.resolution_m;
-        let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt() * inv_res; // cells per metre of t
-        if horiz < 1e-9 {
-            return Some(t_min_m);
-        }
-        let (w, h) = (g.width, g.height);
-        // Inverses up front: the loop's step depends on the previous one, so a division in it
-        // would sit on the critical path.
-        let t_per_cell = 1.0 / horiz;
-        let t_per_drop_m = if dir[2] < 0.0 {
-            -1.0 / dir[2]
-        } else {
-            f64::INFINITY
+        let mut w = match self.clear_walk(origin, dir, t_min_m, t_max_m) {
+            Ok(w) => w,
+            Err(t) => return Some(t),
         };
-        let inv_dz = 1.0 / c.dz_m;
-        let mut t = t_min_m;
         loop {
-            let x = (origin[0] + dir[0] * t - g.origin.x_m) * inv_res;
-            let y = (origin[1] + dir[1] * t - g.origin.y_m) * inv_res;
-            if !(x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64) {
-                // Outside the grid: only the exact march knows whether it re-enters.
-                return Some(t);
-            }
-            let z = origin[2] + dir[2] * t;
-            let layer = (z - c.z0_m) * inv_dz;
-            if layer < 1.0 {
-                return Some(t);
-            }
-            let k = (layer as usize - 1).min(c.count - 1);
-            let z_k = c.z0_m + k as f64 * c.dz_m;
-            // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
-            let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, x as usize, y as usize)]
-                as f64
-                - 1.5;
-            let mut step = d * t_per_cell;
-            let drop_limit = (z - z_k) * t_per_drop_m;
-            if drop_limit < step {
-                step = drop_limit;
-            }
-            if step * horiz < 2.0 {
-                return Some(t);
-            }
-            t += step;
-            if t >= t_max_m {
-                return None;
+            match self.clear_step(c, &mut w) {
+                ClearStep::Open => {}
+                ClearStep::Exact(t) => return Some(t),
+                ClearStep::Clear => return None,
             }
         }
     }
@@ -417,90 +383,6 @@ impl HeightPyramid {
             }
         }
     }
-
-    /// Like [`cast`](Self::cast), but may start at `hint_m` (rays of one image column hit in
-    /// order, so the previous hit is a good guess). The guess is only trusted once the
-    /// clearance field proves the stretch before it empty; where that proof stops short,
-    /// the exact walk continues from there. So the answer is always the first hit, as
-    /// [`cast`](Self::cast) would find it.
-    pub fn cast_from_hint(
-        &self,
-        origin: [f64; 3],
-        dir: [f64; 3],
-        t_min_m: f64,
-        hint_m: f64,
-        t_max_m: f64,
-    ) -> Option<f64> {
-        if hint_m <= t_min_m || self.clearance.is_none() {
-            return self.cast(origin, dir, t_min_m, t_max_m);
-        }
-        let hint_m = hint_m.min(t_max_m);
-        // Where the proof stops short of the hint, walk exactly from there instead.
-        let start = self
-            .skip_clear_space(origin, dir, t_min_m, hint_m)
-            .unwrap_or(hint_m);
-        match self.march_near(origin, dir, start, t_max_m) {
-            Near::Settled(hit) => hit,
-            Near::ContinueFrom(t) => self.cast(origin, dir, t, t_max_m),
-            Near::HitBehindStart => self.cast(origin, dir, t_min_m, t_max_m),
-        }
-    }
-
-    /// Walks level-0 cells from `t_start_m` for a short stretch, for rays whose hit is
-    /// expected to be close: no clipping, no pyramid, almost no setup.
-    fn march_near(&self, origin: [f64; 3], dir: [f64; 3], t_start_m: f64, t_max_m: f64) -> Near {
-        const STRETCH_CELLS: usize = 64;
-        let g = &self.geometry;
-        let inv_res = 1.0 / g.resolution_m;
-        let ox = (origin[0] - g.origin.x_m) * inv_res;
-        let oy = (origin[1] - g.origin.y_m) * inv_res;
-        let (dx, dy, dz) = (dir[0] * inv_res, dir[1] * inv_res, dir[2]);
-        let (px, py) = (ox + dx * t_start_m, oy + dy * t_start_m);
-        let (w, h) = (g.width as i64, g.height as i64);
-        if !(px >= 0.0 && py >= 0.0 && px < w as f64 && py < h as f64) {
-            return Near::ContinueFrom(t_start_m);
-        }
-        let (mut cx, mut cy) = (px as i64, py as i64);
-        let cells = &self.levels[0];
-        let z0 = origin[2] + dz * t_start_m;
-        if z0 <= cells.at(cx as usize, cy as usize) as f64 {
-            return Near::HitBehindStart;
-        }
-        let (step_x, step_y) = (step_sign(dx), step_sign(dy));
-        let (inv_dx, inv_dy) = (1.0 / dx, 1.0 / dy);
-        let (tdx, tdy) = (inv_dx.abs(), inv_dy.abs());
-        let mut tmx = exit_time(cx, 1.0, ox, inv_dx, step_x);
-        let mut tmy = exit_time(cy, 1.0, oy, inv_dy, step_y);
-        let mut t = t_start_m;
-        for _ in 0..STRETCH_CELLS {
-            let top = cells.at(cx as usize, cy as usize) as f64;
-            let t_exit = if tmx < tmy { tmx } else { tmy };
-            let t_exit = if t_exit < t_max_m { t_exit } else { t_max_m };
-            let z_in = oz_at(origin, dz, t);
-            if z_in <= top {
-                return Near::Settled(Some(t));
-            }
-            let z_out = oz_at(origin, dz, t_exit);
-            if z_out <= top {
-                return Near::Settled(Some(t + (top - z_in) / dz));
-            }
-            if t_exit >= t_max_m {
-                return Near::Settled(None);
-            }
-            t = t_exit;
-            if tmx < tmy {
-                cx += step_x;
-                tmx += tdx;
-            } else {
-                cy += step_y;
-                tmy += tdy;
-            }
-            if cx < 0 || cy < 0 || cx >= w || cy >= h {
-                return Near::ContinueFrom(t);
-            }
-        }
-        Near::ContinueFrom(t)
-    }
 }
 
 /// Which way a ray walks along an axis: +1, -1, or 0 when it does not move along it.
@@ -522,20 +404,6 @@ fn exit_time(c: i64, size: f64, o: f64, inv: f64, step: i64) -> f64 {
         -1 => (c as f64 * size - o) * inv,
         _ => f64::INFINITY,
     }
-}
-
-/// What a short level-0 walk found.
-enum Near {
-    /// The walk found the hit, or the end of the range.
-    Settled(Option<f64>),
-    /// Nothing yet: cast properly from here.
-    ContinueFrom(f64),
-    /// The start is below the surface: the hit lies before it.
-    HitBehindStart,
-}
-
-fn oz_at(origin: [f64; 3], dz: f64, t: f64) -> f64 {
-    origin[2] + dz * t
 }
 
 #[cfg(test)]

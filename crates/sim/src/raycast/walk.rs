@@ -1,0 +1,347 @@
+//! The two walks a depth or camera pixel's ray takes, written as state machines that advance
+//! one step per call, so that several rays can be walked in turn.
+//!
+//! Each step of either walk is a short chain of dependent arithmetic and one load, so a
+//! single ray keeps the core waiting on latency while most of its execution units idle.
+//! Stepping the rays of neighbouring image columns in turn overlaps their chains: the same
+//! work, done side by side. The answers are those of one ray at a time, exactly.
+
+use super::{Clearance, HeightPyramid, Level, exit_time, step_sign};
+
+/// Sphere tracing through the clearance field (see [`HeightPyramid::cast`]), one step per
+/// [`HeightPyramid::clear_step`].
+#[derive(Clone, Copy, Debug)]
+pub(super) struct ClearWalk {
+    origin: [f64; 3],
+    dir: [f64; 3],
+    /// Cells crossed per unit of t.
+    horiz: f64,
+    t_per_cell: f64,
+    t_per_drop_m: f64,
+    inv_res: f64,
+    inv_dz: f64,
+    t: f64,
+    t_max: f64,
+}
+
+/// What one step of a clearance walk ended with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum ClearStep {
+    /// Moved on through open space.
+    Open,
+    /// Can prove no further: exact marching takes over from this t.
+    Exact(f64),
+    /// Reached `t_max` through open space.
+    Clear,
+}
+
+/// Level-0 cells walked for a short stretch from a proved start (see
+/// [`HeightPyramid::cast_from_hints`]), one cell per [`HeightPyramid::near_step`].
+#[derive(Clone, Copy, Debug)]
+pub(super) struct NearWalk {
+    origin_z: f64,
+    dz: f64,
+    cx: i64,
+    cy: i64,
+    step_x: i64,
+    step_y: i64,
+    tdx: f64,
+    tdy: f64,
+    tmx: f64,
+    tmy: f64,
+    t: f64,
+    t_max: f64,
+    cells_left: usize,
+}
+
+/// Cells a near walk takes before handing over to a full cast.
+const STRETCH_CELLS: usize = 64;
+
+/// What a near walk found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Near {
+    /// The walk found the hit, or the end of the range.
+    Settled(Option<f64>),
+    /// Nothing yet: cast properly from here.
+    ContinueFrom(f64),
+    /// The start is below the surface: the hit lies before it.
+    HitBehindStart,
+}
+
+impl HeightPyramid {
+    /// A clearance walk along the ray over `[t_min, t_max]`, or where exact marching starts
+    /// at once (no clearance field, or a vertical ray).
+    #[inline(always)]
+    pub(super) fn clear_walk(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        t_min: f64,
+        t_max: f64,
+    ) -> Result<ClearWalk, f64> {
+        let Some(c) = &self.clearance else {
+            return Err(t_min);
+        };
+        let horiz = (dir[0] * dir[0] + dir[1] * dir[1]).sqrt() / self.geometry.resolution_m;
+        if horiz < 1e-9 {
+            return Err(t_min);
+        }
+        // Inverses up front: each step depends on the one before, so a division in it would
+        // sit on the critical path.
+        Ok(ClearWalk {
+            origin,
+            dir,
+            horiz,
+            t_per_cell: 1.0 / horiz,
+            t_per_drop_m: if dir[2] < 0.0 {
+                -1.0 / dir[2]
+            } else {
+                f64::INFINITY
+            },
+            inv_res: 1.0 / self.geometry.resolution_m,
+            inv_dz: 1.0 / c.dz_m,
+            t: t_min,
+            t_max,
+        })
+    }
+
+    /// One step of sphere tracing: as far as the clearance field proves empty at the ray's
+    /// height, unless that is under two cells or the ray is off the grid.
+    #[inline(always)]
+    pub(super) fn clear_step(&self, c: &Clearance, w: &mut ClearWalk) -> ClearStep {
+        let g = &self.geometry;
+        let inv_res = w.inv_res;
+        let t = w.t;
+        let x = (w.origin[0] + w.dir[0] * t - g.origin.x_m) * inv_res;
+        let y = (w.origin[1] + w.dir[1] * t - g.origin.y_m) * inv_res;
+        if !(x >= 0.0 && y >= 0.0 && x < g.width as f64 && y < g.height as f64) {
+            // Outside the grid: only the exact march knows whether it re-enters.
+            return ClearStep::Exact(t);
+        }
+        let z = w.origin[2] + w.dir[2] * t;
+        let layer = (z - c.z0_m) * w.inv_dz;
+        if layer < 1.0 {
+            return ClearStep::Exact(t);
+        }
+        let k = (layer as usize - 1).min(c.count - 1);
+        let z_k = c.z0_m + k as f64 * c.dz_m;
+        // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
+        let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, x as usize, y as usize)] as f64
+            - 1.5;
+        let mut step = d * w.t_per_cell;
+        let drop_limit = (z - z_k) * w.t_per_drop_m;
+        if drop_limit < step {
+            step = drop_limit;
+        }
+        if step * w.horiz < 2.0 {
+            return ClearStep::Exact(t);
+        }
+        w.t = t + step;
+        if w.t >= w.t_max {
+            return ClearStep::Clear;
+        }
+        ClearStep::Open
+    }
+
+    /// A near walk from `t_start` (no clipping, no pyramid, almost no setup), or what it
+    /// settles at once: off the grid, or starting below the surface.
+    #[inline(always)]
+    pub(super) fn near_walk(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        t_start: f64,
+        t_max: f64,
+    ) -> Result<NearWalk, Near> {
+        let g = &self.geometry;
+        let inv_res = 1.0 / g.resolution_m;
+        let ox = (origin[0] - g.origin.x_m) * inv_res;
+        let oy = (origin[1] - g.origin.y_m) * inv_res;
+        let (dx, dy, dz) = (dir[0] * inv_res, dir[1] * inv_res, dir[2]);
+        let (px, py) = (ox + dx * t_start, oy + dy * t_start);
+        if !(px >= 0.0 && py >= 0.0 && px < g.width as f64 && py < g.height as f64) {
+            return Err(Near::ContinueFrom(t_start));
+        }
+        let (cx, cy) = (px as i64, py as i64);
+        if origin[2] + dz * t_start <= self.levels[0].at(cx as usize, cy as usize) as f64 {
+            return Err(Near::HitBehindStart);
+        }
+        let (step_x, step_y) = (step_sign(dx), step_sign(dy));
+        let (inv_dx, inv_dy) = (1.0 / dx, 1.0 / dy);
+        Ok(NearWalk {
+            origin_z: origin[2],
+            dz,
+            cx,
+            cy,
+            step_x,
+            step_y,
+            tdx: inv_dx.abs(),
+            tdy: inv_dy.abs(),
+            tmx: exit_time(cx, 1.0, ox, inv_dx, step_x),
+            tmy: exit_time(cy, 1.0, oy, inv_dy, step_y),
+            t: t_start,
+            t_max,
+            cells_left: STRETCH_CELLS,
+        })
+    }
+
+    /// One cell of a near walk: `Some` once it has settled.
+    #[inline(always)]
+    pub(super) fn near_step(&self, w: &mut NearWalk) -> Option<Near> {
+        if w.cells_left == 0 {
+            return Some(Near::ContinueFrom(w.t));
+        }
+        w.cells_left -= 1;
+        let top = self.levels[0].at(w.cx as usize, w.cy as usize) as f64;
+        let t_exit = if w.tmx < w.tmy { w.tmx } else { w.tmy };
+        let t_exit = if t_exit < w.t_max { t_exit } else { w.t_max };
+        let z_in = w.origin_z + w.dz * w.t;
+        if z_in <= top {
+            return Some(Near::Settled(Some(w.t)));
+        }
+        let z_out = w.origin_z + w.dz * t_exit;
+        if z_out <= top {
+            return Some(Near::Settled(Some(w.t + (top - z_in) / w.dz)));
+        }
+        if t_exit >= w.t_max {
+            return Some(Near::Settled(None));
+        }
+        w.t = t_exit;
+        if w.tmx < w.tmy {
+            w.cx += w.step_x;
+            w.tmx += w.tdx;
+        } else {
+            w.cy += w.step_y;
+            w.tmy += w.tdy;
+        }
+        let g = &self.geometry;
+        if w.cx < 0 || w.cy < 0 || w.cx >= g.width as i64 || w.cy >= g.height as i64 {
+            return Some(Near::ContinueFrom(w.t));
+        }
+        None
+    }
+
+    /// Like [`cast`](Self::cast) for `N` rays from one origin, each of which may start at its
+    /// hint (rays of one image column hit in order, so the previous hit is a good guess). A
+    /// guess is only trusted once the clearance field proves the stretch before it empty;
+    /// where that proof stops short, the exact walk continues from there. So each answer is
+    /// the first hit, as `cast` would find it. The rays' walks are stepped in turn, so rays of
+    /// neighbouring columns go side by side.
+    pub fn cast_from_hints<const N: usize>(
+        &self,
+        origin: [f64; 3],
+        dirs: [[f64; 3]; N],
+        t_min_m: f64,
+        hints_m: [f64; N],
+        t_max_m: f64,
+    ) -> [Option<f64>; N] {
+        let mut hits = [None; N];
+        let Some(c) = &self.clearance else {
+            for (hit, dir) in hits.iter_mut().zip(dirs) {
+                *hit = self.cast(origin, dir, t_min_m, t_max_m);
+            }
+            return hits;
+        };
+        // Where each ray's proof ends (None: no hint to prove towards, cast it whole).
+        let mut starts: [Option<f64>; N] = [None; N];
+        let mut clear: [Option<ClearWalk>; N] = [None; N];
+        for i in 0..N {
+            if hints_m[i] > t_min_m {
+                let hint = hints_m[i].min(t_max_m);
+                match self.clear_walk(origin, dirs[i], t_min_m, hint) {
+                    Ok(w) => clear[i] = Some(w),
+                    Err(t) => starts[i] = Some(t),
+                }
+            }
+        }
+        let mut walking = clear.iter().filter(|w| w.is_some()).count();
+        while walking > 0 {
+            for i in 0..N {
+                let Some(w) = clear[i].as_mut() else { continue };
+                let t = match self.clear_step(c, w) {
+                    ClearStep::Open => continue,
+                    ClearStep::Exact(t) => t,
+                    // Proved empty up to the hint: walk exactly from there.
+                    ClearStep::Clear => w.t_max,
+                };
+                starts[i] = Some(t);
+                clear[i] = None;
+                walking -= 1;
+            }
+        }
+        let mut settled: [Option<Near>; N] = [None; N];
+        let mut near: [Option<NearWalk>; N] = [None; N];
+        for i in 0..N {
+            if let Some(start) = starts[i] {
+                match self.near_walk(origin, dirs[i], start, t_max_m) {
+                    Ok(w) => near[i] = Some(w),
+                    Err(n) => settled[i] = Some(n),
+                }
+            }
+        }
+        let mut walking = near.iter().filter(|w| w.is_some()).count();
+        while walking > 0 {
+            for i in 0..N {
+                let Some(w) = near[i].as_mut() else { continue };
+                if let Some(n) = self.near_step(w) {
+                    settled[i] = Some(n);
+                    near[i] = None;
+                    walking -= 1;
+                }
+            }
+        }
+        for i in 0..N {
+            hits[i] = match settled[i] {
+                Some(Near::Settled(hit)) => hit,
+                Some(Near::ContinueFrom(t)) => self.cast(origin, dirs[i], t, t_max_m),
+                Some(Near::HitBehindStart) | None => self.cast(origin, dirs[i], t_min_m, t_max_m),
+            };
+        }
+        hits
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use realms_core::{Grid, GridGeometry, Point2};
+
+    proptest! {
+        /// Side by side or alone, with hints before, at or past the true hit (or none), every
+        /// ray gets what a plain cast finds.
+        #[test]
+        fn rays_side_by_side_hit_what_each_hits_alone(
+            seed in 0u64..1000,
+            ox in 1.0..9.0f64, oy in 1.0..9.0f64, oz in 0.1..0.6f64,
+            yaw in 0.0..std::f64::consts::TAU, pitch in -0.5..0.1f64,
+            spread in 0.0..0.2f64,
+            hint_scales in proptest::array::uniform4(0.0..1.5f64),
+        ) {
+            let g = GridGeometry { width: 200, height: 200, resolution_m: 0.05, origin: Point2::new(0.0, 0.0) };
+            let cells = (0..200u64 * 200)
+                .map(|i| {
+                    let v = (i * 7919 + seed * 104_729) % 89;
+                    if v < 3 { 0.4 } else { ((i % 200) as f32 * 0.05).sin() * 0.05 }
+                })
+                .collect();
+            let p = HeightPyramid::new(&Grid::from_cells(g, cells).expect("sized"));
+            let o = [ox, oy, oz];
+            let dirs: [[f64; 3]; 4] = std::array::from_fn(|i| {
+                let a = yaw + spread * i as f64;
+                let e = pitch + 0.01 * i as f64;
+                [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()]
+            });
+            let alone = dirs.map(|d| p.cast(o, d, 0.0, 6.0));
+            let hints: [f64; 4] =
+                std::array::from_fn(|i| alone[i].unwrap_or(6.0) * hint_scales[i]);
+            let together = p.cast_from_hints(o, dirs, 0.0, hints, 6.0);
+            for i in 0..4 {
+                match (together[i], alone[i]) {
+                    (Some(a), Some(b)) => prop_assert!((a - b).abs() < 1e-9, "ray {}: {} against {}", i, a, b),
+                    (a, b) => prop_assert_eq!(a, b, "ray {}", i),
+                }
+            }
+        }
+    }
+}
