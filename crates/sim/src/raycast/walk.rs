@@ -6,7 +6,7 @@
 //! Stepping the rays of neighbouring image columns in turn overlaps their chains: the same
 //! work, done side by side. The answers are those of one ray at a time, exactly.
 
-use super::{Clearance, HeightPyramid, Level, exit_time, step_sign};
+use super::{CLEAR_BLOCK, Clearance, HeightPyramid, Level, exit_time, step_sign};
 
 /// Sphere tracing through the clearance field (see [`HeightPyramid::cast`]), one step per
 /// [`HeightPyramid::clear_step`].
@@ -126,8 +126,8 @@ impl HeightPyramid {
         let k = (layer as usize - 1).min(c.count - 1);
         let z_k = c.z0_m + k as f64 * c.dz_m;
         // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
-        let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, x as usize, y as usize)] as f64
-            - 1.5;
+        let (bx, by) = (x as usize / CLEAR_BLOCK, y as usize / CLEAR_BLOCK);
+        let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, bx, by)] as f64 - 1.5;
         let mut step = d * w.t_per_cell;
         let drop_limit = (z - z_k) * w.t_per_drop_m;
         if drop_limit < step {
