@@ -2,7 +2,8 @@
 //!
 //! Speed: the default arena, its rovers driving steady arcs (no autonomy), every sensor at its
 //! default rate, cameras off (nobody subscribes); simulated seconds per wall second, median of
-//! several trials. Sensors: frames taken from random free poses across the arena, median
+//! several trials. Sensors: frames taken from random free poses across the arena (each with a
+//! cold cache) and along a drive (consecutive frames, as a rover takes them), median
 //! microseconds each, with plain cell-by-cell ray marching timed in the same run as the
 //! baseline the max-mipmap caster is compared against.
 
