@@ -2,9 +2,9 @@
 //!
 //! Cells are flat-topped columns. Two accelerations, both exact:
 //! - A layered clearance field: for height layers every few centimetres, the chessboard
-//!   distance from each cell to the nearest cell reaching that layer. A ray above a layer can
-//!   step that far at once (sphere tracing, Hart 1996, on a 2.5D field), so a beam across open
-//!   ground takes a handful of steps.
+//!   distance from each 2 x 2 block of cells to the nearest cell reaching that layer. A ray
+//!   above a layer can step that far at once (sphere tracing, Hart 1996, on a 2.5D field), so
+//!   a beam across open ground takes a handful of steps.
 //! - A pyramid of maximum heights (a "maximum mipmap", after Tevs, Ihrke & Seidel, "Maximum
 //!   Mipmaps for Fast, Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008) for
 //!   the last stretch before a hit, where it skips any block the ray passes entirely above.
@@ -75,10 +75,10 @@ struct Clearance {
     layers: Vec<u8>,
 }
 
-/// Most layers a clearance field gets (memory: one byte per cell per layer).
+/// Most layers a clearance field gets (memory: one byte per block per layer).
 const MAX_LAYERS: usize = 40;
 /// Cells a side of the blocks the clearance field is kept for (each holds its cells' least
-/// distance): a quarter or less of the memory, so more of it stays in cache.
+/// distance): about a quarter of the memory, so more of it stays in cache.
 pub(super) const CLEAR_BLOCK: usize = 2;
 /// Finest layer spacing, metres.
 const MIN_LAYER_STEP_M: f64 = 0.04;
@@ -487,7 +487,8 @@ mod tests {
             ox in 0.2..9.8f64, oy in 0.2..9.8f64, oz in 0.1..0.6f64,
             yaw in 0.0..std::f64::consts::TAU, pitch in -0.4..0.2f64,
         ) {
-            let grid = field(200, 200, |x, y| {
+            // Odd sizes, so the clearance field's blocks and tiles are padded at the edges.
+            let grid = field(203, 197, |x, y| {
                 let v = ((x as u64 * 7919 + y as u64 * 104_729 + seed * 31) % 97) as f32;
                 if v < 3.0 { 0.5 } else { ((x as f32) * 0.05).sin() * 0.05 }
             });

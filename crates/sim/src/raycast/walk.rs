@@ -126,7 +126,8 @@ impl HeightPyramid {
         }
         let k = (layer as usize - 1).min(c.count - 1);
         let z_k = c.z0_m + k as f64 * c.dz_m;
-        // Every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
+        // d is the least distance of the point's block, so no more than the point's own cell's:
+        // every point within d - 1.5 cells of the ray is outside any cell reaching z_k.
         let (bx, by) = (x as usize / CLEAR_BLOCK, y as usize / CLEAR_BLOCK);
         let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, bx, by)] as f64 - 1.5;
         let mut step = d * w.t_per_cell;

@@ -66,6 +66,9 @@ pub fn cast_image(
     // Neighbouring columns are cast side by side (their walks overlap on the core), then
     // visited one after the other.
     const SIDE_BY_SIDE: u32 = 4;
+    if width == 0 || height == 0 {
+        return;
+    }
     let mut hits = vec![None; (SIDE_BY_SIDE * height) as usize];
     let mut u = 0;
     while u < width {
