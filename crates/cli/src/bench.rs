@@ -158,7 +158,7 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     // Frames along a drive: 5 cm apart on a circle about the arena's centre, heading along
     // it. Consecutive frames see nearly the same ground, as a driving rover's do, so they find
     // much of what they read still in cache, which frames from random poses do not.
-    let drive: Vec<Pose2> = {
+    let drive_poses: Vec<Pose2> = {
         let g = *world.truth().explorable.geometry();
         let centre = (g.width_m() / 2.0, g.height_m() / 2.0);
         let radius_m = 0.3 * g.width_m().min(g.height_m());
@@ -195,7 +195,7 @@ fn sim(args: BenchSimArgs) -> Result<()> {
             .collect()
     };
     let frames = sensor_frames(&free);
-    let drive = sensor_frames(&drive);
+    let drive = sensor_frames(&drive_poses);
     let time_each = |n: usize, f: &mut dyn FnMut(usize)| {
         let us: Vec<f64> = (0..n)
             .map(|i| {

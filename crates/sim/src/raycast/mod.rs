@@ -421,7 +421,8 @@ mod tests {
     use proptest::prelude::*;
     use realms_core::Point2;
 
-    fn field(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Grid<f32> {
+    /// A `w x h` heightfield of 5 cm cells with the height `f(x, y)` at each cell.
+    pub(super) fn field(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Grid<f32> {
         let g = GridGeometry {
             width: w,
             height: h,

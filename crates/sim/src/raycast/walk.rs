@@ -1,5 +1,6 @@
-//! The two walks a depth or camera pixel's ray takes, written as state machines that advance
-//! one step per call, so that several rays can be walked in turn.
+//! The two walks of a cast, written as state machines that advance one step per call, so
+//! that several rays can be walked in turn: the clearance walk through open space (every
+//! cast takes it) and the short near walk from a proved start (image pixels take it).
 //!
 //! Each step of either walk is a short chain of dependent arithmetic and one load. Stepping
 //! the rays of four neighbouring image columns in turn lets the core overlap their chains:
@@ -256,6 +257,7 @@ impl HeightPyramid {
                 }
             }
         }
+        // The two walks below step each ray in turn, round after round, until all have ended.
         let mut walking = clear.iter().filter(|w| w.is_some()).count();
         while walking > 0 {
             for i in 0..N {
@@ -307,7 +309,6 @@ impl HeightPyramid {
 mod tests {
     use super::*;
     use proptest::prelude::*;
-    use realms_core::{Grid, GridGeometry, Point2};
 
     proptest! {
         /// Side by side or alone, with hints before, at or past the true hit (or none), every
@@ -320,14 +321,11 @@ mod tests {
             spread in 0.0..0.2f64,
             hint_scales in proptest::array::uniform4(0.0..1.5f64),
         ) {
-            let g = GridGeometry { width: 200, height: 200, resolution_m: 0.05, origin: Point2::new(0.0, 0.0) };
-            let cells = (0..200u64 * 200)
-                .map(|i| {
-                    let v = (i * 7919 + seed * 104_729) % 89;
-                    if v < 3 { 0.4 } else { ((i % 200) as f32 * 0.05).sin() * 0.05 }
-                })
-                .collect();
-            let p = HeightPyramid::new(&Grid::from_cells(g, cells).expect("sized"));
+            let grid = super::super::tests::field(200, 200, |x, y| {
+                let v = ((y * 200 + x) as u64 * 7919 + seed * 104_729) % 89;
+                if v < 3 { 0.4 } else { (x as f32 * 0.05).sin() * 0.05 }
+            });
+            let p = HeightPyramid::new(&grid);
             let o = [ox, oy, oz];
             let dirs: [[f64; 3]; 4] = std::array::from_fn(|i| {
                 let a = yaw + spread * i as f64;
