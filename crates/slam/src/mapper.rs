@@ -260,10 +260,26 @@ const TRIM_MIN_COVERED: f64 = 0.95;
 const RELOCALISE_AFTER_M: f64 = 0.1;
 /// ... or turned this far (5 degrees), radians.
 const RELOCALISE_AFTER_RAD: f64 = 0.087;
+/// Motion the scans followed while the odometry's reading stood still, beyond which the
+/// reading that ends the stall is applied from where the stall began, metres ...
+const STALL_FOLLOWED_M: f64 = 0.05;
+/// ... or radians (2 degrees).
+const STALL_FOLLOWED_RAD: f64 = 0.035;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
 const RELOCALISE_WINDOW_M: f64 = 3.0;
 /// ... and this far in heading, radians.
 const RELOCALISE_WINDOW_RAD: f64 = 0.6;
+
+/// Where motion is predicted from. Odometry that stalls repeats its reading for a few scans
+/// while the robot moves on, then jumps by all the motion at once (the MIT CSAIL log does,
+/// turning 50-85 degrees in one reading). The scans in between were matched on their own;
+/// the jump is applied to the pose of the scan that first carried the repeated reading, so
+/// the motion is counted once. Without a stall this is the last scan.
+#[derive(Clone, Copy, Debug)]
+struct OdomAnchor {
+    odom: Pose2,
+    pose: Pose2,
+}
 
 /// The mapper.
 #[derive(Debug)]
@@ -281,7 +297,9 @@ pub struct Mapper {
     submaps: Vec<Submap>,
     scans: Vec<ScanPose>,
     pose: Pose2,
-    last_odom: Option<Pose2>,
+    /// The odometry reading as it last changed, and the pose of the scan it first came
+    /// with: motion is predicted from there (see [`OdomAnchor`]).
+    odom_anchor: Option<OdomAnchor>,
     /// Odometry at the last scan that was matched (for the motion filter).
     last_matched_odom: Option<Pose2>,
     pending_closures: bool,
@@ -321,7 +339,7 @@ impl Mapper {
             submaps: Vec::new(),
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
-            last_odom: None,
+            odom_anchor: None,
             last_matched_odom: None,
             pending_closures: false,
             recent_closures: Vec::new(),
@@ -365,21 +383,30 @@ impl Mapper {
     /// Adds a scan taken at `time_s`: its endpoints in the robot frame, and the wheel
     /// odometry pose at that time (any fixed odometry frame).
     pub fn add_points(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>) -> Tracked {
-        let odom_delta = self
-            .last_odom
-            .map_or(Pose2::IDENTITY, |prev| prev.inverse() * odom);
-        let predicted = match self.last_odom {
-            Some(_) => {
-                self.pose
-                    * self
-                        .wheel_scale
-                        .as_ref()
-                        .map_or(odom_delta, |w| w.apply(odom_delta))
+        // A reading repeated while the scans show motion is odometry that stalled, and the
+        // reading that ends the stall carries all of it: predicted from the last pose, it
+        // would count the motion the matcher already followed twice.
+        let stalled = self.odom_anchor.is_some_and(|a| a.odom == odom);
+        let (odom_delta, predicted) = match self.odom_anchor {
+            None => (Pose2::IDENTITY, odom),
+            Some(a) => {
+                let since = a.odom.inverse() * odom;
+                let scaled = self.wheel_scale.as_ref().map_or(since, |w| w.apply(since));
+                // While the robot stands still the scans' poses differ by the matcher's
+                // noise alone, and the latest is as good a start as the anchor's.
+                let followed = a.pose.inverse() * self.pose;
+                if followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
+                    && followed.yaw_rad.abs() < STALL_FOLLOWED_RAD
+                {
+                    (since, self.pose * scaled)
+                } else {
+                    // The wheels' motion over this scan's interval alone.
+                    (self.pose.inverse() * (a.pose * since), a.pose * scaled)
+                }
             }
-            None => odom,
         };
-        self.last_odom = Some(odom);
         let before = self.pose;
+        let transitions_before = self.transitions.len();
         let mut score = None;
         let mut trusted_along = false;
         // Matched and mapped filled in; the live map and closures take the endpoints.
@@ -500,6 +527,14 @@ impl Mapper {
             keyframe,
             keyframe_from_scan: kf_pose.inverse() * self.pose,
         });
+        // A relocalisation, or being declared lost, moves the pose off the wheels' track:
+        // the anchor is taken again there.
+        if !stalled || self.transitions.len() != transitions_before {
+            self.odom_anchor = Some(OdomAnchor {
+                odom,
+                pose: self.pose,
+            });
+        }
         Tracked {
             pose: self.pose,
             score,
@@ -713,6 +748,11 @@ impl Mapper {
                 // with it. Once their submaps are finished, the optimisation is free to bend
                 // them.
                 move_as_block(&mut self.graph.nodes[first..], &drawn);
+            }
+            // The stall's anchor moves with the pose, in the optimised frame.
+            let moved = self.graph.nodes[node] * self.pose.inverse();
+            if let Some(a) = &mut self.odom_anchor {
+                a.pose = moved * a.pose;
             }
             self.pose = self.graph.nodes[node];
             if let Some(w) = &mut self.wheel_scale {

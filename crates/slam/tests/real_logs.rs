@@ -290,3 +290,38 @@ fn a_match_that_turns_against_the_gyro_is_held_to_its_heading() {
     assert!((held - 3.0).abs() < 0.1, "held to the odometry: {held}");
     assert_eq!(holds, 1);
 }
+
+#[test]
+fn odometry_that_stalls_then_jumps_is_not_counted_twice() {
+    use realms_slam::mapper::{Mapper, MapperConfig};
+    // 68.5-69.2 s into the MIT CSAIL log the odometry repeats its reading for four scans
+    // while the robot drives on at ~0.8 m/s and turns, then jumps 0.86 m and 50 degrees in
+    // one reading. The scans in between are matched on their own; applied from the last
+    // pose, the jump would turn the robot a second time (34 degrees too far, before).
+    let l = log("mit-csail");
+    let t0 = l.scans[0].timestamp_s;
+    let stall = l
+        .scans
+        .windows(2)
+        .position(|w| w[1].timestamp_s - t0 > 68.0 && w[0].odom == w[1].odom)
+        .expect("the log's stall");
+    assert!((l.scans[stall].timestamp_s - t0 - 68.5).abs() < 0.3);
+    let segment = &l.scans[..stall + 20];
+    let mut mapper = Mapper::new(MapperConfig::default());
+    for s in segment {
+        mapper.add_scan(s);
+    }
+    let traj = mapper.trajectory();
+    // Relations spanning the stall and the jump that ends it.
+    let (from, to) = (t0 + 67.5, t0 + 70.5);
+    let across: Vec<Relation> = relations("mit-csail")
+        .into_iter()
+        .filter(|r| r.t1_s >= from && r.t2_s <= to && r.t1_s < t0 + 68.6 && r.t2_s > t0 + 69.3)
+        .collect();
+    assert!(!across.is_empty(), "relations across the stall");
+    let e = relative_pose_error(&traj, &across).expect("poses at the relations");
+    assert!(
+        e.rot_mean_deg < 5.0 && e.trans_mean_m < 0.15,
+        "across the stall: {e:?}"
+    );
+}
