@@ -79,6 +79,10 @@ pub fn run(args: SlamArgs) -> Result<()> {
     let wall_s = start.elapsed().as_secs_f64();
     if !args.no_loop_closure {
         println!("{} loop closures", mapper.closures);
+        println!(
+            "fast turns: headings searched at {} scans, the searched heading's match kept at {}",
+            mapper.fast_turn_searches, mapper.fast_turn_taken
+        );
     }
     let duration = log.duration_s();
     println!(

@@ -89,8 +89,8 @@ pub struct MapperConfig {
     /// right for wheel-only headings such as the recorded logs'), radians.
     pub max_heading_step_rad: Option<f64>,
     /// A closure may correct the pose only as far as the map can have drifted between the
-    /// two places it joins (`None`: any correction the search window allows; right for
-    /// wheel-only odometry, whose drift is too wild to bound this way).
+    /// two places it joins, and is searched only that far (`None`: any correction the
+    /// search window allows).
     pub closure_drift: Option<ClosureDrift>,
     /// Scale the wheels' translation by the share the scan matches found real (`None`: take
     /// the wheels at their word, as for a recorded log's calibrated odometry).
@@ -111,6 +111,28 @@ pub struct MapperConfig {
     /// pose (Cartographer's split of local and global SLAM); otherwise they take their
     /// optimised poses.
     pub track_in_submap_frame: bool,
+    /// Where the prediction turns fast, also search the headings around it before the
+    /// local match (see [`FastTurn`]); `None`: the local match alone.
+    pub fast_turn: Option<FastTurn>,
+}
+
+/// Over a scan in which the wheels turn more than `turn_rad`, the headings within
+/// `search_rad` of the prediction are searched (every `step_rad`) for the scan's best fit
+/// on the coarsest map, and the local match is run from there too. Its match is kept only
+/// if it scores `margin` more than the match from the wheels' prediction: where both fit
+/// poorly (a view half new after a fast turn), a slightly better fit elsewhere is as likely
+/// chance as truth, and the wheels were right more often (BENCHMARKS.md, "Closures searched
+/// as far as the path can have drifted").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastTurn {
+    /// Predicted turn over one scan beyond which the headings are searched, radians.
+    pub turn_rad: f64,
+    /// Half-width of the search, radians.
+    pub search_rad: f64,
+    /// Step of the search, radians.
+    pub step_rad: f64,
+    /// Mean occupancy by which the searched heading's match must beat the prediction's.
+    pub margin: f64,
 }
 
 /// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
@@ -185,7 +207,9 @@ impl Default for MapperConfig {
             submap_keyframes: 30,
             loop_every_keyframes: 2,
             loop_search_radius_m: 8.0,
-            loop_window_m: 2.5,
+            // Wide enough for a long loop's drift on wheel odometry (MIT CSAIL's is metres);
+            // the drift bound below narrows it where the two ends were joined recently.
+            loop_window_m: 5.0,
             loop_window_rad: 15f64.to_radians(),
             loop_min_score: 0.5,
             loop_search_min_score: 0.55,
@@ -195,12 +219,29 @@ impl Default for MapperConfig {
             trim_radius_m: None,
             motion_filter: None,
             max_heading_step_rad: None,
-            closure_drift: None,
+            // Wheel odometry with the scans matched in between drifts by a few per cent of
+            // the path; a tenth of it, and a degree a metre, bound what a closure may ask
+            // for. On the recorded logs this turned closures that slid a corridor's length
+            // away (ACES) into refusals, and made the searches 2-3 times faster
+            // (BENCHMARKS.md, "Closures searched as far as the path can have drifted").
+            closure_drift: Some(ClosureDrift {
+                base_m: 0.3,
+                per_m: 0.1,
+                hop_m: 2.0,
+                base_rad: 5f64.to_radians(),
+                per_m_rad: 1f64.to_radians(),
+            }),
             slip_calibration: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
             graph_preconditioner: Preconditioner::BlockJacobi,
             track_in_submap_frame: true,
+            fast_turn: Some(FastTurn {
+                turn_rad: 10f64.to_radians(),
+                search_rad: 20f64.to_radians(),
+                step_rad: 1f64.to_radians(),
+                margin: 0.1,
+            }),
         }
     }
 }
@@ -317,6 +358,10 @@ pub struct Mapper {
     pub heading_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
+    /// Fast turns whose headings were searched ...
+    pub fast_turn_searches: usize,
+    /// ... and the matches from the searched heading that were kept.
+    pub fast_turn_taken: usize,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
@@ -351,6 +396,8 @@ impl Mapper {
             closures: 0,
             heading_holds: 0,
             relocalise_searches: 0,
+            fast_turn_searches: 0,
+            fast_turn_taken: 0,
             assembly: Assembly::new(cfg.frontend.resolution_m)
                 .with_miss_rule(cfg.frontend.miss_rule),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
@@ -452,6 +499,29 @@ impl Mapper {
                     let prior = origin.inverse() * predicted;
                     let map = &self.submaps[i].map;
                     let mut m = match_scan(map, &dense, prior, &self.cfg.frontend.matcher);
+                    let turn = normalize_angle_rad(predicted.yaw_rad - before.yaw_rad);
+                    if let Some(fast) = self.cfg.fast_turn
+                        && turn.abs() > fast.turn_rad
+                    {
+                        let start = crate::matcher::best_heading(
+                            map,
+                            &dense,
+                            prior,
+                            fast.search_rad,
+                            fast.step_rad,
+                        );
+                        if normalize_angle_rad(start.yaw_rad - prior.yaw_rad).abs() > fast.step_rad
+                        {
+                            // In a fast turn the wheels' heading is the doubtful part:
+                            // the match from the searched heading is pulled towards it.
+                            let other = match_scan(map, &dense, start, &self.cfg.frontend.matcher);
+                            self.fast_turn_searches += 1;
+                            if other.score > m.score + fast.margin {
+                                m = other;
+                                self.fast_turn_taken += 1;
+                            }
+                        }
+                    }
                     if let Some(gate) = self.cfg.max_heading_step_rad
                         && normalize_angle_rad(m.pose.yaw_rad - prior.yaw_rad).abs() > gate
                     {
