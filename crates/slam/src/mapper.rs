@@ -313,9 +313,9 @@ const RELOCALISE_WINDOW_RAD: f64 = 0.6;
 
 /// Where motion is predicted from. Odometry that stalls repeats its reading for a few scans
 /// while the robot moves on, then jumps by all the motion at once (the MIT CSAIL log does,
-/// turning 50-85 degrees in one reading). The scans in between were matched on their own;
-/// the jump is applied to the pose of the scan that first carried the repeated reading, so
-/// the motion is counted once. Without a stall this is the last scan.
+/// turning by up to 85 degrees in one reading). The scans in between were matched on their
+/// own; the jump is applied to the pose of the scan that first carried the repeated reading,
+/// so the motion is counted once. Without a stall this is the last scan.
 #[derive(Clone, Copy, Debug)]
 struct OdomAnchor {
     odom: Pose2,
