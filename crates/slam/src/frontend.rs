@@ -5,6 +5,7 @@
 use crate::carmen::LaserReading;
 use crate::matcher::{Match, MatcherConfig, MultiResMap, match_scan};
 use crate::occupancy::MissRule;
+use crate::odometry::OdomPredictor;
 use crate::trajectory::StampedPose;
 use realms_core::{Point2, Pose2};
 
@@ -109,7 +110,7 @@ pub struct Frontend {
     cfg: FrontendConfig,
     map: MultiResMap,
     pose: Pose2,
-    last_odom: Option<Pose2>,
+    odometry: OdomPredictor,
     last_insert: Option<Pose2>,
     trajectory: Vec<StampedPose>,
 }
@@ -121,7 +122,7 @@ impl Frontend {
             map: MultiResMap::new(cfg.resolution_m, cfg.levels).with_miss_rule(cfg.miss_rule),
             cfg,
             pose: Pose2::IDENTITY,
-            last_odom: None,
+            odometry: OdomPredictor::default(),
             last_insert: None,
             trajectory: Vec::new(),
         }
@@ -134,11 +135,8 @@ impl Frontend {
 
     /// Adds a scan; returns the estimated pose of the robot at the scan.
     pub fn add_scan(&mut self, scan: &LaserReading) -> Option<Match> {
-        let predicted = match self.last_odom {
-            Some(prev) => self.pose * (prev.inverse() * scan.odom),
-            None => scan.odom,
-        };
-        self.last_odom = Some(scan.odom);
+        let prediction = self.odometry.predict(scan.odom, self.pose, |d| d);
+        let predicted = prediction.pose;
         let points = self.points_in_robot(scan);
         let matched = match self.last_insert {
             Some(_) if points.len() >= 10 => {
@@ -147,6 +145,8 @@ impl Frontend {
             _ => None,
         };
         self.pose = matched.map_or(predicted, |m| m.pose);
+        self.odometry
+            .settle(scan.odom, self.pose, &prediction, false);
         let moved = self.last_insert.is_none_or(|last| {
             let d = self.pose.relative_to(&last);
             d.x_m.hypot(d.y_m) >= self.cfg.insert_translation_m

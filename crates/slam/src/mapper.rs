@@ -22,6 +22,7 @@ use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
 use crate::occupancy::CellState;
+use crate::odometry::OdomPredictor;
 use crate::posegraph::{Edge, PoseGraph, Preconditioner};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
@@ -301,26 +302,10 @@ const TRIM_MIN_COVERED: f64 = 0.95;
 const RELOCALISE_AFTER_M: f64 = 0.1;
 /// ... or turned this far (5 degrees), radians.
 const RELOCALISE_AFTER_RAD: f64 = 0.087;
-/// Motion the scans followed while the odometry's reading stood still, beyond which the
-/// reading that ends the stall is applied from where the stall began, metres ...
-const STALL_FOLLOWED_M: f64 = 0.05;
-/// ... or radians (2 degrees).
-const STALL_FOLLOWED_RAD: f64 = 0.035;
 /// Relocalisation searches this far around the dead-reckoned pose, metres ...
 const RELOCALISE_WINDOW_M: f64 = 3.0;
 /// ... and this far in heading, radians.
 const RELOCALISE_WINDOW_RAD: f64 = 0.6;
-
-/// Where motion is predicted from. Odometry that stalls repeats its reading for a few scans
-/// while the robot moves on, then jumps by all the motion at once (the MIT CSAIL log does,
-/// turning by up to 85 degrees in one reading). The scans in between were matched on their
-/// own; the jump is applied to the pose of the scan that first carried the repeated reading,
-/// so the motion is counted once. Without a stall this is the last scan.
-#[derive(Clone, Copy, Debug)]
-struct OdomAnchor {
-    odom: Pose2,
-    pose: Pose2,
-}
 
 /// The mapper.
 #[derive(Debug)]
@@ -338,9 +323,8 @@ pub struct Mapper {
     submaps: Vec<Submap>,
     scans: Vec<ScanPose>,
     pose: Pose2,
-    /// The odometry reading as it last changed, and the pose of the scan it first came
-    /// with: motion is predicted from there (see [`OdomAnchor`]).
-    odom_anchor: Option<OdomAnchor>,
+    /// Where the next scan is predicted from (odometry that stalls is applied once).
+    odometry: OdomPredictor,
     /// Odometry at the last scan that was matched (for the motion filter).
     last_matched_odom: Option<Pose2>,
     pending_closures: bool,
@@ -384,7 +368,7 @@ impl Mapper {
             submaps: Vec::new(),
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
-            odom_anchor: None,
+            odometry: OdomPredictor::default(),
             last_matched_odom: None,
             pending_closures: false,
             recent_closures: Vec::new(),
@@ -430,28 +414,10 @@ impl Mapper {
     /// Adds a scan taken at `time_s`: its endpoints in the robot frame, and the wheel
     /// odometry pose at that time (any fixed odometry frame).
     pub fn add_points(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>) -> Tracked {
-        // A reading repeated while the scans show motion is odometry that stalled, and the
-        // reading that ends the stall carries all of it: predicted from the last pose, it
-        // would count the motion the matcher already followed twice.
-        let stalled = self.odom_anchor.is_some_and(|a| a.odom == odom);
-        let (odom_delta, predicted) = match self.odom_anchor {
-            None => (Pose2::IDENTITY, odom),
-            Some(a) => {
-                let since = a.odom.inverse() * odom;
-                let scaled = self.wheel_scale.as_ref().map_or(since, |w| w.apply(since));
-                // While the robot stands still the scans' poses differ by the matcher's
-                // noise alone, and the latest is as good a start as the anchor's.
-                let followed = a.pose.inverse() * self.pose;
-                if followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
-                    && followed.yaw_rad.abs() < STALL_FOLLOWED_RAD
-                {
-                    (since, self.pose * scaled)
-                } else {
-                    // The wheels' motion over this scan's interval alone.
-                    (self.pose.inverse() * (a.pose * since), a.pose * scaled)
-                }
-            }
-        };
+        let prediction = self.odometry.predict(odom, self.pose, |d| {
+            self.wheel_scale.as_ref().map_or(d, |w| w.apply(d))
+        });
+        let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
         let transitions_before = self.transitions.len();
         let mut score = None;
@@ -597,14 +563,10 @@ impl Mapper {
             keyframe,
             keyframe_from_scan: kf_pose.inverse() * self.pose,
         });
-        // A relocalisation, or being declared lost, moves the pose off the wheels' track:
-        // the anchor is taken again there.
-        if !stalled || self.transitions.len() != transitions_before {
-            self.odom_anchor = Some(OdomAnchor {
-                odom,
-                pose: self.pose,
-            });
-        }
+        // A relocalisation, or being declared lost, moves the pose off the wheels' track.
+        let moved_off_track = self.transitions.len() != transitions_before;
+        self.odometry
+            .settle(odom, self.pose, &prediction, moved_off_track);
         Tracked {
             pose: self.pose,
             score,
@@ -819,11 +781,9 @@ impl Mapper {
                 // them.
                 move_as_block(&mut self.graph.nodes[first..], &drawn);
             }
-            // The stall's anchor moves with the pose, in the optimised frame.
-            let moved = self.graph.nodes[node] * self.pose.inverse();
-            if let Some(a) = &mut self.odom_anchor {
-                a.pose = moved * a.pose;
-            }
+            // Where a stall began moves with the pose, into the optimised frame.
+            self.odometry
+                .shift(self.graph.nodes[node] * self.pose.inverse());
             self.pose = self.graph.nodes[node];
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();

@@ -1,0 +1,190 @@
+//! The motion prediction a scan match starts from, taken from wheel odometry that may stall.
+//!
+//! Odometry that stalls repeats its reading for a few scans while the robot moves on, then
+//! jumps by all the motion at once (the MIT CSAIL log does, turning by up to 85 degrees in
+//! one reading). The scans in between are matched on their own and follow the motion.
+//! Applied from the last pose, the jump would count that motion a second time; it is applied
+//! from the pose of the scan that first carried the repeated reading instead. Without a
+//! stall that scan is the last one, and the prediction is the odometry's step from the last
+//! pose, as usual.
+
+use realms_core::Pose2;
+
+/// Motion the scans followed while the odometry's reading stood still, beyond which the
+/// reading that ends the stall is applied from where the stall began, metres ...
+const STALL_FOLLOWED_M: f64 = 0.05;
+/// ... or radians (2 degrees). Below both, the robot stood still: the scans' poses differ by
+/// the matcher's noise alone, and the latest is as good a start as the anchor's.
+const STALL_FOLLOWED_RAD: f64 = 0.035;
+
+/// The odometry reading as it last changed, and the pose of the scan it first came with.
+#[derive(Clone, Copy, Debug)]
+struct Anchor {
+    odom: Pose2,
+    pose: Pose2,
+}
+
+/// Where the next scan is predicted from.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OdomPredictor {
+    anchor: Option<Anchor>,
+}
+
+/// The prediction for one scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prediction {
+    /// The wheels' motion over this scan's interval alone, from the last pose (robot frame).
+    pub step: Pose2,
+    /// The predicted pose.
+    pub pose: Pose2,
+    /// The odometry repeated the reading the anchor holds.
+    pub stalled: bool,
+}
+
+impl OdomPredictor {
+    /// The pose of a scan with odometry `odom`, the last scan's pose being `last`. `scale`
+    /// corrects the wheels' motion (e.g. for slip). The first scan is predicted at `odom`.
+    pub fn predict(&self, odom: Pose2, last: Pose2, scale: impl Fn(Pose2) -> Pose2) -> Prediction {
+        let Some(a) = self.anchor else {
+            return Prediction {
+                step: Pose2::IDENTITY,
+                pose: odom,
+                stalled: false,
+            };
+        };
+        if a.odom == odom {
+            // No news from the wheels: no motion predicted (the matcher follows it).
+            return Prediction {
+                step: Pose2::IDENTITY,
+                pose: last,
+                stalled: true,
+            };
+        }
+        let since = a.odom.inverse() * odom;
+        let followed = a.pose.inverse() * last;
+        let stood_still = followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
+            && followed.yaw_rad.abs() < STALL_FOLLOWED_RAD;
+        let (step, pose) = if stood_still {
+            (since, last * scale(since))
+        } else {
+            (last.inverse() * (a.pose * since), a.pose * scale(since))
+        };
+        Prediction {
+            step,
+            pose,
+            stalled: false,
+        }
+    }
+
+    /// Records where the scan of `prediction` ended up. The anchor moves to it unless the
+    /// odometry stalled; `moved_off_track` (a relocalisation, being declared lost) moves it
+    /// regardless, since the pose then no longer follows the wheels.
+    pub fn settle(
+        &mut self,
+        odom: Pose2,
+        pose: Pose2,
+        prediction: &Prediction,
+        moved_off_track: bool,
+    ) {
+        if !prediction.stalled || moved_off_track {
+            self.anchor = Some(Anchor { odom, pose });
+        }
+    }
+
+    /// The map's frame moved by `correction` (an optimisation): the anchor moves with it.
+    pub fn shift(&mut self, correction: Pose2) {
+        if let Some(a) = &mut self.anchor {
+            a.pose = correction * a.pose;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: Pose2, b: Pose2) -> bool {
+        let d = a.relative_to(&b);
+        d.x_m.hypot(d.y_m) < 1e-9 && d.yaw_rad.abs() < 1e-9
+    }
+
+    #[test]
+    fn without_a_stall_the_prediction_is_the_odometrys_step_from_the_last_pose() {
+        let mut p = OdomPredictor::default();
+        let odom0 = Pose2::new(5.0, 1.0, 0.3);
+        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        assert!(close(first.pose, odom0));
+        let matched = Pose2::new(0.1, 0.0, 0.01);
+        p.settle(odom0, matched, &first, false);
+        let odom1 = odom0 * Pose2::new(0.2, 0.01, 0.05);
+        let next = p.predict(odom1, matched, |d| d);
+        assert!(close(next.step, Pose2::new(0.2, 0.01, 0.05)));
+        assert!(close(next.pose, matched * Pose2::new(0.2, 0.01, 0.05)));
+        assert!(!next.stalled);
+    }
+
+    #[test]
+    fn a_stall_the_scans_followed_is_counted_once() {
+        // The robot drives 0.2 m and turns 0.1 rad a scan; the odometry repeats its reading
+        // for three scans, then jumps by all four steps.
+        let step = Pose2::new(0.2, 0.0, 0.1);
+        let mut p = OdomPredictor::default();
+        let odom0 = Pose2::IDENTITY;
+        let mut truth = Pose2::IDENTITY;
+        let first = p.predict(odom0, truth, |d| d);
+        p.settle(odom0, truth, &first, false);
+        for _ in 0..3 {
+            let pred = p.predict(odom0, truth, |d| d);
+            assert!(pred.stalled && close(pred.step, Pose2::IDENTITY));
+            assert!(close(pred.pose, truth), "{:?}", pred.pose);
+            truth = truth * step;
+            // The matcher follows the motion.
+            p.settle(odom0, truth, &pred, false);
+        }
+        let odom4 = step * step * step * step;
+        let pred = p.predict(odom4, truth, |d| d);
+        assert!(close(pred.pose, truth * step), "{:?}", pred.pose);
+        assert!(close(pred.step, step), "{:?}", pred.step);
+    }
+
+    #[test]
+    fn a_robot_that_stood_still_is_predicted_from_its_last_pose() {
+        let mut p = OdomPredictor::default();
+        let odom = Pose2::new(1.0, 2.0, 0.5);
+        let first = p.predict(odom, Pose2::IDENTITY, |d| d);
+        p.settle(odom, Pose2::IDENTITY, &first, false);
+        // Matcher noise while parked: 1 cm.
+        let parked = Pose2::new(0.01, 0.0, 0.0);
+        let pred = p.predict(odom, parked, |d| d);
+        p.settle(odom, parked, &pred, false);
+        let moved = odom * Pose2::new(0.3, 0.0, 0.0);
+        let pred = p.predict(moved, parked, |d| d);
+        assert!(close(pred.pose, parked * Pose2::new(0.3, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn the_anchor_moves_with_the_map_and_after_a_relocalisation() {
+        let step = Pose2::new(0.2, 0.0, 0.0);
+        let mut p = OdomPredictor::default();
+        let odom0 = Pose2::IDENTITY;
+        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        p.settle(odom0, Pose2::IDENTITY, &first, false);
+        let stalled = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        p.settle(odom0, step, &stalled, false);
+        // An optimisation moves the map (and the last pose) by 1 m in y.
+        let correction = Pose2::new(0.0, 1.0, 0.0);
+        p.shift(correction);
+        let last = correction * step;
+        let pred = p.predict(step * step, last, |d| d);
+        assert!(close(pred.pose, last * step), "{:?}", pred.pose);
+        // A relocalisation during a stall takes the anchor where the robot was put.
+        let mut p = OdomPredictor::default();
+        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        p.settle(odom0, Pose2::IDENTITY, &first, false);
+        let stalled = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let relocalised = Pose2::new(3.0, 0.0, 0.0);
+        p.settle(odom0, relocalised, &stalled, true);
+        let pred = p.predict(step, relocalised, |d| d);
+        assert!(close(pred.pose, relocalised * step), "{:?}", pred.pose);
+    }
+}
