@@ -99,13 +99,13 @@ pub fn rover_mapper_config() -> MapperConfig {
     // The rover turns at most 6 degrees between scans (1 rad/s), and the gyro's heading
     // holds a match anyway: no search over headings in fast turns.
     cfg.fast_turn = None;
+    // The rovers' closure window stays at 2.5 m, what their replays were tuned with.
+    cfg.loop_window_m = 2.5;
     // With the gyro holding the heading the map drifts about 1 % of the path (BENCHMARKS.md);
     // a closure asking for five times that is the lander's square fitted one side over.
     // The heading creeps a degree or two over a whole mission's few hundred metres; 3
     // degrees, and 0.2 degrees a metre of path between the ends, bound the closure search's
     // turns (BENCHMARKS.md, "A narrower closure search").
-    // The rovers' closure window stays at 2.5 m, what their replays were tuned with.
-    cfg.loop_window_m = 2.5;
     cfg.closure_drift = Some(realms_slam::mapper::ClosureDrift {
         base_m: 0.3,
         per_m: 0.05,

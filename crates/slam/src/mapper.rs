@@ -4,7 +4,10 @@
 //!
 //! - Each submap keeps its grid in the frame of its first keyframe, so when the graph moves
 //!   that keyframe the submap moves with it.
-//! - Scans are tracked against the older of the (at most two) active submaps.
+//! - Scans are tracked against the older of the (at most two) active submaps, from the
+//!   odometry's prediction ([`crate::odometry`]: a stalled reading's jump is applied once).
+//!   Where the prediction turns fast, the headings around it are searched first
+//!   ([`FastTurn`]).
 //! - A keyframe is added when the robot has moved enough; it is inserted into the active
 //!   submaps and linked to the previous keyframe.
 //! - Loop closure: every other keyframe is searched against the nearest finished submaps by
@@ -12,15 +15,16 @@
 //!   A match becomes a closure only if it passes three checks, because a few false closures
 //!   ruin a map: it scores high, it clearly beats every distinct pose in the window (corridors
 //!   and look-alike rooms do not), and a second closure from a nearby keyframe asks for the
-//!   same correction. Accepted closures enter the graph as robust edges and the graph is
-//!   re-optimised.
+//!   same correction. With a [`ClosureDrift`] bound, the search reaches only as far as the
+//!   map can have drifted along the path between the two places. Accepted closures enter the
+//!   graph as robust edges and the graph is re-optimised.
 
 use crate::assembly::Assembly;
 use crate::bnb::{self, PrecomputedMap, SearchWindow};
 use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
-use crate::matcher::{MatcherConfig, MultiResMap, match_scan};
+use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::occupancy::CellState;
 use crate::odometry::OdomPredictor;
 use crate::posegraph::{Edge, PoseGraph, Preconditioner};
@@ -113,20 +117,23 @@ pub struct MapperConfig {
     /// optimised poses.
     pub track_in_submap_frame: bool,
     /// Where the prediction turns fast, also search the headings around it before the
-    /// local match (see [`FastTurn`]); `None`: the local match alone.
+    /// local match (see [`FastTurn`]); `None`: the local match alone. For wheel-only
+    /// headings: with a gyro, `max_heading_step_rad` holds the heading instead, and would
+    /// redo a searched match.
     pub fast_turn: Option<FastTurn>,
 }
 
-/// Over a scan in which the wheels turn more than `turn_rad`, the headings within
+/// Over a scan whose predicted turn exceeds `turn_rad`, the headings within
 /// `search_rad` of the prediction are searched (every `step_rad`) for the scan's best fit
 /// on the coarsest map, and the local match is run from there too. Its match is kept only
 /// if it scores `margin` more than the match from the wheels' prediction: where both fit
 /// poorly (a view half new after a fast turn), a slightly better fit elsewhere is as likely
-/// chance as truth, and the wheels were right more often (BENCHMARKS.md, "Closures searched
-/// as far as the path can have drifted").
+/// chance as truth, and the wheels were right more often (BENCHMARKS.md, "Odometry that
+/// stalls, fast turns, and closures searched as far as the path can have drifted").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FastTurn {
-    /// Predicted turn over one scan beyond which the headings are searched, radians.
+    /// Predicted turn over one scan (from the last pose) beyond which the headings are
+    /// searched, radians.
     pub turn_rad: f64,
     /// Half-width of the search, radians.
     pub search_rad: f64,
@@ -221,10 +228,11 @@ impl Default for MapperConfig {
             motion_filter: None,
             max_heading_step_rad: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
-            // the path; a tenth of it, and a degree a metre, bound what a closure may ask
-            // for. On the recorded logs this turned closures that slid a corridor's length
-            // away (ACES) into refusals, and made the searches 2-3 times faster
-            // (BENCHMARKS.md, "Closures searched as far as the path can have drifted").
+            // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
+            // between its ends, and is searched within a degree of turn a metre. On the
+            // recorded logs this refused closures that slid a corridor's length (ACES), and
+            // made the searches 2-3 times faster (BENCHMARKS.md, "Odometry that stalls, fast
+            // turns, and closures searched as far as the path can have drifted").
             closure_drift: Some(ClosureDrift {
                 base_m: 0.3,
                 per_m: 0.1,
@@ -342,7 +350,7 @@ pub struct Mapper {
     pub heading_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
-    /// Fast turns whose headings were searched ...
+    /// Scans whose headings were searched for a fast turn ...
     pub fast_turn_searches: usize,
     /// ... and the matches from the searched heading that were kept.
     pub fast_turn_taken: usize,
@@ -419,7 +427,8 @@ impl Mapper {
         });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
-        let transitions_before = self.transitions.len();
+        // A relocalisation puts the pose off the wheels' track.
+        let mut relocalised = false;
         let mut score = None;
         let mut trusted_along = false;
         // Matched and mapped filled in; the live map and closures take the endpoints.
@@ -438,7 +447,9 @@ impl Mapper {
             });
             if new_view {
                 self.last_relocalise_odom = Some(odom);
+                let dead_reckoned = self.pose;
                 self.try_relocalise(&points);
+                relocalised = self.pose != dead_reckoned;
             }
         } else {
             self.last_relocalise_odom = None;
@@ -465,23 +476,19 @@ impl Mapper {
                     let prior = origin.inverse() * predicted;
                     let map = &self.submaps[i].map;
                     let mut m = match_scan(map, &dense, prior, &self.cfg.frontend.matcher);
-                    let turn = normalize_angle_rad(predicted.yaw_rad - before.yaw_rad);
                     if let Some(fast) = self.cfg.fast_turn
-                        && turn.abs() > fast.turn_rad
+                        && normalize_angle_rad(predicted.yaw_rad - before.yaw_rad).abs()
+                            > fast.turn_rad
                     {
-                        let start = crate::matcher::best_heading(
-                            map,
-                            &dense,
-                            prior,
-                            fast.search_rad,
-                            fast.step_rad,
-                        );
+                        self.fast_turn_searches += 1;
+                        let start =
+                            best_heading(map, &dense, prior, fast.search_rad, fast.step_rad);
+                        // Within a step of the prediction, the local match started there.
                         if normalize_angle_rad(start.yaw_rad - prior.yaw_rad).abs() > fast.step_rad
                         {
-                            // In a fast turn the wheels' heading is the doubtful part:
-                            // the match from the searched heading is pulled towards it.
+                            // The searched heading is the second match's prior: in a fast
+                            // turn the wheels' heading is the doubtful part.
                             let other = match_scan(map, &dense, start, &self.cfg.frontend.matcher);
-                            self.fast_turn_searches += 1;
                             if other.score > m.score + fast.margin {
                                 m = other;
                                 self.fast_turn_taken += 1;
@@ -563,10 +570,8 @@ impl Mapper {
             keyframe,
             keyframe_from_scan: kf_pose.inverse() * self.pose,
         });
-        // A relocalisation, or being declared lost, moves the pose off the wheels' track.
-        let moved_off_track = self.transitions.len() != transitions_before;
         self.odometry
-            .settle(odom, self.pose, &prediction, moved_off_track);
+            .settle(odom, self.pose, &prediction, relocalised);
         Tracked {
             pose: self.pose,
             score,

@@ -99,19 +99,7 @@ pub fn match_scan(
     prior: Pose2,
     cfg: &MatcherConfig,
 ) -> Match {
-    match_scan_from(map, points, prior, prior, cfg)
-}
-
-/// [`match_scan`] starting the descent at `start` rather than at `prior`; the prior still
-/// pulls towards `prior`.
-pub fn match_scan_from(
-    map: &MultiResMap,
-    points: &[Point2],
-    start: Pose2,
-    prior: Pose2,
-    cfg: &MatcherConfig,
-) -> Match {
-    let mut pose = start;
+    let mut pose = prior;
     let mut information = [[0.0; 3]; 3];
     for level in map.levels.iter().rev() {
         for _ in 0..cfg.iterations {
@@ -326,7 +314,9 @@ mod tests {
             .map(|p| (truth0.transform_point(*p), true))
             .collect();
         map.insert(truth0.position(), &world);
-        // Turned in place, with the wheels' heading 25 degrees past the turn.
+        // Turned in place, with the wheels' heading 25 degrees past the turn. In this plain
+        // room the local match alone still finds turns up to about 18 degrees, so the test
+        // goes past the mapper's 20-degree search, and searches 30.
         let truth1 = Pose2::new(2.0, 2.0, 0.6);
         let scan1 = room_scan(truth1);
         let prior = Pose2::new(2.0, 2.0, 0.6 + 25f64.to_radians());
@@ -341,8 +331,9 @@ mod tests {
             "{:?}",
             searched.pose
         );
+        // By more than the mapper's margin for taking it (`FastTurn::margin`, 0.1).
         assert!(
-            searched.score > local.score,
+            searched.score > local.score + 0.1,
             "{} vs {}",
             searched.score,
             local.score
