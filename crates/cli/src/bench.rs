@@ -31,6 +31,7 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::Merge(args) => crate::bench_merge::run(args),
         crate::cli::BenchCommand::Slip(args) => crate::bench_slip::run(args),
         crate::cli::BenchCommand::Slam(args) => crate::bench_slam::run(args),
+        crate::cli::BenchCommand::Logs(args) => crate::bench_logs::run(args),
     }
 }
 

@@ -172,6 +172,19 @@ pub enum BenchCommand {
     Slip(BenchSlipArgs),
     /// The rovers' SLAM replayed on a mission's captured sensor input: error against the truth and cost, per variant.
     Slam(BenchSlamArgs),
+    /// SLAM on the recorded logs of the standard 2D benchmark (Intel, ACES, MIT CSAIL) against the published figures.
+    Logs(BenchLogsArgs),
+}
+
+/// `realms bench logs`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchLogsArgs {
+    /// Folder holding `NAME.clf` and `NAME.relations` for each log.
+    #[arg(long, default_value = "../shared/data/slam")]
+    pub data: PathBuf,
+    /// Logs to run, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "intel,aces,mit-csail")]
+    pub logs: Vec<String>,
 }
 
 /// `realms bench slam`.

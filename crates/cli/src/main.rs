@@ -8,6 +8,7 @@
 #![allow(clippy::disallowed_methods)]
 
 mod bench;
+mod bench_logs;
 mod bench_merge;
 mod bench_nav;
 mod bench_net;
