@@ -162,3 +162,52 @@ fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
         "{changes:?}"
     );
 }
+
+#[test]
+fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
+    // rover1's wheel odometry falls silent for 6 s while it explores the small arena; its
+    // gyro and lidar go on. When the wheels report again, the travel of the whole dropout
+    // arrives in one reading. The scans followed that travel meanwhile: applied from the
+    // last pose, it would be counted twice (1.5 m off, before).
+    let mut s = small();
+    let (from_s, for_s) = (20.0, 6.0);
+    s.faults = vec![realms_sim::scenario::Fault {
+        kind: realms_sim::scenario::FaultKind::SensorDropout,
+        rover: "rover1".into(),
+        at_s: from_s,
+        duration_s: for_s,
+        sensor: Some(realms_sim::scenario::SensorKind::Odometry),
+    }];
+    let options = MissionOptions {
+        ideal_comms: true,
+        gyro_calibration: realms_core::Duration::from_secs(5),
+        ..MissionOptions::default()
+    };
+    let mut mission = Mission::with_options(World::new(&s), options);
+    mission.run_until(Time::from_secs_f64(from_s + for_s + 6.0));
+    let checks = &mission.slam_records()[0].checks;
+    let error = |c: &realms_mission::slam_record::PoseCheck| {
+        c.estimate.position().distance_m(c.truth.position())
+    };
+    let before = checks
+        .iter()
+        .rfind(|c| c.t.as_secs_f64() <= from_s)
+        .expect("a check before the dropout");
+    let after: Vec<_> = checks
+        .iter()
+        .filter(|c| c.t.as_secs_f64() >= from_s + for_s + 1.0)
+        .collect();
+    assert!(!after.is_empty(), "checks after the dropout");
+    let last = after.last().expect("checks after");
+    let driven = before.truth.position().distance_m(last.truth.position());
+    assert!(
+        driven > 1.0,
+        "rover1 drove only {driven:.2} m: nothing to count twice"
+    );
+    let worst_after = after.iter().map(|c| error(c)).fold(0.0, f64::max);
+    assert!(
+        worst_after < error(before) + 0.2,
+        "pose off {:.2} m before the dropout, up to {worst_after:.2} m after",
+        error(before)
+    );
+}

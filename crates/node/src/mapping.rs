@@ -22,10 +22,14 @@ use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
+use realms_slam::odometry::OdomSample;
 use realms_slam::traversability::{SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps};
 
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
 const SHADOW_MIN_GAP_M: f64 = 0.5;
+
+/// The wheels count as silent once this many of their readings are overdue.
+const WHEELS_SILENT_READINGS: f64 = 4.0;
 
 /// How far past its latest sample the gyro's heading is carried on at its latest rate: a
 /// few of its samples; a gyro silent longer than that leaves the heading where it was.
@@ -263,20 +267,24 @@ impl Mapping {
         let p = &odom.pose.pose;
         let wheel = Pose2::new(p.position.x, p.position.y, p.orientation.yaw_rad());
         let stamp = odom.header.stamp;
+        let back_from_silence = self.wheels_silent_at(stamp);
         let fused = match (self.last_wheel, self.odometry.last()) {
             (Some(prev), Some((_, fused_prev))) if self.gyro_heard => {
                 // The wheel motion in the wheel frame, replayed along the gyro's heading.
                 let step = prev.inverse() * wheel;
                 let yaw = self.gyro_yaw_at(stamp);
-                let turned = normalize_angle_rad(yaw - fused_prev.yaw_rad);
-                let mid_yaw = fused_prev.yaw_rad + turned / 2.0;
-                let (s, c) = mid_yaw.sin_cos();
-                let forward = step.x_m;
-                Pose2::new(
-                    fused_prev.x_m + c * forward,
-                    fused_prev.y_m + s * forward,
-                    yaw,
-                )
+                let (dx, dy) = if back_from_silence {
+                    // The whole travel of a dropout in one reading, along a curve: its chord
+                    // in the frame where the wheels fell silent.
+                    let (s, c) = fused_prev.yaw_rad.sin_cos();
+                    (c * step.x_m - s * step.y_m, s * step.x_m + c * step.y_m)
+                } else {
+                    let turned = normalize_angle_rad(yaw - fused_prev.yaw_rad);
+                    let mid_yaw = fused_prev.yaw_rad + turned / 2.0;
+                    let (s, c) = mid_yaw.sin_cos();
+                    (c * step.x_m, s * step.x_m)
+                };
+                Pose2::new(fused_prev.x_m + dx, fused_prev.y_m + dy, yaw)
             }
             _ => {
                 self.gyro_yaw_rad = wheel.yaw_rad;
@@ -434,6 +442,19 @@ impl Mapping {
         }
     }
 
+    /// Whether the wheels have missed their last few readings by `t` (a dropout): the
+    /// odometry's translation is then stale while the gyro's heading goes on, and the SLAM
+    /// must not take the travel they report when they come back as new motion.
+    fn wheels_silent_at(&self, t: Time) -> bool {
+        match self.odometry.as_slice() {
+            [(t0, _), (t1, _)] => {
+                let period = (*t1 - *t0).as_secs_f64();
+                period > 0.0 && (t - *t1).as_secs_f64() > WHEELS_SILENT_READINGS * period
+            }
+            _ => false,
+        }
+    }
+
     /// Odometry at `t`, interpolated (or extrapolated a little) from the latest two readings.
     fn odometry_at(&self, t: Time) -> Option<Pose2> {
         match self.odometry.as_slice() {
@@ -498,7 +519,13 @@ impl Mapping {
             }
             points.push(Point2::new(x, y));
         }
-        let tracked = self.mapper.add_points(stamp.as_secs_f64(), odom, points);
+        let sample = OdomSample {
+            pose: odom,
+            wheels_silent: self.wheels_silent_at(stamp),
+        };
+        let tracked = self
+            .mapper
+            .add_points_with(stamp.as_secs_f64(), sample, points);
         self.tracked_once = true;
         for (_, change) in self.mapper.take_transitions() {
             out.push(Outgoing {

@@ -5,7 +5,7 @@
 use crate::carmen::LaserReading;
 use crate::matcher::{Match, MatcherConfig, MultiResMap, match_scan};
 use crate::occupancy::MissRule;
-use crate::odometry::OdomPredictor;
+use crate::odometry::{OdomPredictor, OdomSample};
 use crate::trajectory::StampedPose;
 use realms_core::{Point2, Pose2};
 
@@ -135,7 +135,9 @@ impl Frontend {
 
     /// Adds a scan; returns the estimated pose of the robot at the scan.
     pub fn add_scan(&mut self, scan: &LaserReading) -> Option<Match> {
-        let prediction = self.odometry.predict(scan.odom, self.pose, |d| d);
+        let prediction = self
+            .odometry
+            .predict(OdomSample::wheels(scan.odom), self.pose, |d| d);
         let predicted = prediction.pose;
         let points = self.points_in_robot(scan);
         let matched = match self.last_insert {

@@ -26,7 +26,7 @@ use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::occupancy::CellState;
-use crate::odometry::OdomPredictor;
+use crate::odometry::{OdomPredictor, OdomSample};
 use crate::posegraph::{Edge, PoseGraph, Preconditioner};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
@@ -422,7 +422,18 @@ impl Mapper {
     /// Adds a scan taken at `time_s`: its endpoints in the robot frame, and the wheel
     /// odometry pose at that time (any fixed odometry frame).
     pub fn add_points(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>) -> Tracked {
-        let prediction = self.odometry.predict(odom, self.pose, |d| {
+        self.add_points_with(time_s, OdomSample::wheels(odom), points)
+    }
+
+    /// [`Mapper::add_points`], saying whether the wheels were silent (see [`OdomSample`]).
+    pub fn add_points_with(
+        &mut self,
+        time_s: f64,
+        sample: OdomSample,
+        points: Vec<Point2>,
+    ) -> Tracked {
+        let odom = sample.pose;
+        let prediction = self.odometry.predict(sample, self.pose, |d| {
             self.wheel_scale.as_ref().map_or(d, |w| w.apply(d))
         });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
@@ -458,7 +469,9 @@ impl Mapper {
                 .submaps
                 .iter()
                 .position(|s| !s.finished && s.keyframes > 0);
+            // Silent wheels say nothing of whether the robot moves: every scan is matched.
             let moved = match (self.cfg.motion_filter, self.last_matched_odom) {
+                _ if sample.wheels_silent => true,
                 (Some(f), Some(at)) => {
                     let d = at.inverse() * odom;
                     d.x_m.hypot(d.y_m) >= f.translation_m || d.yaw_rad.abs() >= f.rotation_rad

@@ -7,8 +7,14 @@
 //! from the pose of the scan that first carried the repeated reading instead. Without a
 //! stall that scan is the last one, and the prediction is the odometry's step from the last
 //! pose, as usual.
+//!
+//! A rover's odometry is the wheels' translation with a gyro's heading: when the wheels fall
+//! silent the heading goes on, so the reading never repeats exactly. The caller says so
+//! ([`OdomSample::wheels_silent`]); the turn is then predicted from the heading alone, and the
+//! wheels' travel, when they report again, from where they fell silent.
 
 use realms_core::Pose2;
+use realms_core::geometry::normalize_angle_rad;
 
 /// Motion the scans followed while the odometry's reading stood still, beyond which the
 /// reading that ends the stall is applied from where the stall began, metres ...
@@ -24,10 +30,32 @@ struct Anchor {
     pose: Pose2,
 }
 
+/// The odometry at a scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OdomSample {
+    /// The odometry pose (any fixed odometry frame).
+    pub pose: Pose2,
+    /// The wheels have not reported for a while, so the pose's translation is stale (its
+    /// heading, a gyro's, may still be live).
+    pub wheels_silent: bool,
+}
+
+impl OdomSample {
+    /// A reading from wheels that are reporting.
+    pub fn wheels(pose: Pose2) -> Self {
+        OdomSample {
+            pose,
+            wheels_silent: false,
+        }
+    }
+}
+
 /// Where the next scan is predicted from.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OdomPredictor {
     anchor: Option<Anchor>,
+    /// The last scan's odometry pose.
+    last_odom: Option<Pose2>,
 }
 
 /// The prediction for one scan.
@@ -42,9 +70,16 @@ pub struct Prediction {
 }
 
 impl OdomPredictor {
-    /// The pose of a scan with odometry `odom`, the last scan's pose being `last`. `scale`
-    /// corrects the wheels' motion (e.g. for slip). The first scan is predicted at `odom`.
-    pub fn predict(&self, odom: Pose2, last: Pose2, scale: impl Fn(Pose2) -> Pose2) -> Prediction {
+    /// The pose of a scan with odometry `sample`, the last scan's pose being `last`. `scale`
+    /// corrects the wheels' motion (e.g. for slip). The first scan is predicted at the
+    /// odometry's pose.
+    pub fn predict(
+        &self,
+        sample: OdomSample,
+        last: Pose2,
+        scale: impl Fn(Pose2) -> Pose2,
+    ) -> Prediction {
+        let odom = sample.pose;
         let Some(a) = self.anchor else {
             return Prediction {
                 step: Pose2::IDENTITY,
@@ -52,11 +87,16 @@ impl OdomPredictor {
                 stalled: false,
             };
         };
-        if a.odom == odom {
-            // No news from the wheels: no motion predicted (the matcher follows it).
+        if sample.wheels_silent || a.odom == odom {
+            // No news from the wheels: only the heading's turn since the last scan (none
+            // for a repeated reading); the matcher follows the rest.
+            let turned = self
+                .last_odom
+                .map_or(0.0, |l| normalize_angle_rad(odom.yaw_rad - l.yaw_rad));
+            let step = Pose2::new(0.0, 0.0, turned);
             return Prediction {
-                step: Pose2::IDENTITY,
-                pose: last,
+                step,
+                pose: last * step,
                 stalled: true,
             };
         }
@@ -89,6 +129,7 @@ impl OdomPredictor {
         if !prediction.stalled || moved_off_track {
             self.anchor = Some(Anchor { odom, pose });
         }
+        self.last_odom = Some(odom);
     }
 
     /// The map's frame moved by `correction` (an optimisation): the anchor moves with it.
@@ -112,12 +153,12 @@ mod tests {
     fn without_a_stall_the_prediction_is_the_odometrys_step_from_the_last_pose() {
         let mut p = OdomPredictor::default();
         let odom0 = Pose2::new(5.0, 1.0, 0.3);
-        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let first = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         assert!(close(first.pose, odom0));
         let matched = Pose2::new(0.1, 0.0, 0.01);
         p.settle(odom0, matched, &first, false);
         let odom1 = odom0 * Pose2::new(0.2, 0.01, 0.05);
-        let next = p.predict(odom1, matched, |d| d);
+        let next = p.predict(OdomSample::wheels(odom1), matched, |d| d);
         assert!(close(next.step, Pose2::new(0.2, 0.01, 0.05)));
         assert!(close(next.pose, matched * Pose2::new(0.2, 0.01, 0.05)));
         assert!(!next.stalled);
@@ -131,10 +172,10 @@ mod tests {
         let mut p = OdomPredictor::default();
         let odom0 = Pose2::IDENTITY;
         let mut truth = Pose2::IDENTITY;
-        let first = p.predict(odom0, truth, |d| d);
+        let first = p.predict(OdomSample::wheels(odom0), truth, |d| d);
         p.settle(odom0, truth, &first, false);
         for _ in 0..3 {
-            let pred = p.predict(odom0, truth, |d| d);
+            let pred = p.predict(OdomSample::wheels(odom0), truth, |d| d);
             assert!(pred.stalled && close(pred.step, Pose2::IDENTITY));
             assert!(close(pred.pose, truth), "{:?}", pred.pose);
             truth = truth * step;
@@ -142,7 +183,7 @@ mod tests {
             p.settle(odom0, truth, &pred, false);
         }
         let odom4 = step * step * step * step;
-        let pred = p.predict(odom4, truth, |d| d);
+        let pred = p.predict(OdomSample::wheels(odom4), truth, |d| d);
         assert!(close(pred.pose, truth * step), "{:?}", pred.pose);
         assert!(close(pred.step, step), "{:?}", pred.step);
     }
@@ -151,15 +192,48 @@ mod tests {
     fn a_robot_that_stood_still_is_predicted_from_its_last_pose() {
         let mut p = OdomPredictor::default();
         let odom = Pose2::new(1.0, 2.0, 0.5);
-        let first = p.predict(odom, Pose2::IDENTITY, |d| d);
+        let first = p.predict(OdomSample::wheels(odom), Pose2::IDENTITY, |d| d);
         p.settle(odom, Pose2::IDENTITY, &first, false);
         // Matcher noise while parked: 1 cm.
         let parked = Pose2::new(0.01, 0.0, 0.0);
-        let pred = p.predict(odom, parked, |d| d);
+        let pred = p.predict(OdomSample::wheels(odom), parked, |d| d);
         p.settle(odom, parked, &pred, false);
         let moved = odom * Pose2::new(0.3, 0.0, 0.0);
-        let pred = p.predict(moved, parked, |d| d);
+        let pred = p.predict(OdomSample::wheels(moved), parked, |d| d);
         assert!(close(pred.pose, parked * Pose2::new(0.3, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn silent_wheels_under_a_live_gyro_predict_the_turn_and_apply_their_travel_once() {
+        // A rover drives 0.2 m and turns 0.1 rad a scan. Its wheels fall silent for three
+        // scans: the odometry's translation stands still while the gyro's heading goes on.
+        let step = Pose2::new(0.2, 0.0, 0.1);
+        let mut p = OdomPredictor::default();
+        let mut truth = Pose2::IDENTITY;
+        let first = p.predict(OdomSample::wheels(truth), truth, |d| d);
+        p.settle(truth, truth, &first, false);
+        let silent_at = truth;
+        for k in 1..=3 {
+            let heading = Pose2::new(silent_at.x_m, silent_at.y_m, 0.1 * k as f64);
+            let sample = OdomSample {
+                pose: heading,
+                wheels_silent: true,
+            };
+            let pred = p.predict(sample, truth, |d| d);
+            assert!(pred.stalled);
+            // The gyro's turn, and no travel.
+            assert!(
+                close(pred.pose, truth * Pose2::new(0.0, 0.0, 0.1)),
+                "{:?}",
+                pred.pose
+            );
+            truth = truth * step;
+            p.settle(heading, truth, &pred, false);
+        }
+        // The wheels report again, with all four steps' travel.
+        let back = step * step * step * step;
+        let pred = p.predict(OdomSample::wheels(back), truth, |d| d);
+        assert!(close(pred.pose, truth * step), "{:?}", pred.pose);
     }
 
     #[test]
@@ -167,24 +241,24 @@ mod tests {
         let step = Pose2::new(0.2, 0.0, 0.0);
         let mut p = OdomPredictor::default();
         let odom0 = Pose2::IDENTITY;
-        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let first = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         p.settle(odom0, Pose2::IDENTITY, &first, false);
-        let stalled = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let stalled = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         p.settle(odom0, step, &stalled, false);
         // An optimisation moves the map (and the last pose) by 1 m in y.
         let correction = Pose2::new(0.0, 1.0, 0.0);
         p.shift(correction);
         let last = correction * step;
-        let pred = p.predict(step * step, last, |d| d);
+        let pred = p.predict(OdomSample::wheels(step * step), last, |d| d);
         assert!(close(pred.pose, last * step), "{:?}", pred.pose);
         // A relocalisation during a stall takes the anchor where the robot was put.
         let mut p = OdomPredictor::default();
-        let first = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let first = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         p.settle(odom0, Pose2::IDENTITY, &first, false);
-        let stalled = p.predict(odom0, Pose2::IDENTITY, |d| d);
+        let stalled = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         let relocalised = Pose2::new(3.0, 0.0, 0.0);
         p.settle(odom0, relocalised, &stalled, true);
-        let pred = p.predict(step, relocalised, |d| d);
+        let pred = p.predict(OdomSample::wheels(step), relocalised, |d| d);
         assert!(close(pred.pose, relocalised * step), "{:?}", pred.pose);
     }
 }
