@@ -166,7 +166,7 @@ fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
 #[test]
 fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
     // rover1's wheel odometry falls silent for 6 s while it explores the small arena; its
-    // gyro and lidar go on. When the wheels report again, the travel of the whole dropout
+    // gyro and lidar go on, and it reports the odometry unreliable meanwhile. When the wheels report again, the travel of the whole dropout
     // arrives in one reading. The scans followed that travel meanwhile: applied from the
     // last pose, it would be counted twice (1.5 m off, before).
     let mut s = small();
@@ -203,6 +203,16 @@ fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
     assert!(
         driven > 1.0,
         "rover1 drove only {driven:.2} m: nothing to count twice"
+    );
+    // And the rover says so while it lasts.
+    let changes = &mission.slam_records()[0].changes;
+    assert!(
+        changes
+            .iter()
+            .any(|c| c.state == LocalisationState::OdometryUnreliable
+                && (from_s..from_s + 2.0).contains(&c.t_s)
+                && c.reason.contains("no wheel odometry")),
+        "{changes:?}"
     );
     let worst_after = after.iter().map(|c| error(c)).fold(0.0, f64::max);
     assert!(

@@ -68,6 +68,8 @@ pub struct TrackedScan {
     /// The match score (mean occupancy at the endpoints), or `None` if the scan was not
     /// matched (too few points, or no map yet).
     pub score: Option<f64>,
+    /// The wheels have stopped reporting (a dropout): `odom_delta` is the gyro's turn alone.
+    pub wheels_silent: bool,
 }
 
 /// A change of state, with the reason in words (for the operator).
@@ -103,6 +105,8 @@ pub struct HealthMonitor {
     agreeing_since_s: Option<f64>,
     disagreeing_since_s: Option<f64>,
     last_time_s: Option<f64>,
+    /// Since when the wheels have been silent.
+    wheels_silent_since_s: Option<f64>,
 }
 
 impl HealthMonitor {
@@ -114,6 +118,7 @@ impl HealthMonitor {
             recent: std::collections::VecDeque::new(),
             unmatched: (Pose2::IDENTITY, Pose2::IDENTITY),
             poor_in_a_row: 0,
+            wheels_silent_since_s: None,
             agreeing_since_s: None,
             disagreeing_since_s: None,
             last_time_s: None,
@@ -171,6 +176,23 @@ impl HealthMonitor {
                 ),
             );
         }
+        if scan.wheels_silent {
+            // Wheels that report nothing are lost odometry too: said once it has lasted a
+            // moment, and never all clear while it lasts.
+            self.agreeing_since_s = None;
+            let since = *self.wheels_silent_since_s.get_or_insert(scan.time_s);
+            if scan.time_s - since >= self.cfg.confirm_s {
+                return self.go(
+                    LocalisationState::OdometryUnreliable,
+                    format!(
+                        "no wheel odometry for {:.1} s: tracking on the scans and the gyro",
+                        scan.time_s - since
+                    ),
+                );
+            }
+            return None;
+        }
+        self.wheels_silent_since_s = None;
         // Slipping wheels report travel the scans do not see, on every match while it lasts;
         // a match that jumps (onto a new submap, or onto one a loop closure has moved) does
         // so once. Each match's shortfall along the wheels' direction is therefore capped at
@@ -252,7 +274,34 @@ mod tests {
             odom_delta: Pose2::new(odom_m, 0.0, 0.0),
             matched_delta: Pose2::new(matched_m, 0.0, 0.0),
             score: Some(score),
+            wheels_silent: false,
         }
+    }
+
+    #[test]
+    fn wheels_that_fall_silent_are_reported_until_they_report_again() {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        let mut states = Vec::new();
+        // Driving at 0.3 m/s; the wheels are silent from 10 to 16 s while the scans follow.
+        for k in 0..250 {
+            let t = k as f64 * 0.1;
+            let silent = (10.0..16.0).contains(&t);
+            let observed = TrackedScan {
+                wheels_silent: silent,
+                ..scan(t, if silent { 0.0 } else { 0.03 }, 0.03, 0.8)
+            };
+            if let Some(tr) = m.observe(&observed) {
+                states.push((t, tr.state, tr.reason));
+            }
+        }
+        assert_eq!(states.len(), 2, "{states:?}");
+        let (t_silent, s, why) = &states[0];
+        assert_eq!(*s, LocalisationState::OdometryUnreliable);
+        assert!((10.0..11.0).contains(t_silent), "noticed at {t_silent}");
+        assert!(why.contains("no wheel odometry"), "{why}");
+        let (t_ok, s, _) = &states[1];
+        assert_eq!(*s, LocalisationState::Tracking);
+        assert!((16.0..20.0).contains(t_ok), "all clear at {t_ok}");
     }
 
     #[test]
@@ -318,6 +367,7 @@ mod tests {
                     odom_delta: Pose2::new(0.03, 0.0, 0.0),
                     matched_delta: Pose2::new(matched, 0.0, 0.0),
                     score,
+                    wheels_silent: false,
                 }),
                 None,
                 "{t}"
@@ -345,6 +395,7 @@ mod tests {
                 odom_delta: Pose2::new(0.01, 0.0, 0.0),
                 matched_delta: Pose2::new(matched, 0.0, 0.0),
                 score,
+                wheels_silent: false,
             }) {
                 noticed.get_or_insert((t, tr.state));
             }

@@ -542,6 +542,7 @@ impl Mapper {
                     before.inverse() * self.pose
                 },
                 score,
+                wheels_silent: sample.wheels_silent,
             };
             if let Some(t) = self.health.observe(&observed) {
                 if t.state == LocalisationState::Lost {
