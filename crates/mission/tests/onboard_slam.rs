@@ -166,9 +166,10 @@ fn slam_beats_odometry_maps_truly_and_reports_the_slip_burst() {
 #[test]
 fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
     // rover1's wheel odometry falls silent for 6 s while it explores the small arena; its
-    // gyro and lidar go on, and it reports the odometry unreliable meanwhile. When the wheels report again, the travel of the whole dropout
-    // arrives in one reading. The scans followed that travel meanwhile: applied from the
-    // last pose, it would be counted twice (1.5 m off, before).
+    // gyro and lidar go on, and it reports the odometry unreliable meanwhile. When the
+    // wheels report again, the travel of the whole dropout arrives in one reading. The scans
+    // followed that travel meanwhile: applied from the last pose, it would be counted twice
+    // (1.5 m off, before).
     let mut s = small();
     let (from_s, for_s) = (20.0, 6.0);
     s.faults = vec![realms_sim::scenario::Fault {

@@ -174,6 +174,9 @@ pub struct Mapping {
     /// interpolate at a scan's stamp.
     odometry: Vec<(Time, Pose2)>,
     last_wheel: Option<Pose2>,
+    /// Time between the wheels' readings, seconds, as they come when all is well (a
+    /// reading that ends a dropout does not count).
+    wheel_period_s: Option<f64>,
     /// The gyro's integrated heading at its latest sample, and when that was.
     gyro_yaw_rad: f64,
     last_gyro: Option<Time>,
@@ -210,6 +213,7 @@ impl Mapping {
             cfg,
             odometry: Vec::new(),
             last_wheel: None,
+            wheel_period_s: None,
             gyro_yaw_rad: 0.0,
             last_gyro: None,
             prev_gyro: None,
@@ -293,6 +297,12 @@ impl Mapping {
             }
         };
         self.last_wheel = Some(wheel);
+        if !back_from_silence
+            && let Some((t1, _)) = self.odometry.last()
+            && stamp > *t1
+        {
+            self.wheel_period_s = Some((stamp - *t1).as_secs_f64());
+        }
         if self.odometry.len() == 2 {
             self.odometry.remove(0);
         }
@@ -446,10 +456,9 @@ impl Mapping {
     /// odometry's translation is then stale while the gyro's heading goes on, and the SLAM
     /// must not take the travel they report when they come back as new motion.
     fn wheels_silent_at(&self, t: Time) -> bool {
-        match self.odometry.as_slice() {
-            [(t0, _), (t1, _)] => {
-                let period = (*t1 - *t0).as_secs_f64();
-                period > 0.0 && (t - *t1).as_secs_f64() > WHEELS_SILENT_READINGS * period
+        match (self.odometry.last(), self.wheel_period_s) {
+            (Some((t1, _)), Some(period)) => {
+                (t - *t1).as_secs_f64() > WHEELS_SILENT_READINGS * period
             }
             _ => false,
         }
@@ -465,8 +474,10 @@ impl Mapping {
                 if span <= 0.0 {
                     return Some(*p1);
                 }
-                // Never more than one reading's span beyond the newest.
-                let s = ((t - *t0).as_secs_f64() / span).clamp(0.0, 2.0);
+                // Never more than one reading's period beyond the newest (after a dropout the
+                // two readings are seconds apart).
+                let limit = self.wheel_period_s.map_or(2.0, |p| 1.0 + p / span).min(2.0);
+                let s = ((t - *t0).as_secs_f64() / span).clamp(0.0, limit);
                 Some(p0.interpolate(p1, s))
             }
             _ => unreachable!("at most two readings are kept"),

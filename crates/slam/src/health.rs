@@ -143,6 +143,7 @@ impl HealthMonitor {
         self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
         self.poor_in_a_row = 0;
         self.agreeing_since_s = None;
+        self.wheels_silent_since_s = None;
         self.go(LocalisationState::Tracking, reason)
     }
 

@@ -28,6 +28,9 @@ const STALL_FOLLOWED_RAD: f64 = 0.035;
 struct Anchor {
     odom: Pose2,
     pose: Pose2,
+    /// `odom` goes with `pose`: false when the pose was moved (a relocalisation) while the
+    /// wheels were stalled or silent, so the reading is older than the pose.
+    odom_matches_pose: bool,
 }
 
 /// The odometry at a scan.
@@ -65,7 +68,7 @@ pub struct Prediction {
     pub step: Pose2,
     /// The predicted pose.
     pub pose: Pose2,
-    /// The odometry repeated the reading the anchor holds.
+    /// The wheels said nothing new: a repeated reading, or wheels the caller called silent.
     pub stalled: bool,
 }
 
@@ -100,6 +103,19 @@ impl OdomPredictor {
                 stalled: true,
             };
         }
+        if !a.odom_matches_pose {
+            // The pose was put where the robot is while the wheels said nothing: their
+            // travel since then is unknown, and only the turn is predicted.
+            let turned = self
+                .last_odom
+                .map_or(0.0, |l| normalize_angle_rad(odom.yaw_rad - l.yaw_rad));
+            let step = Pose2::new(0.0, 0.0, turned);
+            return Prediction {
+                step,
+                pose: last * step,
+                stalled: false,
+            };
+        }
         let since = a.odom.inverse() * odom;
         let followed = a.pose.inverse() * last;
         let stood_still = followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
@@ -127,7 +143,11 @@ impl OdomPredictor {
         moved_off_track: bool,
     ) {
         if !prediction.stalled || moved_off_track {
-            self.anchor = Some(Anchor { odom, pose });
+            self.anchor = Some(Anchor {
+                odom,
+                pose,
+                odom_matches_pose: !(prediction.stalled && moved_off_track),
+            });
         }
         self.last_odom = Some(odom);
     }
@@ -251,7 +271,9 @@ mod tests {
         let last = correction * step;
         let pred = p.predict(OdomSample::wheels(step * step), last, |d| d);
         assert!(close(pred.pose, last * step), "{:?}", pred.pose);
-        // A relocalisation during a stall takes the anchor where the robot was put.
+        // A relocalisation during a stall puts the pose where the robot is, but the wheels'
+        // travel since the stall began is partly before it: none of it is applied, and the
+        // wheels' steps count again from the next reading.
         let mut p = OdomPredictor::default();
         let first = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
         p.settle(odom0, Pose2::IDENTITY, &first, false);
@@ -259,6 +281,10 @@ mod tests {
         let relocalised = Pose2::new(3.0, 0.0, 0.0);
         p.settle(odom0, relocalised, &stalled, true);
         let pred = p.predict(OdomSample::wheels(step), relocalised, |d| d);
-        assert!(close(pred.pose, relocalised * step), "{:?}", pred.pose);
+        assert!(close(pred.pose, relocalised), "{:?}", pred.pose);
+        assert!(!pred.stalled);
+        p.settle(step, relocalised, &pred, false);
+        let next = p.predict(OdomSample::wheels(step * step), relocalised, |d| d);
+        assert!(close(next.pose, relocalised * step), "{:?}", next.pose);
     }
 }
