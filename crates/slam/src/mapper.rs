@@ -143,6 +143,29 @@ pub struct FastTurn {
     pub margin: f64,
 }
 
+impl FastTurn {
+    /// The match of `points` from the best heading around `prior`, if it beats `local` (the
+    /// match from `prior`) by the margin.
+    fn rematch(
+        &self,
+        map: &MultiResMap,
+        points: &[Point2],
+        prior: Pose2,
+        local: &crate::matcher::Match,
+        matcher: &MatcherConfig,
+    ) -> Option<crate::matcher::Match> {
+        let start = best_heading(map, points, prior, self.search_rad, self.step_rad);
+        // Within a step of the prediction, the local match started there.
+        if normalize_angle_rad(start.yaw_rad - prior.yaw_rad).abs() <= self.step_rad {
+            return None;
+        }
+        // The searched heading is the second match's prior: in a fast turn the wheels'
+        // heading is the doubtful part.
+        let other = match_scan(map, points, start, matcher);
+        (other.score > local.score + self.margin).then_some(other)
+    }
+}
+
 /// How far a gyro's integrated heading wanders over a span of `dt` seconds: a random walk
 /// from its white noise, `rad_per_sqrt_s * sqrt(dt)`, plus what is left of its bias after
 /// calibration, `bias_rad_s * dt` (standard deviations).
@@ -494,18 +517,11 @@ impl Mapper {
                             > fast.turn_rad
                     {
                         self.fast_turn_searches += 1;
-                        let start =
-                            best_heading(map, &dense, prior, fast.search_rad, fast.step_rad);
-                        // Within a step of the prediction, the local match started there.
-                        if normalize_angle_rad(start.yaw_rad - prior.yaw_rad).abs() > fast.step_rad
+                        if let Some(better) =
+                            fast.rematch(map, &dense, prior, &m, &self.cfg.frontend.matcher)
                         {
-                            // The searched heading is the second match's prior: in a fast
-                            // turn the wheels' heading is the doubtful part.
-                            let other = match_scan(map, &dense, start, &self.cfg.frontend.matcher);
-                            if other.score > m.score + fast.margin {
-                                m = other;
-                                self.fast_turn_taken += 1;
-                            }
+                            m = better;
+                            self.fast_turn_taken += 1;
                         }
                     }
                     if let Some(gate) = self.cfg.max_heading_step_rad

@@ -93,28 +93,12 @@ impl OdomPredictor {
         if sample.wheels_silent || a.odom == odom {
             // No news from the wheels: only the heading's turn since the last scan (none
             // for a repeated reading); the matcher follows the rest.
-            let turned = self
-                .last_odom
-                .map_or(0.0, |l| normalize_angle_rad(odom.yaw_rad - l.yaw_rad));
-            let step = Pose2::new(0.0, 0.0, turned);
-            return Prediction {
-                step,
-                pose: last * step,
-                stalled: true,
-            };
+            return self.turn_only(odom, last, true);
         }
         if !a.odom_matches_pose {
             // The pose was put where the robot is while the wheels said nothing: their
             // travel since then is unknown, and only the turn is predicted.
-            let turned = self
-                .last_odom
-                .map_or(0.0, |l| normalize_angle_rad(odom.yaw_rad - l.yaw_rad));
-            let step = Pose2::new(0.0, 0.0, turned);
-            return Prediction {
-                step,
-                pose: last * step,
-                stalled: false,
-            };
+            return self.turn_only(odom, last, false);
         }
         let since = a.odom.inverse() * odom;
         let followed = a.pose.inverse() * last;
@@ -132,9 +116,22 @@ impl OdomPredictor {
         }
     }
 
+    /// `last` turned by the odometry's heading change since the last scan, with no travel.
+    fn turn_only(&self, odom: Pose2, last: Pose2, stalled: bool) -> Prediction {
+        let turned = self
+            .last_odom
+            .map_or(0.0, |l| normalize_angle_rad(odom.yaw_rad - l.yaw_rad));
+        let step = Pose2::new(0.0, 0.0, turned);
+        Prediction {
+            step,
+            pose: last * step,
+            stalled,
+        }
+    }
+
     /// Records where the scan of `prediction` ended up. The anchor moves to it unless the
-    /// odometry stalled; `moved_off_track` (a relocalisation, being declared lost) moves it
-    /// regardless, since the pose then no longer follows the wheels.
+    /// odometry stalled; `moved_off_track` (a relocalisation) moves it regardless, since the
+    /// pose then no longer follows the wheels.
     pub fn settle(
         &mut self,
         odom: Pose2,

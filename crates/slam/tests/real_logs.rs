@@ -3,7 +3,7 @@
 
 use realms_core::{Point2, Pose2};
 use realms_slam::carmen::CarmenLog;
-use realms_slam::eval::{Relation, read_relations, relative_pose_error};
+use realms_slam::eval::{Relation, RelativePoseError, read_relations, relative_pose_error};
 use realms_slam::frontend::{Frontend, FrontendConfig};
 use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::trajectory::StampedPose;
@@ -197,19 +197,25 @@ fn the_live_map_agrees_with_the_map_drawn_afresh_on_a_real_log() {
     );
 }
 
-#[test]
-fn verified_loop_closures_keep_the_aces_building_consistent() {
-    // The whole ACES log: a large building whose outer loop drifts by metres before it
-    // closes. Graph mapping (Kümmerle et al. 2009) reaches 0.044 m here; scan matching alone
-    // reaches 0.3 m, and one false or one missed big closure costs more than 0.5 m.
+/// The whole log `name` through the mapper as `realms slam` runs it, and its error.
+fn mapped_whole(name: &str) -> (realms_slam::mapper::Mapper, RelativePoseError) {
     use realms_slam::mapper::{Mapper, MapperConfig};
-    let l = log("aces");
+    let l = log(name);
     let mut mapper = Mapper::new(MapperConfig::default());
     for s in &l.scans {
         mapper.add_scan(s);
     }
     mapper.finish();
-    let e = relative_pose_error(&mapper.trajectory(), &relations("aces")).expect("relations");
+    let e = relative_pose_error(&mapper.trajectory(), &relations(name)).expect("relations");
+    (mapper, e)
+}
+
+#[test]
+fn verified_loop_closures_keep_the_aces_building_consistent() {
+    // The whole ACES log: a large building whose outer loop drifts by metres before it
+    // closes. Graph mapping (Kümmerle et al. 2009) reaches 0.044 m here; scan matching alone
+    // reaches 0.3 m, and one false or one missed big closure costs more than 0.5 m.
+    let (_, e) = mapped_whole("aces");
     eprintln!("ACES with closures: {e:?}");
     assert!(
         e.trans_mean_m < 0.08 && e.rot_mean_deg < 1.0,
@@ -221,17 +227,10 @@ fn verified_loop_closures_keep_the_aces_building_consistent() {
 fn mit_csail_closes_its_loops_despite_stalls_and_fast_turns() {
     // The MIT CSAIL log: long corridors, odometry that stalls and then jumps by up to 85
     // degrees, and turns where the wheels' heading is off by 10-20 degrees. Cartographer
-    // reaches 0.032 m here. One missed or false loop closure costs 0.4-1.3 m; without the
-    // fast-turn search it was 0.070 m (BENCHMARKS.md, "Odometry that stalls, fast turns, and
-    // closures searched as far as the path can have drifted").
-    use realms_slam::mapper::{Mapper, MapperConfig};
-    let l = log("mit-csail");
-    let mut mapper = Mapper::new(MapperConfig::default());
-    for s in &l.scans {
-        mapper.add_scan(s);
-    }
-    mapper.finish();
-    let e = relative_pose_error(&mapper.trajectory(), &relations("mit-csail")).expect("relations");
+    // reaches 0.032 m here. One missed or false loop closure costs 0.4-1.3 m (BENCHMARKS.md,
+    // "Odometry that stalls, fast turns, and closures searched as far as the path can have
+    // drifted"); the fast-turn search must have been needed.
+    let (mapper, e) = mapped_whole("mit-csail");
     eprintln!("MIT CSAIL with closures: {e:?}");
     assert!(
         e.trans_mean_m < 0.06 && e.rot_mean_deg < 1.0,
