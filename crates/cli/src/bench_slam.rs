@@ -71,6 +71,19 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain,
     },
     Variant {
+        name: "one-graph-step",
+        what: "one Gauss-Newton step per optimisation of the pose graph, not three",
+        apply: |c| c.mapper.graph_steps = 1,
+    },
+    Variant {
+        name: "chain-one-step",
+        what: "the chain preconditioner and one Gauss-Newton step per optimisation",
+        apply: |c| {
+            c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain;
+            c.mapper.graph_steps = 1;
+        },
+    },
+    Variant {
         name: "track-in-submap",
         what: "after an optimisation, the active submaps' keyframes keep the poses their cells were drawn with, moved as one block (as on the recorded logs)",
         apply: |c| c.mapper.track_in_submap_frame = true,

@@ -110,6 +110,8 @@ pub struct MapperConfig {
     pub blind_travel_uncertain: bool,
     /// How the pose graph's linear solver is preconditioned.
     pub graph_preconditioner: Preconditioner,
+    /// Gauss-Newton steps per optimisation of the pose graph.
+    pub graph_steps: usize,
     /// After an optimisation, the keyframes of the submaps still being built keep their
     /// poses relative to each other (the geometry their cells were drawn with) and move as
     /// one block with the oldest of them, so tracking resumes in cells that agree with its
@@ -267,6 +269,7 @@ impl Default for MapperConfig {
             gyro_heading: None,
             blind_travel_uncertain: true,
             graph_preconditioner: Preconditioner::BlockJacobi,
+            graph_steps: 3,
             track_in_submap_frame: true,
             fast_turn: Some(FastTurn {
                 turn_rad: 10f64.to_radians(),
@@ -808,7 +811,7 @@ impl Mapper {
                 })
                 .flatten()
                 .map(|first| (first, self.graph.nodes[first..].to_vec()));
-            self.graph.optimize(3);
+            self.graph.optimize(self.cfg.graph_steps);
             if let Some((first, drawn)) = active {
                 // The active submaps' cells show those keyframes where they were: move them
                 // with the oldest one as a block, so tracking goes on in cells that agree

@@ -12,7 +12,7 @@
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
 
-use crate::assembly::{Assembly, hazard_vote};
+use crate::assembly::Assembly;
 use crate::occupancy::{CellState, OccupancyGrid};
 use realms_core::{Grid, Point2, Pose2};
 
@@ -103,50 +103,72 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         c.min_z = c.min_z.min(p[2]);
         c.max_z = c.max_z.max(p[2]);
     }
-    let judged = |i: usize| cols[i].n as usize >= cfg.min_points;
-    let mean = |i: usize| cols[i].sum_z / cols[i].n as f64;
+    if touched[0] > touched[2] {
+        return Vec::new();
+    }
     // The slope is measured over two cells so depth noise matters less.
     let baseline = 2i64;
     let slope = cfg.max_slope_rad.tan();
     let reach = (FLOOR_REACH_M / r).ceil() as i64;
-    // Every neighbour's offset and distance, cells, worked out once a frame.
-    let neighbours: Vec<(i64, i64, f64)> = (-reach..=reach)
+    // The touched box's columns with `reach` columns of padding around it, reduced to what
+    // the judging reads: each judged column's lowest point and mean height. Unjudged ones
+    // (and the padding) hold a lowest point of +inf and a mean of NaN, which no minimum
+    // takes and no comparison passes, so the neighbour loop needs no checks.
+    let (bw, bh) = (
+        (touched[2] - touched[0] + 1 + 2 * reach) as usize,
+        (touched[3] - touched[1] + 1 + 2 * reach) as usize,
+    );
+    let mut min_z = vec![f64::INFINITY; bw * bh];
+    let mut mean = vec![f64::NAN; bw * bh];
+    for iy in touched[1]..=touched[3] {
+        for ix in touched[0]..=touched[2] {
+            let c = &cols[iy as usize * side + ix as usize];
+            // Every judged column holds a point (a mean of none is meaningless).
+            if c.n > 0 && c.n as usize >= cfg.min_points {
+                let k =
+                    (iy - touched[1] + reach) as usize * bw + (ix - touched[0] + reach) as usize;
+                min_z[k] = c.min_z;
+                mean[k] = c.sum_z / c.n as f64;
+            }
+        }
+    }
+    // Every neighbour's offset in the box and distance, cells, worked out once a frame.
+    let neighbours: Vec<(isize, f64)> = (-reach..=reach)
         .flat_map(|dy| {
-            (-reach..=reach).map(move |dx| (dx, dy, ((dx * dx + dy * dy) as f64).sqrt()))
+            (-reach..=reach).map(move |dx| {
+                (
+                    dy as isize * bw as isize + dx as isize,
+                    ((dx * dx + dy * dy) as f64).sqrt(),
+                )
+            })
         })
         .collect();
     let mut out = Vec::new();
     for iy in touched[1]..=touched[3] {
         for ix in touched[0]..=touched[2] {
-            let i = iy as usize * side + ix as usize;
-            if !judged(i) {
+            let k = (iy - touched[1] + reach) as usize * bw + (ix - touched[0] + reach) as usize;
+            let here = mean[k];
+            if here.is_nan() {
                 continue;
             }
+            let c = &cols[iy as usize * side + ix as usize];
             // The local floor: the lowest point within `reach` cells.
-            let mut floor = cols[i].min_z;
+            let mut floor = c.min_z;
             let mut steep = false;
-            let here = mean(i);
-            for &(dx, dy, dist) in &neighbours {
-                let (x, y) = (ix + dx, iy + dy);
-                if x < 0 || y < 0 || x >= side as i64 || y >= side as i64 {
-                    continue;
-                }
-                let j = y as usize * side + x as usize;
-                if !judged(j) {
-                    continue;
-                }
-                floor = floor.min(cols[j].min_z);
+            for &(offset, dist) in &neighbours {
+                let j = (k as isize + offset) as usize;
+                floor = floor.min(min_z[j]);
                 // Far from the camera the points thin out to a few cells per row, so the
                 // slope is taken to any judged neighbour at least two cells away. Only the
                 // upper cell of a steep pair is marked: the face of a rock or a crater's wall
                 // is the hazard, not the flat floor at its foot (which would otherwise grow
                 // every rock and wall by a band the width of the baseline).
-                if dist >= baseline as f64 && here - mean(j) > slope * dist * r + SLOPE_NOISE_M {
+                if dist >= baseline as f64 && here - mean[j] > slope * dist * r + SLOPE_NOISE_M {
                     steep = true;
                 }
             }
-            let step = cols[i].max_z - floor > cfg.max_step_m;
-            let drop = mean(i) < -cfg.max_drop_m;
+            let step = c.max_z - floor > cfg.max_step_m;
+            let drop = here < -cfg.max_drop_m;
             let centre = Point2::new(
                 (ix - half) as f64 * r + r / 2.0,
                 (iy - half) as f64 * r + r / 2.0,
@@ -255,7 +277,7 @@ impl HazardMap {
 /// stretch of the map moves the craters and rocks seen from it too. Frames go into the
 /// newest submap's layer in that submap's frame; layers are drawn together at their
 /// submaps' current poses through an [`Assembly`], where a layer that saw a hazard
-/// outvotes the layers that saw the cell safe ([`hazard_vote`]). Layers are kept when the mapper drops a
+/// outvotes the layers that saw the cell safe ([`hazard_vote`](crate::assembly::hazard_vote)). Layers are kept when the mapper drops a
 /// covered submap's grids: hazards are seen once, from close by, and not seen again.
 #[derive(Clone, Debug)]
 pub struct SubmapHazards {
@@ -270,7 +292,7 @@ impl SubmapHazards {
         SubmapHazards {
             layers: Vec::new(),
             current: None,
-            assembly: Assembly::weighing(resolution_m, hazard_vote),
+            assembly: Assembly::hazard_votes(resolution_m),
         }
     }
 
