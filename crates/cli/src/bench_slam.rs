@@ -67,21 +67,13 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "chain-solver",
-        what: "the pose graph solved to its optimum (chain preconditioner), not stopped after 500 block-Jacobi iterations",
-        apply: |c| c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain,
+        what: "the pose graph solved by conjugate gradients preconditioned by the chain of poses, to the optimum, not stopped after 500 block-Jacobi iterations",
+        apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Chain,
     },
     Variant {
-        name: "one-graph-step",
-        what: "one Gauss-Newton step per optimisation of the pose graph, not three",
-        apply: |c| c.mapper.graph_steps = 1,
-    },
-    Variant {
-        name: "chain-one-step",
-        what: "the chain preconditioner and one Gauss-Newton step per optimisation",
-        apply: |c| {
-            c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain;
-            c.mapper.graph_steps = 1;
-        },
+        name: "elimination",
+        what: "the pose graph solved exactly by block elimination in minimum-degree order",
+        apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Elimination,
     },
     Variant {
         name: "track-in-submap",
@@ -90,9 +82,9 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "chain-and-track-in-submap",
-        what: "both of the above",
+        what: "chain-solver and track-in-submap together",
         apply: |c| {
-            c.mapper.graph_preconditioner = realms_slam::posegraph::Preconditioner::Chain;
+            c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Chain;
             c.mapper.track_in_submap_frame = true;
         },
     },

@@ -80,10 +80,12 @@ pub struct SlamArgs {
     /// (Cartographer's update), instead of once per beam crossing it.
     #[arg(long)]
     pub miss_once_per_scan: bool,
-    /// Solve the pose graph to its optimum at every optimisation (the chain preconditioner)
-    /// instead of stopping after 500 block-Jacobi iterations.
-    #[arg(long, conflicts_with = "no_loop_closure")]
-    pub chain_solver: bool,
+    /// How each optimisation of the pose graph solves its linear systems: `block-jacobi`
+    /// (conjugate gradients stopped after 500 iterations), `chain` (conjugate gradients
+    /// preconditioned by the chain of poses, to the optimum) or `elimination` (exactly, in
+    /// minimum-degree order).
+    #[arg(long, value_enum, default_value_t = GraphSolverArg::BlockJacobi, conflicts_with = "no_loop_closure")]
+    pub graph_solver: GraphSolverArg,
     /// After each optimisation, give the keyframes of the submaps still being built their
     /// optimised poses, rather than keeping the poses their cells were drawn with and moving
     /// them as one block.
@@ -370,4 +372,25 @@ pub enum BenchSensor {
     Camera,
     /// None.
     None,
+}
+
+/// `--graph-solver`: how the pose graph's linear systems are solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum GraphSolverArg {
+    /// Conjugate gradients, block-Jacobi preconditioned, stopped after 500 iterations.
+    BlockJacobi,
+    /// Conjugate gradients preconditioned by the chain of poses, to the optimum.
+    Chain,
+    /// Block elimination in minimum-degree order, exact.
+    Elimination,
+}
+
+impl From<GraphSolverArg> for realms_slam::posegraph::GraphSolver {
+    fn from(arg: GraphSolverArg) -> Self {
+        match arg {
+            GraphSolverArg::BlockJacobi => Self::BlockJacobi,
+            GraphSolverArg::Chain => Self::Chain,
+            GraphSolverArg::Elimination => Self::Elimination,
+        }
+    }
 }

@@ -46,11 +46,7 @@ pub fn run(args: SlamArgs) -> Result<()> {
     let mcfg = realms_slam::mapper::MapperConfig {
         frontend: cfg,
         loop_min_score: args.loop_min_score,
-        graph_preconditioner: if args.chain_solver {
-            realms_slam::posegraph::Preconditioner::Chain
-        } else {
-            realms_slam::posegraph::Preconditioner::BlockJacobi
-        },
+        graph_solver: args.graph_solver.into(),
         track_in_submap_frame: !args.no_track_in_submap,
         ..Default::default()
     };

@@ -12,6 +12,7 @@
 //! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
 //! - [`health`]: notices unreliable odometry and lost tracking, from the scans.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
+//! - `elimination`: the pose graph's normal equations solved exactly, in minimum-degree order.
 //! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
@@ -20,6 +21,7 @@
 pub mod assembly;
 pub mod bnb;
 pub mod carmen;
+mod elimination;
 pub mod eval;
 pub mod frontend;
 pub mod health;

@@ -27,7 +27,7 @@ use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan,
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::occupancy::CellState;
 use crate::odometry::{OdomPredictor, OdomSample};
-use crate::posegraph::{Edge, PoseGraph, Preconditioner};
+use crate::posegraph::{Edge, GraphSolver, PoseGraph};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
@@ -108,10 +108,8 @@ pub struct MapperConfig {
     /// uncertain: the graph edge across it is loosened by its length, and a closure may
     /// correct the pose by up to all of it (`false`: such travel counts as matched travel).
     pub blind_travel_uncertain: bool,
-    /// How the pose graph's linear solver is preconditioned.
-    pub graph_preconditioner: Preconditioner,
-    /// Gauss-Newton steps per optimisation of the pose graph.
-    pub graph_steps: usize,
+    /// How the pose graph's linear systems are solved.
+    pub graph_solver: GraphSolver,
     /// After an optimisation, the keyframes of the submaps still being built keep their
     /// poses relative to each other (the geometry their cells were drawn with) and move as
     /// one block with the oldest of them, so tracking resumes in cells that agree with its
@@ -268,8 +266,7 @@ impl Default for MapperConfig {
             slip_calibration: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
-            graph_preconditioner: Preconditioner::BlockJacobi,
-            graph_steps: 3,
+            graph_solver: GraphSolver::BlockJacobi,
             track_in_submap_frame: true,
             fast_turn: Some(FastTurn {
                 turn_rad: 10f64.to_radians(),
@@ -392,7 +389,7 @@ impl Mapper {
         Mapper {
             cfg,
             graph: PoseGraph {
-                preconditioner: cfg.graph_preconditioner,
+                solver: cfg.graph_solver,
                 ..PoseGraph::default()
             },
             keyframe_points: Vec::new(),
@@ -811,7 +808,7 @@ impl Mapper {
                 })
                 .flatten()
                 .map(|first| (first, self.graph.nodes[first..].to_vec()));
-            self.graph.optimize(self.cfg.graph_steps);
+            self.graph.optimize(3);
             if let Some((first, drawn)) = active {
                 // The active submaps' cells show those keyframes where they were: move them
                 // with the oldest one as a block, so tracking goes on in cells that agree

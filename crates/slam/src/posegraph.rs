@@ -1,14 +1,14 @@
 //! A 2D pose graph: poses as nodes, relative-pose measurements (odometry, scan matches, loop
 //! closures) as edges, optimised by Gauss-Newton with a Huber loss on loop-closure edges so a
 //! wrong closure cannot drag the whole map (Grisetti et al., "A Tutorial on Graph-Based SLAM",
-//! 2010). The normal equations are block-sparse (3 x 3 blocks); they are solved by conjugate
-//! gradients without a sparse Cholesky dependency, preconditioned by block-Jacobi (each
-//! pose's own block) or by the chain of consecutive poses solved exactly (subgraph
-//! preconditioning, after Dellaert, Carlson, Ila, Ni & Thorpe, "Subgraph-preconditioned
-//! Conjugate Gradients for Large Scale SLAM", IROS 2010). A graph is its odometry chain plus
-//! loop closures, so with the chain the iterations only have to spread the closures; with
-//! block-Jacobi a chain of `n` poses needs about `n` iterations, and the solve is capped
-//! before that on long missions.
+//! 2010). The normal equations are block-sparse (3 x 3 blocks). They are solved exactly by
+//! block elimination in minimum-degree order ([`crate::elimination`]), or by conjugate
+//! gradients preconditioned by block-Jacobi (each pose's own block) or by the chain of
+//! consecutive poses solved exactly (subgraph preconditioning, after Dellaert, Carlson, Ila,
+//! Ni & Thorpe, "Subgraph-preconditioned Conjugate Gradients for Large Scale SLAM", IROS
+//! 2010). A graph is its odometry chain plus loop closures, so with the chain the iterations
+//! only have to spread the closures; with block-Jacobi a chain of `n` poses needs about `n`
+//! iterations, and the solve is capped before that on long missions.
 
 use realms_core::Pose2;
 use realms_core::geometry::normalize_angle_rad;
@@ -35,13 +35,13 @@ pub struct PoseGraph {
     pub nodes: Vec<Pose2>,
     /// Constraints.
     pub edges: Vec<Edge>,
-    /// How the linear solver is preconditioned.
-    pub preconditioner: Preconditioner,
+    /// How each Gauss-Newton step's linear system is solved.
+    pub solver: GraphSolver,
 }
 
-/// The conjugate-gradient solver's preconditioner.
+/// How each Gauss-Newton step's linear system is solved.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Preconditioner {
+pub enum GraphSolver {
     /// Each pose's own 3 x 3 block inverted: cheap, but a chain of `n` poses needs about
     /// `n` iterations to carry a correction from one end to the other, and the solve stops
     /// at 500. On the recorded logs that partial solve is the better map (BENCHMARKS.md).
@@ -51,6 +51,11 @@ pub enum Preconditioner {
     /// exactly: corrections travel along the chain in one iteration, and the solve reaches
     /// the optimum on graphs of any length.
     Chain,
+    /// Exactly, by block elimination in minimum-degree order ([`crate::elimination`]): the
+    /// optimum of each step, in a few milliseconds for a few thousand poses, where the
+    /// iterations take hundreds of passes over every edge. Falls back to the chain if the
+    /// system is not positive definite.
+    Elimination,
 }
 
 impl PoseGraph {
@@ -118,7 +123,7 @@ impl PoseGraph {
 /// Huber threshold on the Mahalanobis length of a residual.
 const HUBER_K: f64 = 1.0;
 
-type Block = [[f64; 3]; 3];
+pub(crate) type Block = [[f64; 3]; 3];
 
 /// `e = z^-1 (+) (x_i^-1 (+) x_j)` and its Jacobians with respect to `x_i` and `x_j`.
 fn residual(xi: &Pose2, xj: &Pose2, z: &Pose2) -> ([f64; 3], Block, Block) {
@@ -162,7 +167,7 @@ fn at_w_b(a: &Block, w: &[f64; 3], b: &Block) -> Block {
     out
 }
 
-fn add_block(m: &mut Block, d: &Block) {
+pub(crate) fn add_block(m: &mut Block, d: &Block) {
     for r in 0..3 {
         for c in 0..3 {
             m[r][c] += d[r][c];
@@ -230,15 +235,20 @@ impl PoseGraph {
             // Capped: with block-Jacobi, a few hundred iterations resolve the large-scale
             // correction and later Gauss-Newton steps refine; the chain needs far fewer.
             let cap = (4 * n + 100).min(500);
-            let step = match self.preconditioner {
-                Preconditioner::BlockJacobi => {
+            let step = match self.solver {
+                GraphSolver::BlockJacobi => {
                     let pre: Vec<Block> = diag.iter().map(invert).collect();
                     conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| block_jacobi(&pre, r))
                 }
-                Preconditioner::Chain => {
+                GraphSolver::Chain => {
                     let chain = ChainFactor::new(&diag, &off);
                     conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
                 }
+                GraphSolver::Elimination => crate::elimination::solve(&diag, &off, &rhs)
+                    .unwrap_or_else(|| {
+                        let chain = ChainFactor::new(&diag, &off);
+                        conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
+                    }),
             };
             let mut largest = 0.0f64;
             for (p, d) in self.nodes.iter_mut().zip(&step) {
@@ -282,7 +292,7 @@ fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 }
 
 /// Inverts a symmetric positive definite 3 x 3 block (identity if singular).
-fn invert(m: &Block) -> Block {
+pub(crate) fn invert(m: &Block) -> Block {
     let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
@@ -311,7 +321,7 @@ fn invert(m: &Block) -> Block {
 }
 
 /// `m v` for a 3 x 3 block.
-fn block_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
+pub(crate) fn block_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
     let mut o = [0.0; 3];
     for (i, out) in o.iter_mut().enumerate() {
         *out = (0..3).map(|c| m[i][c] * v[c]).sum();
@@ -320,7 +330,7 @@ fn block_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
 }
 
 /// `m^T v` for a 3 x 3 block.
-fn block_transpose_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
+pub(crate) fn block_transpose_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
     let mut o = [0.0; 3];
     for (i, out) in o.iter_mut().enumerate() {
         *out = (0..3).map(|c| m[c][i] * v[c]).sum();
@@ -329,7 +339,7 @@ fn block_transpose_times(m: &Block, v: &[f64; 3]) -> [f64; 3] {
 }
 
 /// `a b` for 3 x 3 blocks.
-fn block_product(a: &Block, b: &Block) -> Block {
+pub(crate) fn block_product(a: &Block, b: &Block) -> Block {
     let mut o = [[0.0; 3]; 3];
     for (r, row) in o.iter_mut().enumerate() {
         for (c, v) in row.iter_mut().enumerate() {
@@ -339,7 +349,7 @@ fn block_product(a: &Block, b: &Block) -> Block {
     o
 }
 
-fn transpose(m: &Block) -> Block {
+pub(crate) fn transpose(m: &Block) -> Block {
     let mut o = [[0.0; 3]; 3];
     for (r, row) in o.iter_mut().enumerate() {
         for (c, v) in row.iter_mut().enumerate() {
@@ -546,13 +556,13 @@ mod tests {
 
     /// A long loop (a circle of `n` poses) whose edges all agree with the truth, but whose
     /// poses start from odometry that turned 1 % too little: the optimum is the truth.
-    fn consistent_circle(n: usize, preconditioner: Preconditioner) -> (Vec<Pose2>, PoseGraph) {
+    fn consistent_circle(n: usize, solver: GraphSolver) -> (Vec<Pose2>, PoseGraph) {
         let turn = std::f64::consts::TAU / n as f64;
         let step = Pose2::new(0.3, 0.0, turn);
         let mut truth = vec![Pose2::IDENTITY];
         let mut graph = PoseGraph {
             nodes: vec![Pose2::IDENTITY],
-            preconditioner,
+            solver,
             ..PoseGraph::default()
         };
         for k in 0..n - 1 {
@@ -574,27 +584,31 @@ mod tests {
     }
 
     #[test]
-    fn the_chain_preconditioner_solves_a_long_loop_where_block_jacobi_stalls() {
+    fn the_chain_and_elimination_solve_a_long_loop_where_block_jacobi_stalls() {
         // 2000 poses, as a rover's hour of driving: block-Jacobi's 500 iterations a step
         // cannot carry the closure's correction round the loop.
-        let (truth, mut chain) = consistent_circle(2000, Preconditioner::Chain);
-        let before = max_error(&truth, &chain.nodes);
-        assert!(before > 3.0, "drift {before}");
-        chain.optimize(5);
-        let solved = max_error(&truth, &chain.nodes);
-        assert!(solved < 1e-6, "chain: {solved} m off the optimum");
-        let (_, mut jacobi) = consistent_circle(2000, Preconditioner::BlockJacobi);
+        for solver in [GraphSolver::Chain, GraphSolver::Elimination] {
+            let (truth, mut exact) = consistent_circle(2000, solver);
+            let before = max_error(&truth, &exact.nodes);
+            assert!(before > 3.0, "drift {before}");
+            exact.optimize(5);
+            let solved = max_error(&truth, &exact.nodes);
+            assert!(solved < 1e-6, "{solver:?}: {solved} m off the optimum");
+        }
+        let (truth, mut jacobi) = consistent_circle(2000, GraphSolver::BlockJacobi);
         jacobi.optimize(5);
         let stalled = max_error(&truth, &jacobi.nodes);
         assert!(stalled > 1e-3, "block-Jacobi: {stalled} m");
     }
 
     #[test]
-    fn both_preconditioners_reach_the_same_optimum_on_a_small_loop() {
+    fn every_solver_reaches_the_same_optimum_on_a_small_loop() {
         let (_, mut a) = drifting_square();
         let (_, mut b) = drifting_square();
-        b.preconditioner = Preconditioner::Chain;
-        for g in [&mut a, &mut b] {
+        let (_, mut c) = drifting_square();
+        b.solver = GraphSolver::Chain;
+        c.solver = GraphSolver::Elimination;
+        for g in [&mut a, &mut b, &mut c] {
             g.edges.push(Edge {
                 from: 0,
                 to: 40,
@@ -604,15 +618,17 @@ mod tests {
             });
             g.optimize(20);
         }
-        let gap = max_error(&a.nodes, &b.nodes);
-        assert!(gap < 1e-6, "{gap}");
-        let turn = a
-            .nodes
-            .iter()
-            .zip(&b.nodes)
-            .map(|(p, q)| normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs())
-            .fold(0.0, f64::max);
-        assert!(turn < 1e-8, "{turn}");
+        for other in [&b, &c] {
+            let gap = max_error(&a.nodes, &other.nodes);
+            assert!(gap < 1e-6, "{:?}: {gap}", other.solver);
+            let turn = a
+                .nodes
+                .iter()
+                .zip(&other.nodes)
+                .map(|(p, q)| normalize_angle_rad(p.yaw_rad - q.yaw_rad).abs())
+                .fold(0.0, f64::max);
+            assert!(turn < 1e-8, "{:?}: {turn}", other.solver);
+        }
     }
 
     #[test]
