@@ -76,6 +76,23 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Elimination,
     },
     Variant {
+        name: "elimination-dcs",
+        what: "the pose graph solved exactly by elimination, closures discounted by dynamic covariance scaling (phi 5) rather than Huber's loss",
+        apply: |c| {
+            c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Elimination;
+            c.mapper.graph_loss =
+                realms_slam::posegraph::RobustLoss::DynamicCovarianceScaling { phi: 5.0 };
+        },
+    },
+    Variant {
+        name: "dcs",
+        what: "closures discounted by dynamic covariance scaling (phi 5) rather than Huber's loss",
+        apply: |c| {
+            c.mapper.graph_loss =
+                realms_slam::posegraph::RobustLoss::DynamicCovarianceScaling { phi: 5.0 };
+        },
+    },
+    Variant {
         name: "track-in-submap",
         what: "after an optimisation, the active submaps' keyframes keep the poses their cells were drawn with, moved as one block (as on the recorded logs)",
         apply: |c| c.mapper.track_in_submap_frame = true,

@@ -27,7 +27,7 @@ use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan,
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::occupancy::CellState;
 use crate::odometry::{OdomPredictor, OdomSample};
-use crate::posegraph::{Edge, GraphSolver, PoseGraph};
+use crate::posegraph::{Edge, GraphSolver, PoseGraph, RobustLoss};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
@@ -110,6 +110,8 @@ pub struct MapperConfig {
     pub blind_travel_uncertain: bool,
     /// How the pose graph's linear systems are solved.
     pub graph_solver: GraphSolver,
+    /// The robust loss on loop closures in the pose graph.
+    pub graph_loss: RobustLoss,
     /// After an optimisation, the keyframes of the submaps still being built keep their
     /// poses relative to each other (the geometry their cells were drawn with) and move as
     /// one block with the oldest of them, so tracking resumes in cells that agree with its
@@ -267,6 +269,7 @@ impl Default for MapperConfig {
             gyro_heading: None,
             blind_travel_uncertain: true,
             graph_solver: GraphSolver::BlockJacobi,
+            graph_loss: RobustLoss::Huber,
             track_in_submap_frame: true,
             fast_turn: Some(FastTurn {
                 turn_rad: 10f64.to_radians(),
@@ -390,6 +393,7 @@ impl Mapper {
             cfg,
             graph: PoseGraph {
                 solver: cfg.graph_solver,
+                loss: cfg.graph_loss,
                 ..PoseGraph::default()
             },
             keyframe_points: Vec::new(),

@@ -37,6 +37,46 @@ pub struct PoseGraph {
     pub edges: Vec<Edge>,
     /// How each Gauss-Newton step's linear system is solved.
     pub solver: GraphSolver,
+    /// How loop closures that disagree with the rest of the graph are discounted.
+    pub loss: RobustLoss,
+}
+
+/// The robust loss on loop-closure edges, applied as a weight on the edge's information at
+/// each Gauss-Newton step (iteratively reweighted least squares), by the squared
+/// Mahalanobis length `chi2` of its residual.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum RobustLoss {
+    /// Huber's, at one standard deviation: weight `1 / sqrt(chi2)` beyond it. A closure a
+    /// metre off still pulls with a twentieth of its weight.
+    #[default]
+    Huber,
+    /// Dynamic covariance scaling (Agarwal, Tipaldi, Spinello, Stachniss & Burgard, "Robust
+    /// Map Optimization Using Dynamic Covariance Scaling", ICRA 2013): weight
+    /// `(2 phi / (phi + chi2))^2` beyond `chi2 = phi`, which falls with the fourth power of
+    /// the error, so a closure that disagrees with the rest by far all but drops out.
+    DynamicCovarianceScaling {
+        /// Where the discount starts, in `chi2`.
+        phi: f64,
+    },
+}
+
+impl RobustLoss {
+    /// The weight on an edge's information at squared Mahalanobis length `chi2`.
+    fn weight(&self, chi2: f64) -> f64 {
+        match *self {
+            RobustLoss::Huber => {
+                if chi2.sqrt() > HUBER_K {
+                    HUBER_K / chi2.sqrt()
+                } else {
+                    1.0
+                }
+            }
+            RobustLoss::DynamicCovarianceScaling { phi } => {
+                let s = (2.0 * phi / (phi + chi2)).min(1.0);
+                s * s
+            }
+        }
+    }
 }
 
 /// How each Gauss-Newton step's linear system is solved.
@@ -209,11 +249,7 @@ impl PoseGraph {
                 }
                 let (r, a, b) = residual(&self.nodes[e.from], &self.nodes[e.to], &e.measurement);
                 let m2: f64 = (0..3).map(|k| r[k] * r[k] * e.information[k]).sum();
-                let scale = if e.robust && m2.sqrt() > HUBER_K {
-                    HUBER_K / m2.sqrt()
-                } else {
-                    1.0
-                };
+                let scale = if e.robust { self.loss.weight(m2) } else { 1.0 };
                 let w = [
                     e.information[0] * scale,
                     e.information[1] * scale,
@@ -700,6 +736,33 @@ mod tests {
             gap(&graph),
             gap(&naive)
         );
+        // Dynamic covariance scaling discounts it further still, with either solver.
+        for solver in [GraphSolver::BlockJacobi, GraphSolver::Elimination] {
+            let (_, start) = drifting_square();
+            let mut dcs = PoseGraph {
+                nodes: start.nodes,
+                edges: graph.edges.clone(),
+                solver,
+                loss: RobustLoss::DynamicCovarianceScaling { phi: 5.0 },
+            };
+            dcs.optimize(20);
+            let moved_dcs = max_error(&good.nodes, &dcs.nodes);
+            assert!(
+                moved_dcs < 0.5 * moved,
+                "{solver:?}: DCS moved {moved_dcs:.3} m, Huber {moved:.3} m"
+            );
+        }
+    }
+
+    #[test]
+    fn dynamic_covariance_scaling_keeps_agreeing_closures_whole_and_drops_far_ones() {
+        let dcs = RobustLoss::DynamicCovarianceScaling { phi: 5.0 };
+        assert_eq!(dcs.weight(0.0), 1.0);
+        assert_eq!(dcs.weight(5.0), 1.0);
+        // chi2 = 45: (10 / 50)^2.
+        assert!((dcs.weight(45.0) - 0.04).abs() < 1e-12);
+        // Huber at the same residual keeps 1 / sqrt(45), four times as much.
+        assert!((RobustLoss::Huber.weight(45.0) - 45f64.sqrt().recip()).abs() < 1e-12);
     }
 
     #[test]
