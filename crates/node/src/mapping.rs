@@ -123,7 +123,8 @@ pub fn rover_mapper_config() -> MapperConfig {
     // The capped block-Jacobi iterations, not the exact solve by elimination: elimination
     // ran the fleet's SLAM 20 % faster on the 45-minute replays, but on seed 3 it let a
     // rover's map bend 3.4 m where the partial solve held it to 0.16 m (BENCHMARKS.md, "The
-    // pose graph solved by elimination").
+    // pose graph solved by elimination"). Dynamic covariance scaling holds that map, but
+    // declared rovers lost more often and did a little worse on the slip bench.
     cfg.graph_solver = realms_slam::posegraph::GraphSolver::BlockJacobi;
     // Keeping the active submaps' keyframes as they were drawn helps on the recorded logs,
     // but on the rovers' replays it left the final trajectory as it was and the pose as

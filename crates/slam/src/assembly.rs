@@ -117,9 +117,6 @@ struct Shadow {
     cells: Vec<f32>,
 }
 
-/// Cells `[x0, x1] x [y0, y1]` of an assembly, inclusive.
-type CellBox = [usize; 4];
-
 impl Live {
     /// No shadows over the finished submaps' sum `finished` (`width` x `height` cells).
     fn new(finished: &[f32], width: usize, height: usize) -> Self {
@@ -258,14 +255,8 @@ impl Assembly {
     }
 
     /// Samples `grid` placed at `pose` at each of this assembly's cell centres, calling
-    /// `visit(cell index, weighed value)` for every cell where the sample is not zero;
-    /// returns the cells it may have visited.
-    fn draw(
-        &self,
-        grid: &OccupancyGrid,
-        pose: Pose2,
-        visit: impl FnMut(usize, f32),
-    ) -> Option<CellBox> {
+    /// `visit(cell index, weighed value)` for every cell where the sample is not zero.
+    fn draw(&self, grid: &OccupancyGrid, pose: Pose2, visit: impl FnMut(usize, f32)) {
         // One loop per weighing, so the per-cell weighing is inlined, not called through a
         // pointer (drawing submaps is most of what keeping the map costs).
         match self.weigh {
@@ -280,10 +271,12 @@ impl Assembly {
         pose: Pose2,
         weigh: impl Fn(f32) -> f32,
         mut visit: impl FnMut(usize, f32),
-    ) -> Option<CellBox> {
-        let (min, max) = placed_box(grid, pose)?;
+    ) {
+        let Some((min, max)) = placed_box(grid, pose) else {
+            return;
+        };
         if self.width == 0 {
-            return None;
+            return;
         }
         let r = self.resolution_m;
         let cell = |v: f64, o: f64| ((v - o) / r).floor();
@@ -298,8 +291,8 @@ impl Assembly {
         // Stepping one target cell along x moves the sample by (c, s) * r in the submap.
         // Positions are stepped in fixed point (32 fractional bits of a submap cell), so a
         // cell's index is two shifts and a sample outside the submap is an unsigned
-        // comparison: three times as fast as floats, and a sample moves by under a
-        // millionth of a cell across a whole row.
+        // comparison: about twice as fast as floats (BENCHMARKS.md), and a sample moves by
+        // under a millionth of a cell across a whole row.
         let fixed = |v: f64| (v * FIXED_ONE).floor() as i64;
         let (dx, dy) = (fixed(c * r / g.resolution_m), fixed(s * r / g.resolution_m));
         let (w, h) = (g.width as u64, g.height as u64);
@@ -325,7 +318,6 @@ impl Assembly {
                 ly += dy;
             }
         }
-        Some([x0, y0, x1, y1])
     }
 
     /// Adds `sign` times `grid` at `pose` to the sum (and brings the live map's states up

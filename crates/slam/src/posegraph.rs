@@ -92,9 +92,8 @@ pub enum GraphSolver {
     /// the optimum on graphs of any length.
     Chain,
     /// Exactly, by block elimination in minimum-degree order ([`crate::elimination`]): the
-    /// optimum of each step, in a few milliseconds for a few thousand poses, where the
-    /// iterations take hundreds of passes over every edge. Falls back to the chain if the
-    /// system is not positive definite.
+    /// optimum of each step without the iterations' hundreds of passes over every edge.
+    /// Falls back to the chain if the system is not positive definite.
     Elimination,
 }
 
@@ -271,20 +270,19 @@ impl PoseGraph {
             // Capped: with block-Jacobi, a few hundred iterations resolve the large-scale
             // correction and later Gauss-Newton steps refine; the chain needs far fewer.
             let cap = (4 * n + 100).min(500);
+            let chain_solve = || {
+                let chain = ChainFactor::new(&diag, &off);
+                conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
+            };
             let step = match self.solver {
                 GraphSolver::BlockJacobi => {
                     let pre: Vec<Block> = diag.iter().map(invert).collect();
                     conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| block_jacobi(&pre, r))
                 }
-                GraphSolver::Chain => {
-                    let chain = ChainFactor::new(&diag, &off);
-                    conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
+                GraphSolver::Chain => chain_solve(),
+                GraphSolver::Elimination => {
+                    crate::elimination::solve(&diag, &off, &rhs).unwrap_or_else(chain_solve)
                 }
-                GraphSolver::Elimination => crate::elimination::solve(&diag, &off, &rhs)
-                    .unwrap_or_else(|| {
-                        let chain = ChainFactor::new(&diag, &off);
-                        conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
-                    }),
             };
             let mut largest = 0.0f64;
             for (p, d) in self.nodes.iter_mut().zip(&step) {

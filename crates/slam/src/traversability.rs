@@ -118,6 +118,10 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         (touched[2] - touched[0] + 1 + 2 * reach) as usize,
         (touched[3] - touched[1] + 1 + 2 * reach) as usize,
     );
+    // Column (ix, iy)'s place in the box.
+    let in_box = |ix: i64, iy: i64| {
+        (iy - touched[1] + reach) as usize * bw + (ix - touched[0] + reach) as usize
+    };
     let mut min_z = vec![f64::INFINITY; bw * bh];
     let mut mean = vec![f64::NAN; bw * bh];
     for iy in touched[1]..=touched[3] {
@@ -125,8 +129,7 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             let c = &cols[iy as usize * side + ix as usize];
             // Every judged column holds a point (a mean of none is meaningless).
             if c.n > 0 && c.n as usize >= cfg.min_points {
-                let k =
-                    (iy - touched[1] + reach) as usize * bw + (ix - touched[0] + reach) as usize;
+                let k = in_box(ix, iy);
                 min_z[k] = c.min_z;
                 mean[k] = c.sum_z / c.n as f64;
             }
@@ -146,7 +149,7 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     let mut out = Vec::new();
     for iy in touched[1]..=touched[3] {
         for ix in touched[0]..=touched[2] {
-            let k = (iy - touched[1] + reach) as usize * bw + (ix - touched[0] + reach) as usize;
+            let k = in_box(ix, iy);
             let here = mean[k];
             if here.is_nan() {
                 continue;
