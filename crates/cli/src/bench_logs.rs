@@ -33,8 +33,9 @@ pub fn run(args: BenchLogsArgs) -> Result<()> {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for name in &args.logs {
         let clf = args.data.join(format!("{name}.clf"));
-        let log =
+        let mut log =
             CarmenLog::read_file(&clf).with_context(|| format!("reading {}", clf.display()))?;
+        log.retime_stale_odometry();
         let rel_path = args.data.join(format!("{name}.relations"));
         let relations = read_relations(&rel_path)?;
         let start = Instant::now();

@@ -98,6 +98,11 @@ pub struct SlamArgs {
     /// endpoints, 0..1).
     #[arg(long, default_value_t = 0.5)]
     pub loop_min_score: f64,
+    /// Take each scan's odometry as its laser message carries it, even where those poses are
+    /// older than their scans (by default the odometry is then interpolated at each scan's
+    /// time from the ODOM lines).
+    #[arg(long)]
+    pub odometry_as_logged: bool,
 }
 
 /// `realms slam-eval`.

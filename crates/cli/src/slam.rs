@@ -12,8 +12,11 @@ use realms_slam::trajectory;
 
 /// `realms slam`.
 pub fn run(args: SlamArgs) -> Result<()> {
-    let log = CarmenLog::read_file(&args.carmen)
+    let mut log = CarmenLog::read_file(&args.carmen)
         .with_context(|| format!("reading {}", args.carmen.display()))?;
+    if !args.odometry_as_logged {
+        retime_odometry(&mut log);
+    }
     anyhow::ensure!(
         !log.scans.is_empty(),
         "{} holds no laser scans",
@@ -118,6 +121,19 @@ pub fn run(args: SlamArgs) -> Result<()> {
 }
 
 /// `realms slam-eval`.
+/// Gives each scan the odometry at its own time where the log's laser messages carry
+/// stale odometry ([`CarmenLog::retime_stale_odometry`]), and says so.
+pub(crate) fn retime_odometry(log: &mut CarmenLog) {
+    if let (Some(stale_s), retimed @ 1..) = log.retime_stale_odometry() {
+        println!(
+            "odometry: the laser messages carry poses {:.0} ms older than their scans (median); \
+             odometry interpolated at the scans' times for {retimed} of {} scans",
+            stale_s * 1e3,
+            log.scans.len()
+        );
+    }
+}
+
 pub fn eval(args: SlamEvalArgs) -> Result<()> {
     let traj = trajectory::read_file(&args.trajectory)?;
     let relations = read_relations(&args.relations)?;

@@ -137,8 +137,11 @@ impl HealthMonitor {
         })
     }
 
-    /// The mapper relocalised: tracking again, with a fresh history.
-    pub fn relocalised(&mut self, reason: String) -> Option<Transition> {
+    /// The mapper relocalised on the scan at `time_s`: tracking again, with a fresh history.
+    /// The mapper shows the monitor no scans while lost, so the next scan's gap counts from
+    /// here, not from the last scan before the rover was lost.
+    pub fn relocalised(&mut self, time_s: f64, reason: String) -> Option<Transition> {
+        self.last_time_s = Some(time_s);
         self.recent.clear();
         self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
         self.poor_in_a_row = 0;
@@ -422,9 +425,13 @@ mod tests {
         // Good matches alone do not end it: the mapper must relocalise.
         assert_eq!(m.observe(&scan(2.1, 0.03, 0.03, 0.9)), None);
         assert_eq!(m.state(), LocalisationState::Lost);
-        assert!(m.relocalised("found".into()).is_some());
+        // Relocalised long after the last scan it saw: the scans in between went to the
+        // search, so the next one, a tenth of a second on, is no gap.
+        assert!(m.relocalised(60.0, "found".into()).is_some());
         assert_eq!(m.state(), LocalisationState::Tracking);
-        let tr = m.observe(&scan(13.0, 0.03, 0.03, 0.9)).expect("a gap");
+        assert_eq!(m.observe(&scan(60.1, 0.03, 0.03, 0.9)), None);
+        assert_eq!(m.state(), LocalisationState::Tracking);
+        let tr = m.observe(&scan(71.0, 0.03, 0.03, 0.9)).expect("a gap");
         assert_eq!(tr.state, LocalisationState::Lost);
         assert!(tr.reason.contains("no lidar scan"), "{}", tr.reason);
     }

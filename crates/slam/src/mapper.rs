@@ -486,7 +486,7 @@ impl Mapper {
             if new_view {
                 self.last_relocalise_odom = Some(odom);
                 let dead_reckoned = self.pose;
-                self.try_relocalise(&points);
+                self.try_relocalise(time_s, &points);
                 relocalised = self.pose != dead_reckoned;
             }
         } else {
@@ -617,7 +617,7 @@ impl Mapper {
     /// While lost: search the submaps around the dead-reckoned pose for the scan, widely
     /// (odometry may have been wrong for a while), and take the pose only if it is
     /// unambiguous. Nothing is written until then.
-    fn try_relocalise(&mut self, points: &[Point2]) {
+    fn try_relocalise(&mut self, time_s: f64, points: &[Point2]) {
         if points.len() < MIN_POINTS {
             return;
         }
@@ -658,8 +658,7 @@ impl Mapper {
                     sub.precomputed = None;
                 }
             }
-            if let Some(t) = self.health.relocalised(reason) {
-                let time_s = self.scans.last().map_or(0.0, |s| s.timestamp_s);
+            if let Some(t) = self.health.relocalised(time_s, reason) {
                 self.transitions.push((time_s, t));
             }
             self.lost_at = None;
