@@ -134,6 +134,55 @@ fn overlap_centre(pair: &synth::Pair) -> realms_core::Point2 {
     frame_b_from_grid.transform_point(local)
 }
 
+/// The second map laid over the first at `a_from_b`, in the first map's grid: the first
+/// map's structure (obstacles, hazards) red, the second's blue, both black; free ground
+/// white where both know it, pale where one does.
+fn write_overlay(
+    pair: &synth::Pair,
+    a_from_b: &realms_core::Pose2,
+    path: &std::path::Path,
+) -> Result<()> {
+    let ga = *pair.a.geometry();
+    let gb = *pair.b.geometry();
+    let b_grid_from_a_grid = pair
+        .b
+        .frame_from_grid()
+        .inverse()
+        .compose(&a_from_b.inverse())
+        .compose(&pair.a.frame_from_grid());
+    let mut canvas = Grid::new(ga, [128u8, 128, 128]);
+    for (cell, a) in pair.a.cells.iter() {
+        let q = b_grid_from_a_grid.transform_point(realms_core::Point2::new(
+            (cell.x as f64 + 0.5) * ga.resolution_m,
+            (cell.y as f64 + 0.5) * ga.resolution_m,
+        ));
+        let (bx, by) = (q.x_m / gb.resolution_m, q.y_m / gb.resolution_m);
+        let b = if bx >= 0.0 && by >= 0.0 {
+            pair.b.cells.get(bx as usize, by as usize).copied()
+        } else {
+            None
+        }
+        .unwrap_or(MapCell::Unknown);
+        let structure = |c: MapCell| matches!(c, MapCell::Occupied | MapCell::Hazard);
+        let colour = match (structure(*a), structure(b), a.is_known(), b.is_known()) {
+            (true, true, _, _) => [0, 0, 0],
+            (true, false, _, true) => [230, 0, 0],
+            (true, false, _, false) => [240, 150, 150],
+            (false, true, true, _) => [0, 0, 230],
+            (false, true, false, _) => [150, 150, 240],
+            (false, false, true, true) => [255, 255, 255],
+            (false, false, true, false) | (false, false, false, true) => [215, 215, 215],
+            (false, false, false, false) => [128, 128, 128],
+        };
+        if let Some(c) = canvas.get_mut(cell.x, cell.y) {
+            *c = colour;
+        }
+    }
+    canvas
+        .write_png(path, |c| *c)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
 /// `realms bench merge`.
 pub fn run(args: BenchMergeArgs) -> Result<()> {
     let overlaps: Vec<u32> = args
@@ -220,6 +269,17 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     params.conflict_weight,
                     realms_merge::verify::On::Refine,
                 );
+                if let Some(dir) = &args.dump {
+                    let stem = format!("{kind}-{overlap_pct}-{i}");
+                    write_overlay(
+                        &pair,
+                        &pair.a_from_b,
+                        &dir.join(format!("{stem}-at-truth.png")),
+                    )?;
+                    if let Some(p) = &est.a_from_b {
+                        write_overlay(&pair, p, &dir.join(format!("{stem}-at-estimate.png")))?;
+                    }
+                }
                 let has_landmark = at_truth.landmark_agree > 0;
                 with_landmark += usize::from(has_landmark);
                 let verdict = match (est.accepted().is_some(), correct) {
