@@ -147,16 +147,23 @@ pub struct FastTurn {
 
 impl FastTurn {
     /// The match of `points` from the best heading around `prior`, if it beats `local` (the
-    /// match from `prior`) by the margin.
+    /// match from `prior`) by the margin. `turn_rad` is the turn the prediction makes over
+    /// the scan: the search reaches from the heading with no turn at all to the predicted
+    /// one, each widened by the search's half-width, because odometry can also report a turn
+    /// the robot never made (a glitch, a knock), and a match left 90 degrees off writes the
+    /// scan into the map turned.
     fn rematch(
         &self,
         map: &MultiResMap,
         points: &[Point2],
         prior: Pose2,
+        turn_rad: f64,
         local: &crate::matcher::Match,
         matcher: &MatcherConfig,
     ) -> Option<crate::matcher::Match> {
-        let start = best_heading(map, points, prior, self.search_rad, self.step_rad);
+        let middle = Pose2::new(prior.x_m, prior.y_m, prior.yaw_rad - turn_rad / 2.0);
+        let half_width = turn_rad.abs() / 2.0 + self.search_rad;
+        let start = best_heading(map, points, middle, half_width, self.step_rad);
         // Within a step of the prediction, the local match started there.
         if normalize_angle_rad(start.yaw_rad - prior.yaw_rad).abs() <= self.step_rad {
             return None;
@@ -340,6 +347,11 @@ const RELOCALISE_AFTER_RAD: f64 = 0.087;
 const RELOCALISE_WINDOW_M: f64 = 3.0;
 /// ... and this far in heading, radians.
 const RELOCALISE_WINDOW_RAD: f64 = 0.6;
+/// Every this many relocalisation searches of one loss, the first included, the search takes
+/// every heading. A turn the odometry never reported (one made in a gap of the log, a knock)
+/// leaves the dead-reckoned heading outside the usual window for good. A search over every
+/// heading costs about five of the usual ones.
+const RELOCALISE_ALL_HEADINGS_EVERY: usize = 4;
 
 /// The mapper.
 #[derive(Debug)]
@@ -369,6 +381,8 @@ pub struct Mapper {
     lost_at: Option<Pose2>,
     /// The odometry pose of the last relocalisation attempt.
     last_relocalise_odom: Option<Pose2>,
+    /// Relocalisation searches since the rover was declared lost.
+    searches_since_lost: usize,
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
@@ -411,6 +425,7 @@ impl Mapper {
             transitions: Vec::new(),
             lost_at: None,
             last_relocalise_odom: None,
+            searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
             heading_holds: 0,
@@ -516,14 +531,19 @@ impl Mapper {
                     let prior = origin.inverse() * predicted;
                     let map = &self.submaps[i].map;
                     let mut m = match_scan(map, &dense, prior, &self.cfg.frontend.matcher);
+                    let turn_rad = normalize_angle_rad(predicted.yaw_rad - before.yaw_rad);
                     if let Some(fast) = self.cfg.fast_turn
-                        && normalize_angle_rad(predicted.yaw_rad - before.yaw_rad).abs()
-                            > fast.turn_rad
+                        && turn_rad.abs() > fast.turn_rad
                     {
                         self.fast_turn_searches += 1;
-                        if let Some(better) =
-                            fast.rematch(map, &dense, prior, &m, &self.cfg.frontend.matcher)
-                        {
+                        if let Some(better) = fast.rematch(
+                            map,
+                            &dense,
+                            prior,
+                            turn_rad,
+                            &m,
+                            &self.cfg.frontend.matcher,
+                        ) {
                             m = better;
                             self.fast_turn_taken += 1;
                         }
@@ -569,6 +589,7 @@ impl Mapper {
                     // The scan that tipped it is not trusted either.
                     self.pose = predicted;
                     self.lost_at = Some(before);
+                    self.searches_since_lost = 0;
                 }
                 self.transitions.push((time_s, t));
             }
@@ -622,10 +643,18 @@ impl Mapper {
             return;
         }
         self.relocalise_searches += 1;
+        let all_headings = self
+            .searches_since_lost
+            .is_multiple_of(RELOCALISE_ALL_HEADINGS_EVERY);
+        self.searches_since_lost += 1;
         let sample = subsample(points, LOOP_POINTS);
         let window = SearchWindow {
             linear_m: RELOCALISE_WINDOW_M,
-            angular_rad: RELOCALISE_WINDOW_RAD,
+            angular_rad: if all_headings {
+                std::f64::consts::PI
+            } else {
+                RELOCALISE_WINDOW_RAD
+            },
             step_range_m: LOOP_STEP_RANGE_M,
         };
         let pose = self.pose;

@@ -371,3 +371,80 @@ fn odometry_that_stalls_then_jumps_is_not_counted_twice() {
         "across the stall: {e:?}"
     );
 }
+
+/// ACES from scan `start` to `end`, as `realms slam` runs it; with `knock`, the odometry
+/// turns 90 degrees at scan `jump` in one reading the robot never made (a knock, a glitch),
+/// and goes on from there; the scans from `jump - drop` to `jump` are dropped. The tracked
+/// pose at the end and the changes of localisation state.
+fn knocked_aces(knock: bool, drop: usize) -> (Pose2, Vec<(f64, realms_slam::health::Transition)>) {
+    use realms_slam::mapper::{Mapper, MapperConfig};
+    let mut l = log("aces");
+    l.retime_stale_odometry();
+    let (start, jump, end) = (1500, 2000, 2300);
+    let mut mapper = Mapper::new(MapperConfig::default());
+    let quarter = Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+    let at_jump = l.scans[jump].odom;
+    let mut last = None;
+    for (k, scan) in l.scans.iter().enumerate().take(end).skip(start) {
+        if knock && (jump - drop..jump).contains(&k) {
+            continue;
+        }
+        let mut scan = scan.clone();
+        if knock && k >= jump {
+            // The same motion after a quarter turn about where the robot stood.
+            scan.odom = at_jump * quarter * at_jump.inverse() * scan.odom;
+        }
+        last = Some(mapper.add_scan(&scan));
+    }
+    (last.expect("scans").pose, mapper.take_transitions())
+}
+
+/// `pose` within 0.2 m and 2 degrees of `truth`.
+fn close(pose: Pose2, truth: Pose2) -> bool {
+    let off = pose.relative_to(&truth);
+    off.x_m.hypot(off.y_m) < 0.2 && off.yaw_rad.abs() < 2f64.to_radians()
+}
+
+/// A turn the odometry reports and the robot never made is a fast turn the scans do not
+/// show: the heading search reaches back to no turn at all, and the match holds the pose.
+/// Searched only around the predicted heading, the match stayed 84 degrees off and the
+/// rover carried on, 30 m astray, writing its scans into the map turned.
+#[test]
+fn a_turn_the_odometry_invented_is_not_followed() {
+    let (truth, calm) = knocked_aces(false, 0);
+    assert!(calm.is_empty(), "lost without the knock: {calm:?}");
+    let (pose, transitions) = knocked_aces(true, 0);
+    assert!(transitions.is_empty(), "{transitions:?}");
+    assert!(
+        close(pose, truth),
+        "{pose:?} against {truth:?} without the knock"
+    );
+}
+
+/// The same turn in a 20-second gap of the scans: the rover is lost, 90 degrees off, and
+/// relocalisation must search beyond its usual +-34 degrees of heading to find it again.
+#[test]
+fn a_turn_in_a_gap_of_the_scans_is_found_by_relocalising() {
+    use realms_slam::health::LocalisationState;
+    let (truth, _) = knocked_aces(false, 0);
+    let (pose, transitions) = knocked_aces(true, 100);
+    eprintln!("{transitions:?}");
+    let lost_s = transitions
+        .iter()
+        .find(|(_, t)| t.state == LocalisationState::Lost)
+        .map(|(s, _)| *s)
+        .expect("a gap makes the rover lost");
+    let found_s = transitions
+        .iter()
+        .find(|(_, t)| t.state == LocalisationState::Tracking)
+        .map(|(s, _)| *s)
+        .expect("relocalised");
+    assert!(
+        found_s - lost_s < 10.0,
+        "lost at {lost_s}, found at {found_s}"
+    );
+    assert!(
+        close(pose, truth),
+        "{pose:?} against {truth:?} without the knock"
+    );
+}
