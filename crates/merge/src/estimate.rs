@@ -561,6 +561,7 @@ fn run(
         &evidence,
         params.conflict_weight,
         params.sharpness_shift_m,
+        params.sharpness_min_turn_rad,
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
@@ -630,8 +631,9 @@ fn run(
         ))
     } else if sharpness < params.min_sharpness {
         Some(format!(
-            "poorly constrained: moved {:.1} m (or turned as much) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
+            "poorly constrained: moved {:.1} m (or turned as much, at least {:.0} deg) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
             params.sharpness_shift_m,
+            params.sharpness_min_turn_rad.to_degrees(),
             100.0 * (1.0 - sharpness)
         ))
     } else if let Some((pose, e)) = rival {

@@ -37,6 +37,10 @@ pub struct Evidence {
     pub overlap_centre: Point2,
     /// Root mean square distance of the overlap from its centre, metres.
     pub overlap_radius_m: f64,
+    /// The ends of the overlap's long axis (its centre plus and minus the half-length of a
+    /// uniform strip with the same spread along that axis), in the second map's grid-local
+    /// metres.
+    pub overlap_ends: [Point2; 2],
     /// `agree - conflict_weight * conflict`.
     pub score: f64,
     /// Shape points (corners, rocks, rims; not straight walls) that agree, counted once
@@ -687,7 +691,8 @@ pub fn verify(
 ) -> Evidence {
     let (t1, t2) = tallies(a, b, a_from_b, on);
     let t = Rigid::new(a_from_b);
-    let (mut overlap_points, mut sx, mut sy, mut sq) = (0usize, 0.0, 0.0, 0.0);
+    let (mut overlap_points, mut sx, mut sy) = (0usize, 0.0, 0.0);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
     for p in &b.known_points {
         let q = t.apply(*p);
         let (x, y) = a.search.cell_under(q);
@@ -695,17 +700,32 @@ pub fn verify(
             overlap_points += 1;
             sx += p.x_m;
             sy += p.y_m;
-            sq += p.x_m * p.x_m + p.y_m * p.y_m;
+            sxx += p.x_m * p.x_m;
+            sxy += p.x_m * p.y_m;
+            syy += p.y_m * p.y_m;
         }
     }
-    let (overlap_centre, overlap_radius_m) = if overlap_points == 0 {
-        (b.centroid, 0.0)
+    let (overlap_centre, overlap_radius_m, overlap_ends) = if overlap_points == 0 {
+        (b.centroid, 0.0, [b.centroid; 2])
     } else {
         let n = overlap_points as f64;
         let (cx, cy) = (sx / n, sy / n);
+        let (vxx, vxy, vyy) = (sxx / n - cx * cx, sxy / n - cx * cy, syy / n - cy * cy);
+        // The larger eigenvalue of the spread and its axis.
+        let half_diff = (vxx - vyy) / 2.0;
+        let major = ((vxx + vyy) / 2.0 + half_diff.hypot(vxy)).max(0.0);
+        let axis = vxy.atan2(half_diff) / 2.0;
+        // A uniform strip of length l spreads l^2 / 12 along it: its ends lie sqrt(3)
+        // standard deviations out.
+        let half_length = (3.0 * major).sqrt();
+        let (s, c) = axis.sin_cos();
         (
             Point2::new(cx, cy),
-            (sq / n - cx * cx - cy * cy).max(0.0).sqrt(),
+            (vxx + vyy).max(0.0).sqrt(),
+            [
+                Point2::new(cx + half_length * c, cy + half_length * s),
+                Point2::new(cx - half_length * c, cy - half_length * s),
+            ],
         )
     };
     let agree = t1.agree + t2.agree;
@@ -720,15 +740,17 @@ pub fn verify(
         overlap_m2: overlap_points as f64 * b.known_area_per_point_m2,
         overlap_centre,
         overlap_radius_m,
+        overlap_ends,
         score: agree as f64 - conflict_weight * conflict as f64,
     }
 }
 
 /// How sharply verification singles out `a_from_b`: one less the best share of its score
-/// kept by the pose moved `shift_m` in any of eight directions or turned either way about
-/// the overlap's centre by the angle that moves the overlap `shift_m` on average. Near 0 when the maps could slide (walls and nothing
-/// else in the overlap) or turn; near 1 when any move loses most of the agreement. The
-/// same idea as judging a correlative match by the spread of its score (Olson 2009).
+/// kept by the pose moved `shift_m` in any of eight directions, or turned either way, about
+/// the overlap's centre and about either end of its long axis, by the angle that moves the
+/// overlap `shift_m` on average about its centre, but at least `min_turn_rad`. Near 0 when the maps could slide (walls and nothing else in the
+/// overlap) or turn; near 1 when any move loses most of the agreement. The same idea as
+/// judging a correlative match by the spread of its score (Olson 2009).
 pub fn sharpness(
     a: &Prepared,
     b: &Prepared,
@@ -736,18 +758,16 @@ pub fn sharpness(
     evidence: &Evidence,
     conflict_weight: f64,
     shift_m: f64,
+    min_turn_rad: f64,
 ) -> f64 {
     if evidence.score <= 0.0 {
         return 0.0;
     }
-    let turn_rad = (shift_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+    let turn_rad = (shift_m / evidence.overlap_radius_m.max(1.0))
+        .min(0.1)
+        .max(min_turn_rad);
     let c = evidence.overlap_centre;
-    let turned = |dyaw: f64| {
-        let pc = a_from_b.transform_point(c);
-        let q = Pose2::new(a_from_b.x_m, a_from_b.y_m, a_from_b.yaw_rad + dyaw);
-        let qc = q.transform_point(c);
-        Pose2::new(q.x_m + pc.x_m - qc.x_m, q.y_m + pc.y_m - qc.y_m, q.yaw_rad)
-    };
+    let turned = |pivot: Point2, dyaw: f64| turned_about(a_from_b, pivot, dyaw);
     let mut moved: Vec<Pose2> = (0..8)
         .map(|k| {
             let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
@@ -758,8 +778,12 @@ pub fn sharpness(
             )
         })
         .collect();
-    moved.push(turned(turn_rad));
-    moved.push(turned(-turn_rad));
+    // About the ends of a long overlap too: a square or a crater at one end of a band can
+    // pin the position there and leave the band free to swing about it.
+    for pivot in [c, evidence.overlap_ends[0], evidence.overlap_ends[1]] {
+        moved.push(turned(pivot, turn_rad));
+        moved.push(turned(pivot, -turn_rad));
+    }
     let kept = moved
         .iter()
         .map(|p| verify(a, b, p, conflict_weight, On::Refine).score / evidence.score)
