@@ -351,6 +351,27 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// Whether the pose `p` (evidence `e`) keeps the best pose's own landmark pairs (at least
+/// `subset_share` of its agreeing landmark points agree at the best and land within
+/// `subset_tolerance_m` of where it puts them) and owes its consistency to an overlap less
+/// than `rival_overlap_share` of the best's, while explaining less: a band turned about the
+/// crater in it until half the band has left the other map's known ground. It brings no
+/// rock together that the best does not, and what it drops is evidence, not conflict.
+fn swung_out_of_view(
+    a: &Prepared,
+    b: &Prepared,
+    best_pose: &Pose2,
+    best: &Evidence,
+    p: &Pose2,
+    e: &Evidence,
+    params: &Params,
+) -> bool {
+    e.agree < best.agree
+        && e.overlap_m2 < params.rival_overlap_share * best.overlap_m2
+        && verify::shared_agreement_of(a, b, best_pose, p, params.subset_tolerance_m, true)
+            >= params.subset_share
+}
+
 /// Whether landmark points land on open ground too often for `e`'s pose to be right.
 fn landmarks_disagree(e: &Evidence, params: &Params) -> bool {
     e.landmark_conflict >= params.min_landmark_conflicts
@@ -542,6 +563,7 @@ fn run(
                 && !dominated(e, &evidence, params)
                 && verify::shared_agreement(a, b, &best_pose, p, params.subset_tolerance_m)
                     < params.subset_share
+                && !swung_out_of_view(a, b, &best_pose, &evidence, p, e, params)
         })
         .collect();
     let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));

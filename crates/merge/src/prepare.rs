@@ -124,6 +124,11 @@ pub struct Params {
     /// ... landing within this distance of where the best puts it, metres
     /// ([`crate::verify::shared_agreement`]).
     pub subset_tolerance_m: f64,
+    /// A clearly different pose is no alternative either when it keeps the best's landmark
+    /// pairs (as above, landmark points only) and overlaps less than this share of the
+    /// best's overlap, explaining less. In `realms bench merge` (lunar, seeds 1-8, 10 and
+    /// 20 %) that merged 9 more pairs, all right; at 1.0 one wrong merge came in.
+    pub rival_overlap_share: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -173,6 +178,7 @@ impl Default for Params {
             rival_landmark_share: 0.5,
             subset_share: 0.9,
             subset_tolerance_m: 0.5,
+            rival_overlap_share: 0.6,
             large_map_m: 30.0,
         }
     }

@@ -803,6 +803,18 @@ pub fn shared_agreement(
     other: &Pose2,
     tolerance_m: f64,
 ) -> f64 {
+    shared_agreement_of(a, b, base, other, tolerance_m, false)
+}
+
+/// [`shared_agreement`] over landmark points only (`landmarks`) or over all structure.
+pub fn shared_agreement_of(
+    a: &Prepared,
+    b: &Prepared,
+    base: &Pose2,
+    other: &Pose2,
+    tolerance_m: f64,
+    landmarks: bool,
+) -> f64 {
     let (mut shared, mut total) = (0.0, 0.0);
     for (points, target, base, other) in [
         (&b.refine_points, &a.refine, *base, *other),
@@ -810,6 +822,9 @@ pub fn shared_agreement(
     ] {
         let (tb, to) = (Rigid::new(&base), Rigid::new(&other));
         for s in points {
+            if landmarks && !s.landmark {
+                continue;
+            }
             let (q_other, v_other) = judge(s, target, &to, other.yaw_rad);
             if v_other != Verdict::Agree {
                 continue;
