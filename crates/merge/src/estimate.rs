@@ -553,7 +553,9 @@ fn run(
     // ground, one the best explains while it leaves out what the best explains
     // ([`dominated`]), and one that agrees with nothing but what the best agrees with, paired
     // alike: the same explanation with part of it slid out of the overlap (a crater rim
-    // turned about its centre, a wall slid along itself; [`verify::shared_agreement`]).
+    // turned about its centre, a wall slid along itself; [`verify::shared_agreement`]);
+    // and one swung about the best's own landmarks until much of the overlap has left view
+    // ([`swung_out_of_view`]).
     let others: Vec<&(Pose2, Evidence)> = verified
         .iter()
         .skip(1)
