@@ -127,7 +127,8 @@ pub struct Params {
     /// A clearly different pose is no alternative either when it keeps the best's landmark
     /// pairs (as above, landmark points only) and overlaps less than this share of the
     /// best's overlap, explaining less. In `realms bench merge` (lunar, seeds 1-8, 10 and
-    /// 20 %) that merged 9 more pairs, all right; at 1.0 one wrong merge came in.
+    /// 20 %) that merged 9 more pairs, all right; at 1.0, on seeds 1-5, one wrong merge came
+    /// in.
     pub rival_overlap_share: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows

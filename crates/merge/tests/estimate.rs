@@ -7,7 +7,7 @@ mod common;
 
 use rand::SeedableRng;
 use realms_merge::synth::{self, Pair, PairSpec};
-use realms_merge::{Params, Prepared, estimate};
+use realms_merge::{Params, Prepared, estimate, estimate_maps};
 
 fn pairs(
     source: &realms_core::Grid<realms_merge::MapCell>,
@@ -29,11 +29,7 @@ fn run(pairs: &[Pair], what: &str) -> usize {
     let params = Params::default();
     let mut accepted = 0;
     for (i, pair) in pairs.iter().enumerate() {
-        let est = estimate(
-            &Prepared::new(&pair.a, &params),
-            &Prepared::new(&pair.b, &params),
-            &params,
-        );
+        let est = estimate_maps(&pair.a, &pair.b, &params);
         if common::accepted_and_right(&est, pair, &format!("{what} #{i}")) {
             accepted += 1;
         }
@@ -70,11 +66,7 @@ fn maps_that_share_nothing_are_refused() {
         ("lunar", common::lunar(4, 5, 120)),
     ] {
         for pair in pairs(&source, 0.0, 14, 2) {
-            let est = estimate(
-                &Prepared::new(&pair.a, &params),
-                &Prepared::new(&pair.b, &params),
-                &params,
-            );
+            let est = estimate_maps(&pair.a, &pair.b, &params);
             assert!(
                 est.accepted().is_none(),
                 "{what}: disjoint maps merged at {:?} with confidence {:.2}",
@@ -247,11 +239,7 @@ fn a_band_free_to_swing_about_a_square_at_one_end_is_refused() {
     for rock in [false, true] {
         let a = hall(&|x| x < 16.0, rock);
         let b = hall(&|x| x >= 14.0, rock);
-        let est = estimate(
-            &Prepared::new(&a, &params),
-            &Prepared::new(&b, &params),
-            &params,
-        );
+        let est = estimate_maps(&a, &b, &params);
         if rock {
             let p = est.accepted().expect("the rock pins the swing");
             assert!(
@@ -307,23 +295,20 @@ fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
         .map(|i| synth::make_pair(&sources[i % 3], &spec, &mut rng).expect("known cells"))
         .last()
         .expect("five pairs");
-    let run_with = |params: &Params| {
-        estimate(
-            &Prepared::new(&pair.a, params),
-            &Prepared::new(&pair.b, params),
-            params,
-        )
-    };
-    let est = run_with(&Params::default());
+    let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert!(
         common::accepted_and_right(&est, &pair, "seed 5 pair 4"),
         "refused: {:?}",
         est.refusal
     );
-    let strict = run_with(&Params {
-        rival_overlap_share: 0.0,
-        ..Params::default()
-    });
+    let strict = estimate_maps(
+        &pair.a,
+        &pair.b,
+        &Params {
+            rival_overlap_share: 0.0,
+            ..Params::default()
+        },
+    );
     assert!(
         strict
             .refusal
