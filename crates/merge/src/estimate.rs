@@ -595,9 +595,11 @@ fn run(
     let nearby = || {
         let c = evidence.overlap_centre;
         let apart_rad = (params.precision_apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
+        let best_closeness = verify::closeness(a, b, &best_pose);
         let settled_apart = verified.iter().skip(1).find(|(p, e)| {
             same_pose(p, &best_pose, b.centroid, params)
                 && e.score >= params.precision_share * evidence.score
+                && verify::closeness(a, b, p) >= params.precision_share * best_closeness
                 && (p
                     .transform_point(c)
                     .distance_m(best_pose.transform_point(c))

@@ -293,9 +293,12 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
 /// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
 /// directions and turned as much either way (about the overlap's centre); the first
 /// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
-/// with a verified score at least `share` of `evidence`'s. In a narrow overlap of walls and
-/// a rock or two, poses a few cells or a degree apart can explain the maps equally well;
-/// then the merge is not precise, whatever its confidence.
+/// with a verified score at least `share` of `evidence`'s and a [`closeness`] at least
+/// `share` of the pose's own. In a narrow overlap of walls and a rock or
+/// two, poses a few cells or a degree apart can explain the maps equally well; then the
+/// merge is not precise, whatever its confidence. (Verification tolerates a cell and a
+/// half, so a pose a cell or two off that overlaps more ground can count as many agreeing
+/// cells as the true one; its surfaces do not lie as close.)
 #[allow(clippy::too_many_arguments)]
 pub fn nearby_alternative(
     a: &Prepared,
@@ -328,6 +331,7 @@ pub fn nearby_alternative(
     probes.push(turned_about(a_from_b, c, turn_rad));
     probes.push(turned_about(a_from_b, c, -turn_rad));
     let here = a_from_b.transform_point(c);
+    let best_closeness = std::cell::OnceCell::new();
     for probe in probes {
         let p = climb(
             a,
@@ -344,7 +348,10 @@ pub fn nearby_alternative(
             continue;
         }
         let e = verify(a, b, &p, params.conflict_weight, On::Refine);
-        if e.score >= share * evidence.score {
+        if e.score >= share * evidence.score
+            && closeness(a, b, &p)
+                >= share * *best_closeness.get_or_init(|| closeness(a, b, a_from_b))
+        {
             return Some((p, e));
         }
     }
@@ -363,6 +370,15 @@ fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
     let d01 = level.dist_at(x0, y0 + 1).unwrap_or(d00);
     let d11 = level.dist_at(x0 + 1, y0 + 1).unwrap_or(d00);
     Some((d00 * (1.0 - tx) + d10 * tx) * (1.0 - ty) + (d01 * (1.0 - tx) + d11 * tx) * ty)
+}
+
+/// How closely the two maps' surfaces lie on each other at grid-local `a_from_b`: each
+/// surface point earns `1 - d / 2` for its distance `d` (fine cells, interpolated) to the
+/// other map's nearest structure, both ways; what refinement's last stage climbs. Unlike
+/// verification's counts, which tolerate a cell and a half, it tells apart poses a cell
+/// from each other.
+pub fn closeness(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
+    Relevant::pick(a, b, On::Refine, *a_from_b).smooth_score(a, b, a_from_b) as f64
 }
 
 /// Coordinate ascent on [`Relevant::smooth_score`] from half a cell and a quarter degree down.

@@ -41,6 +41,47 @@ pub fn lunar(seed: u64, large: u32, small: u32) -> Grid<MapCell> {
         .map(|v| MapCell::from_occupancy(*v))
 }
 
+/// The very sparse arena of `realms bench merge` (`lunar-very-sparse`): the default arena
+/// of `seed` with 2 lidar-visible boulders, 30 rocks, one small and one large crater.
+pub fn lunar_very_sparse(seed: u64) -> Grid<MapCell> {
+    let mut sc = Scenario {
+        seed,
+        ..Scenario::default()
+    };
+    sc.boulders.large_count = 2;
+    sc.boulders.small_count = 30;
+    sc.craters.small_count = 1;
+    sc.craters.large_count = 1;
+    let terrain = Terrain::generate(&sc);
+    GroundTruth::derive(&terrain, &sc)
+        .perfect_map()
+        .map(|v| MapCell::from_occupancy(*v))
+}
+
+/// Pair `index` of `realms bench merge --seed SEED` for kind `kind` at `overlap_pct`, cut
+/// from `sources` (the kind's three arenas, from that seed on) as the bench cuts it.
+pub fn bench_pair(
+    sources: &[Grid<MapCell>],
+    seed: u64,
+    overlap_pct: u32,
+    kind: &str,
+    index: usize,
+) -> Pair {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+        seed ^ (u64::from(overlap_pct) << 32) ^ kind.len() as u64,
+    );
+    let spec = synth::PairSpec {
+        overlap: f64::from(overlap_pct) / 100.0,
+        ..synth::PairSpec::default()
+    };
+    (0..=index)
+        .map(|i| synth::make_pair(&sources[i % sources.len()], &spec, &mut rng))
+        .last()
+        .flatten()
+        .expect("the sources have known cells")
+}
+
 /// Translation error at the second map's known centre (metres) and heading error (radians).
 pub fn error(found: &Pose2, truth: &Pose2, b: &Map) -> (f64, f64) {
     let centre: Point2 = b
