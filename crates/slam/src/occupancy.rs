@@ -178,9 +178,14 @@ impl OccupancyGrid {
     }
 
     fn update(&mut self, i: usize, delta: f32) {
-        let l = updated_log_odds(self.log_odds[i], delta);
-        self.log_odds[i] = l;
-        self.prob[i] = 1.0 - 1.0 / (1.0 + l.exp());
+        let old = self.log_odds[i];
+        let l = updated_log_odds(old, delta);
+        // A cell held at the clamp (open ground seen from many keyframes) does not change,
+        // and its probability need not be worked out again.
+        if l != old {
+            self.log_odds[i] = l;
+            self.prob[i] = 1.0 - 1.0 / (1.0 + l.exp());
+        }
     }
 
     /// Inserts one scan: beams from `sensor` to each endpoint (world frame); endpoints marked
