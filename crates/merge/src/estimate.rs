@@ -598,13 +598,18 @@ fn run(
         let best_closeness = verify::closeness(a, b, &best_pose);
         let settled_apart = verified.iter().skip(1).find(|(p, e)| {
             same_pose(p, &best_pose, b.centroid, params)
-                && e.score >= params.precision_share * evidence.score
-                && verify::closeness(a, b, p) >= params.precision_share * best_closeness
                 && (p
                     .transform_point(c)
                     .distance_m(best_pose.transform_point(c))
                     > params.precision_apart_m
                     || normalize_angle_rad(p.yaw_rad - best_pose.yaw_rad).abs() > apart_rad)
+                && verify::fits_as_well(
+                    a,
+                    b,
+                    (p, e),
+                    (&evidence, best_closeness),
+                    params.precision_share,
+                )
         });
         if let Some(found) = settled_apart {
             return Some(*found);
@@ -614,6 +619,7 @@ fn run(
             b,
             &best_pose,
             &evidence,
+            best_closeness,
             params,
             params.precision_probe_m,
             params.precision_apart_m,

@@ -94,12 +94,9 @@ pub struct Params {
     /// much at the overlap's edge) ...
     pub precision_apart_m: f64,
     /// ... with at least this share of the best verified score and of its
-    /// [`crate::verify::closeness`]. In `realms bench merge` (lunar, seeds 1-8, 10 and
-    /// 20 %, 800 pairs) asking for both from 0.13 m merged 441 pairs with 4 wrong, against
-    /// 440 with 6 for the score alone from 0.15 m.
-    /// Verification tolerates a cell and a half, so a pose a cell or two off that overlaps
-    /// more ground can count as many agreeing cells as the true one; its surfaces do not
-    /// lie as close.
+    /// [`crate::verify::closeness`] ([`crate::verify::fits_as_well`]). In `realms bench
+    /// merge` (lunar, seeds 1-8, 10 and 20 %, 800 pairs) asking for both from 0.13 m merged
+    /// 441 pairs with 4 wrong, against 440 with 6 for the score alone from 0.15 m.
     pub precision_share: f64,
     /// Refuse below this overlap of known cells, square metres.
     pub min_overlap_m2: f64,

@@ -293,18 +293,16 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
 /// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
 /// directions and turned as much either way (about the overlap's centre); the first
 /// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
-/// with a verified score at least `share` of `evidence`'s and a [`closeness`] at least
-/// `share` of the pose's own. In a narrow overlap of walls and a rock or
-/// two, poses a few cells or a degree apart can explain the maps equally well; then the
-/// merge is not precise, whatever its confidence. (Verification tolerates a cell and a
-/// half, so a pose a cell or two off that overlaps more ground can count as many agreeing
-/// cells as the true one; its surfaces do not lie as close.)
+/// and [`fits_as_well`] as the pose (`evidence`, `pose_closeness`). In a narrow overlap of
+/// walls and a rock or two, poses a few cells or a degree apart can explain the maps
+/// equally well; then the merge is not precise, whatever its confidence.
 #[allow(clippy::too_many_arguments)]
 pub fn nearby_alternative(
     a: &Prepared,
     b: &Prepared,
     a_from_b: &Pose2,
     evidence: &Evidence,
+    pose_closeness: f64,
     params: &Params,
     probe_m: f64,
     apart_m: f64,
@@ -331,7 +329,6 @@ pub fn nearby_alternative(
     probes.push(turned_about(a_from_b, c, turn_rad));
     probes.push(turned_about(a_from_b, c, -turn_rad));
     let here = a_from_b.transform_point(c);
-    let best_closeness = std::cell::OnceCell::new();
     for probe in probes {
         let p = climb(
             a,
@@ -348,10 +345,7 @@ pub fn nearby_alternative(
             continue;
         }
         let e = verify(a, b, &p, params.conflict_weight, On::Refine);
-        if e.score >= share * evidence.score
-            && closeness(a, b, &p)
-                >= share * *best_closeness.get_or_init(|| closeness(a, b, a_from_b))
-        {
+        if fits_as_well(a, b, (&p, &e), (evidence, pose_closeness), share) {
             return Some((p, e));
         }
     }
@@ -375,10 +369,24 @@ fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
 /// How closely the two maps' surfaces lie on each other at grid-local `a_from_b`: each
 /// surface point earns `1 - d / 2` for its distance `d` (fine cells, interpolated) to the
 /// other map's nearest structure, both ways; what refinement's last stage climbs. Unlike
-/// verification's counts, which tolerate a cell and a half, it tells apart poses a cell
-/// from each other.
+/// verification's counts, which tolerate a cell and a half, it tells poses a cell apart.
 pub fn closeness(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
     Relevant::pick(a, b, On::Refine, *a_from_b).smooth_score(a, b, a_from_b) as f64
+}
+
+/// Whether `other` (a pose and its evidence) explains the maps about as well as `best`
+/// (its evidence and [`closeness`]): at least `share` of its verified score and of its
+/// closeness. Both are needed: verification tolerates a cell and a half, so a pose a cell
+/// or two off that overlaps more ground can count as many agreeing cells as the true one;
+/// its surfaces do not lie as close.
+pub fn fits_as_well(
+    a: &Prepared,
+    b: &Prepared,
+    (pose, evidence): (&Pose2, &Evidence),
+    (best, best_closeness): (&Evidence, f64),
+    share: f64,
+) -> bool {
+    evidence.score >= share * best.score && closeness(a, b, pose) >= share * best_closeness
 }
 
 /// Coordinate ascent on [`Relevant::smooth_score`] from half a cell and a quarter degree down.

@@ -35,8 +35,13 @@ pub fn lunar(seed: u64, large: u32, small: u32) -> Grid<MapCell> {
     };
     sc.boulders.large_count = large;
     sc.boulders.small_count = small;
-    let terrain = Terrain::generate(&sc);
-    GroundTruth::derive(&terrain, &sc)
+    perfect_map(&sc)
+}
+
+/// The map a perfect sensor suite would build of the arena of `sc`.
+fn perfect_map(sc: &Scenario) -> Grid<MapCell> {
+    let terrain = Terrain::generate(sc);
+    GroundTruth::derive(&terrain, sc)
         .perfect_map()
         .map(|v| MapCell::from_occupancy(*v))
 }
@@ -52,10 +57,7 @@ pub fn lunar_very_sparse(seed: u64) -> Grid<MapCell> {
     sc.boulders.small_count = 30;
     sc.craters.small_count = 1;
     sc.craters.large_count = 1;
-    let terrain = Terrain::generate(&sc);
-    GroundTruth::derive(&terrain, &sc)
-        .perfect_map()
-        .map(|v| MapCell::from_occupancy(*v))
+    perfect_map(&sc)
 }
 
 /// Pair `index` of `realms bench merge --seed SEED` for kind `kind` at `overlap_pct`, cut
