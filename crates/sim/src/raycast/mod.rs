@@ -9,8 +9,10 @@
 //!   Mipmaps for Fast, Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008) for
 //!   the last stretch before a hit, where it skips any block the ray passes entirely above.
 
+mod fan;
 mod walk;
 
+pub use fan::FanCaster;
 use realms_core::{Grid, GridGeometry};
 use walk::ClearStep;
 
@@ -172,13 +174,32 @@ pub struct HeightPyramid {
     geometry: GridGeometry,
     levels: Vec<Level>,
     clearance: Option<Clearance>,
+    /// Each cell the minimum of a block of `2^LOWS_LEVEL` cells a side (the maximum is the
+    /// pyramid's level of that size): bounds on the heights near a camera for fan casts.
+    lows: Option<Level>,
 }
+
+/// Pyramid level whose blocks bound the heights near a camera (16 cells, 0.8 m at 5 cm).
+const LOWS_LEVEL: usize = 4;
 
 impl HeightPyramid {
     /// Builds the pyramid and clearance field over a heightfield (metres).
     pub fn new(heights: &Grid<f32>) -> Self {
         let mut p = HeightPyramid::with_max_level(heights, MAX_LEVEL);
         p.clearance = Some(Clearance::new(heights));
+        if p.levels.len() > LOWS_LEVEL {
+            let g = p.geometry;
+            let side = 1 << LOWS_LEVEL;
+            let (w, h) = (g.width.div_ceil(side), g.height.div_ceil(side));
+            let mut lows = vec![f32::INFINITY; w * h];
+            for y in 0..g.height {
+                for x in 0..g.width {
+                    let m = &mut lows[(y >> LOWS_LEVEL) * w + (x >> LOWS_LEVEL)];
+                    *m = m.min(heights.cells()[y * g.width + x]);
+                }
+            }
+            p.lows = Some(Level::from_row_major(w, h, &lows));
+        }
         p
     }
 
@@ -211,7 +232,36 @@ impl HeightPyramid {
             geometry,
             levels,
             clearance: None,
+            lows: None,
         }
+    }
+
+    /// The lowest and highest cell tops within `reach_m` (horizontally) of `origin`, to the
+    /// precision of the blocks that bound them; `None` without the bounds (plain pyramid).
+    fn height_bounds(&self, origin: [f64; 3], reach_m: f64) -> Option<(f64, f64)> {
+        let lows = self.lows.as_ref()?;
+        let highs = &self.levels[LOWS_LEVEL];
+        let g = &self.geometry;
+        let block = |v: f64, o: f64, cells: usize| {
+            let c = ((v - o) / g.resolution_m).floor();
+            (c.clamp(0.0, (cells - 1) as f64) as usize) >> LOWS_LEVEL
+        };
+        let (x0, x1) = (
+            block(origin[0] - reach_m, g.origin.x_m, g.width),
+            block(origin[0] + reach_m, g.origin.x_m, g.width),
+        );
+        let (y0, y1) = (
+            block(origin[1] - reach_m, g.origin.y_m, g.height),
+            block(origin[1] + reach_m, g.origin.y_m, g.height),
+        );
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                lo = lo.min(lows.at(x, y));
+                hi = hi.max(highs.at(x, y));
+            }
+        }
+        Some((lo as f64, hi as f64))
     }
 
     /// The geometry of the underlying heightfield.

@@ -1,12 +1,12 @@
-//! The two walks of a cast, written as state machines that advance one step per call, so
-//! that several rays can be walked in turn: the clearance walk through open space (every
-//! cast takes it) and the short near walk from a proved start (image pixels take it).
+//! The two walks of a cast, written as state machines that advance one step per call: the
+//! clearance walk through open space (every cast takes it) and the short near walk from a
+//! start known to be clear (image pixels take it from where their fan's profile stops them,
+//! see `fan.rs`).
 //!
-//! Each step of either walk is a short chain of dependent arithmetic and one load. Stepping
-//! the rays of four neighbouring image columns in turn lets the core overlap their chains:
-//! the same work, done side by side, about 6 % faster a depth frame than one ray at a time
-//! (BENCHMARKS.md, twentieth session; two side by side were slower, eight no better). The
-//! answers are those of one ray at a time, exactly.
+//! The state machines once let the rays of four image columns be stepped in turn, so their
+//! chains of dependent steps overlapped (BENCHMARKS.md, twentieth session). Image columns are
+//! now cast as fans, whose walks are a few cells each; stepping those side by side was slower
+//! than one after the other (twenty-fifth session).
 
 use super::{CLEAR_BLOCK, Clearance, HeightPyramid, Level, exit_time, step_sign};
 
@@ -38,7 +38,7 @@ pub(super) enum ClearStep {
 }
 
 /// Level-0 cells walked for a short stretch from a proved start (see
-/// [`HeightPyramid::cast_from_hints`]), one cell per [`HeightPyramid::near_step`].
+/// [`HeightPyramid::walk_from`]), one cell per [`HeightPyramid::near_step`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct NearWalk {
     origin_z: f64,
@@ -224,84 +224,28 @@ impl HeightPyramid {
         None
     }
 
-    /// Like [`cast`](Self::cast) for `N` rays from one origin, each of which may start at its
-    /// hint (rays of one image column hit in order, so the previous hit is a good guess). A
-    /// guess is only trusted once the clearance field proves the stretch before it empty;
-    /// where that proof stops short, the exact walk continues from there. So each answer is
-    /// the first hit, as `cast` would find it. The rays' walks are stepped in turn, so rays of
-    /// neighbouring columns go side by side.
-    pub fn cast_from_hints<const N: usize>(
+    /// The first hit of a ray from `origin`, walked exactly cell by cell from `t_start`, before
+    /// which it is known to hit nothing.
+    pub(super) fn walk_from(
         &self,
         origin: [f64; 3],
-        dirs: [[f64; 3]; N],
-        t_min_m: f64,
-        hints_m: [f64; N],
+        dir: [f64; 3],
+        t_start: f64,
         t_max_m: f64,
-    ) -> [Option<f64>; N] {
-        let mut hits = [None; N];
-        let Some(c) = &self.clearance else {
-            for (hit, dir) in hits.iter_mut().zip(dirs) {
-                *hit = self.cast(origin, dir, t_min_m, t_max_m);
-            }
-            return hits;
+    ) -> Option<f64> {
+        let settled = match self.near_walk(origin, dir, t_start, t_max_m) {
+            Ok(mut w) => loop {
+                if let Some(n) = self.near_step(&mut w) {
+                    break n;
+                }
+            },
+            Err(n) => n,
         };
-        // Where each ray's proof ends (None: no hint to prove towards, cast it whole).
-        let mut starts: [Option<f64>; N] = [None; N];
-        let mut clear: [Option<ClearWalk>; N] = [None; N];
-        for i in 0..N {
-            if hints_m[i] > t_min_m {
-                let hint = hints_m[i].min(t_max_m);
-                match self.clear_walk(origin, dirs[i], t_min_m, hint) {
-                    Ok(w) => clear[i] = Some(w),
-                    Err(t) => starts[i] = Some(t),
-                }
-            }
+        match settled {
+            Near::Settled(hit) => hit,
+            Near::ContinueFrom(t) => self.cast(origin, dir, t, t_max_m),
+            Near::HitBehindStart => self.cast(origin, dir, 0.0, t_max_m),
         }
-        // The two walks below step each ray in turn, round after round, until all have ended.
-        let mut walking = clear.iter().filter(|w| w.is_some()).count();
-        while walking > 0 {
-            for i in 0..N {
-                let Some(w) = clear[i].as_mut() else { continue };
-                let t = match self.clear_step(c, w) {
-                    ClearStep::Open => continue,
-                    ClearStep::Exact(t) => t,
-                    // Proved empty up to the hint: walk exactly from there.
-                    ClearStep::Clear => w.t_max,
-                };
-                starts[i] = Some(t);
-                clear[i] = None;
-                walking -= 1;
-            }
-        }
-        let mut settled: [Option<Near>; N] = [None; N];
-        let mut near: [Option<NearWalk>; N] = [None; N];
-        for i in 0..N {
-            if let Some(start) = starts[i] {
-                match self.near_walk(origin, dirs[i], start, t_max_m) {
-                    Ok(w) => near[i] = Some(w),
-                    Err(n) => settled[i] = Some(n),
-                }
-            }
-        }
-        let mut walking = near.iter().filter(|w| w.is_some()).count();
-        while walking > 0 {
-            for i in 0..N {
-                let Some(w) = near[i].as_mut() else { continue };
-                if let Some(n) = self.near_step(w) {
-                    settled[i] = Some(n);
-                    near[i] = None;
-                    walking -= 1;
-                }
-            }
-        }
-        for i in 0..N {
-            hits[i] = match settled[i] {
-                Some(Near::Settled(hit)) => hit,
-                Some(Near::ContinueFrom(t)) => self.cast(origin, dirs[i], t, t_max_m),
-                Some(Near::HitBehindStart) | None => self.cast(origin, dirs[i], t_min_m, t_max_m),
-            };
-        }
-        hits
     }
 }
 
@@ -311,15 +255,14 @@ mod tests {
     use proptest::prelude::*;
 
     proptest! {
-        /// Side by side or alone, with hints before, at or past the true hit (or none), every
-        /// ray gets what a plain cast finds.
+        /// Walked from any start before its first hit (or anywhere in range, for a ray that
+        /// hits nothing), a ray finds what a plain cast finds.
         #[test]
-        fn rays_side_by_side_hit_what_each_hits_alone(
+        fn a_walk_from_a_clear_start_hits_what_a_cast_hits(
             seed in 0u64..1000,
             ox in 1.0..9.0f64, oy in 1.0..9.0f64, oz in 0.1..0.6f64,
             yaw in 0.0..std::f64::consts::TAU, pitch in -0.5..0.1f64,
-            spread in 0.0..0.2f64,
-            hint_scales in proptest::array::uniform4(0.0..1.5f64),
+            start_share in 0.0..1.0f64,
         ) {
             let grid = super::super::tests::field(200, 200, |x, y| {
                 let v = ((y * 200 + x) as u64 * 7919 + seed * 104_729) % 89;
@@ -327,20 +270,13 @@ mod tests {
             });
             let p = HeightPyramid::new(&grid);
             let o = [ox, oy, oz];
-            let dirs: [[f64; 3]; 4] = std::array::from_fn(|i| {
-                let a = yaw + spread * i as f64;
-                let e = pitch + 0.01 * i as f64;
-                [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()]
-            });
-            let alone = dirs.map(|d| p.cast(o, d, 0.0, 6.0));
-            let hints: [f64; 4] =
-                std::array::from_fn(|i| alone[i].unwrap_or(6.0) * hint_scales[i]);
-            let together = p.cast_from_hints(o, dirs, 0.0, hints, 6.0);
-            for i in 0..4 {
-                match (together[i], alone[i]) {
-                    (Some(a), Some(b)) => prop_assert!((a - b).abs() < 1e-9, "ray {}: {} against {}", i, a, b),
-                    (a, b) => prop_assert_eq!(a, b, "ray {}", i),
-                }
+            let d = [pitch.cos() * yaw.cos(), pitch.cos() * yaw.sin(), pitch.sin()];
+            let cast = p.cast(o, d, 0.0, 6.0);
+            let start = cast.unwrap_or(6.0) * start_share;
+            let walked = p.walk_from(o, d, start, 6.0);
+            match (walked, cast) {
+                (Some(a), Some(b)) => prop_assert!((a - b).abs() < 1e-9, "{} against {}", a, b),
+                (a, b) => prop_assert_eq!(a, b),
             }
         }
     }

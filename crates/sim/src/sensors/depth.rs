@@ -48,12 +48,13 @@ impl Intrinsics {
 /// y left, z up).
 pub const BODY_FROM_OPTICAL: [[f64; 3]; 3] = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
 
-/// Casts every pixel of a `width x height` image from `world_from_optical`, column by column
-/// from the bottom row up so each ray starts near its neighbour's hit. Rays are cast along the
-/// unnormalised optical ray `r = ((u - cx) / fx, (v - cy) / fy, 1)`, so the ray parameter of a
-/// hit is its optical depth z, and stepping up a column is three additions. Calls
-/// `visit(u, v, r, z)` with the optical depth of the hit, or `None` beyond `z_max_m`, column
-/// by column, bottom row first.
+/// Casts every pixel of a `width x height` image from `world_from_optical`, column by column.
+/// The rays of a column leave the camera in one plane, so each column is cast as a fan
+/// ([`realms_sim::raycast::FanCaster`](crate::raycast::FanCaster)): one pass over the ground
+/// for the whole column, then a short exact walk a pixel. Rays are cast along the unnormalised
+/// optical ray `r = ((u - cx) / fx, (v - cy) / fy, 1)`, so the ray parameter of a hit is its
+/// optical depth z. Calls `visit(u, v, r, z)` with the optical depth of the hit, or `None`
+/// beyond `z_max_m`, column by column, bottom row first.
 pub fn cast_image(
     world: &HeightPyramid,
     world_from_optical: &Frame3,
@@ -63,75 +64,39 @@ pub fn cast_image(
     z_max_m: f64,
     mut visit: impl FnMut(u32, u32, [f64; 3], Option<f64>),
 ) {
-    // Neighbouring columns are cast side by side (their walks overlap on the core), then
-    // visited one after the other.
-    const SIDE_BY_SIDE: u32 = 4;
     if width == 0 || height == 0 {
         return;
     }
-    let mut hits = vec![None; (SIDE_BY_SIDE * height) as usize];
-    let mut u = 0;
-    while u < width {
-        let n = if u + SIDE_BY_SIDE <= width {
-            cast_columns::<{ SIDE_BY_SIDE as usize }>(
-                world,
-                world_from_optical,
-                k,
-                u,
-                height,
-                z_max_m,
-                &mut hits,
-            );
-            SIDE_BY_SIDE
-        } else {
-            cast_columns::<1>(world, world_from_optical, k, u, height, z_max_m, &mut hits);
-            1
-        };
-        for (i, column) in hits
-            .chunks_exact(height as usize)
-            .take(n as usize)
-            .enumerate()
-        {
-            let bottom = k.ray(u + i as u32, height - 1);
-            for (rows_up, hit) in column.iter().enumerate() {
-                let v = height - 1 - rows_up as u32;
-                let r = [bottom[0], bottom[1] - rows_up as f64 / k.fy, 1.0];
-                visit(u + i as u32, v, r, *hit);
-            }
+    // A ray r (z = 1) travels |r| per unit of optical depth; the image's corners have the
+    // longest.
+    let longest = [
+        (0, 0),
+        (width - 1, 0),
+        (0, height - 1),
+        (width - 1, height - 1),
+    ]
+    .into_iter()
+    .map(|(u, v)| {
+        let r = k.ray(u, v);
+        (r[0] * r[0] + r[1] * r[1] + 1.0).sqrt()
+    })
+    .fold(0.0, f64::max);
+    let mut fan = world.fan_caster(world_from_optical.origin, z_max_m * longest * (1.0 + 1e-9));
+    let mut rays = Vec::with_capacity(height as usize);
+    let mut dirs = Vec::with_capacity(height as usize);
+    let mut hits = vec![None; height as usize];
+    for u in 0..width {
+        rays.clear();
+        dirs.clear();
+        // Bottom row first: the fan's rays must climb in turn.
+        for v in (0..height).rev() {
+            let r = k.ray(u, v);
+            rays.push(r);
+            dirs.push(world_from_optical.rotate(r));
         }
-        u += n;
-    }
-}
-
-/// Casts columns `u0 .. u0 + N`, bottom row up, into `hits` (column after column).
-fn cast_columns<const N: usize>(
-    world: &HeightPyramid,
-    world_from_optical: &Frame3,
-    k: &Intrinsics,
-    u0: u32,
-    height: u32,
-    z_max_m: f64,
-    hits: &mut [Option<f64>],
-) {
-    let origin = world_from_optical.origin;
-    // World direction of one pixel row up the image (towards smaller v).
-    let row_up = world_from_optical.rotate([0.0, -1.0 / k.fy, 0.0]);
-    let mut dirs: [[f64; 3]; N] =
-        std::array::from_fn(|i| world_from_optical.rotate(k.ray(u0 + i as u32, height - 1)));
-    let mut prev_z = [0.0; N];
-    for rows_up in 0..height as usize {
-        // A ray higher in a column usually hits no nearer than the one below it (or, after a
-        // miss, than its reach), so that is where its search starts; the cast proves the
-        // stretch before it empty first, because a tilted or rolled camera fans the rays
-        // sideways and a thin silhouette can hide between them.
-        let hints = prev_z.map(|z| 0.95 * z);
-        let found = world.cast_from_hints(origin, dirs, 0.0, hints, z_max_m);
-        for (i, hit) in found.into_iter().enumerate() {
-            prev_z[i] = hit.unwrap_or(z_max_m);
-            hits[i * height as usize + rows_up] = hit;
-            for (d, up) in dirs[i].iter_mut().zip(row_up) {
-                *d += up;
-            }
+        fan.cast(&dirs, z_max_m, &mut hits);
+        for (rows_up, (r, hit)) in rays.iter().zip(&hits).enumerate() {
+            visit(u, height - 1 - rows_up as u32, *r, *hit);
         }
     }
 }
