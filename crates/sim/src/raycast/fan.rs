@@ -7,17 +7,20 @@
 //! upright, `kappa * (z - z_camera)` when the camera is pitched or rolled). So wherever a ray
 //! of the fan first touches the ground, the touching point lies within a band of the ground
 //! whose width is `|kappa|` times the spread of the terrain's heights nearby. Walking that band
-//! once from the camera outwards, cell strip by cell strip, and keeping each strip's highest
-//! cell gives a profile no ray of the fan can hit before: a ray passes a strip while it stays
-//! above the strip's highest cell. The rays climb in order, so one pointer walks the profile for
-//! all of them, and each ray then walks exactly, cell by cell, from the strip it cannot pass.
-//! The answers are those of [`HeightPyramid::cast`]: the profile only says where to start.
+//! once from the camera outwards, strip by strip (a row of 4 x 4-cell blocks), and keeping each
+//! strip's highest cell gives a profile no ray of the fan can hit before: a ray passes a strip
+//! while it stays above the strip's highest cell. The rays climb in order, so one pointer walks the profile for
+//! all of them. Each ray then walks exactly, cell by cell, from where it could first touch the
+//! strip it cannot pass (a falling ray not before it is down to the strip's top), through the
+//! strips that stop it, and skips again over those it climbs over. The answers are those of
+//! [`HeightPyramid::cast`]: the profile only says where to walk.
 //!
 //! This is the column-coherent idea of heightfield "wave surfing" renderers (e.g. Comanche's
 //! voxel space, 1992), made exact for a camera that is pitched and rolled: the band accounts
 //! for the plane's tilt instead of assuming upright columns.
 
 use super::HeightPyramid;
+use super::walk::Near;
 
 /// One strip of a fan's band: along the band's horizontal axis, from `a_min_m` to `a_max_m`
 /// from the camera, no cell reaches above `top_m`.
@@ -121,28 +124,87 @@ impl FanCaster<'_> {
         }
         Band::new(self.world, &plane, self.origin, z_lo, z_hi).profile(a_end_m, &mut self.strips);
 
-        let z0 = self.origin[2];
+        let (world, origin) = (self.world, self.origin);
+        let z0 = origin[2];
         let strips = &self.strips;
+        // Strip `k` stops a ray that climbs `slope` unless the ray stays above its top.
+        let passes = |k: usize, slope: f64| {
+            let s = &strips[k];
+            let a_low = if slope >= 0.0 { s.a_min_m } else { s.a_max_m };
+            z0 + slope * a_low > s.top_m
+        };
+        // Where a ray stopped at strip `k` may first touch a cell: a falling ray touches none
+        // of a strip's cells before it is down to the strip's top, but strips overlap along
+        // the band, so those after `k` that begin before that point count too.
+        let first_touch = |k: usize, slope: f64| {
+            let mut first = f64::INFINITY;
+            for s in &strips[k..] {
+                if s.a_min_m >= first {
+                    break;
+                }
+                let a_down = if slope < 0.0 {
+                    (s.top_m - z0) / slope
+                } else {
+                    0.0
+                };
+                first = first.min(s.a_min_m.max(a_down));
+            }
+            first
+        };
         let mut j = 0;
         for ((hit, dir), &(along, slope)) in hits.iter_mut().zip(dirs).zip(&self.rays) {
             let a_reach_m = t_max_m * along;
+            let in_reach = |k: usize| strips.get(k).is_some_and(|s| s.a_min_m <= a_reach_m);
             // Past every strip this ray climbs over; the rays below climbed over none that
             // this one does not, so the pointer only moves on.
-            while let Some(s) = strips.get(j) {
-                let a_low = if slope >= 0.0 { s.a_min_m } else { s.a_max_m };
-                if s.a_min_m <= a_reach_m && z0 + slope * a_low > s.top_m {
-                    j += 1;
-                } else {
-                    break;
-                }
+            while in_reach(j) && passes(j, slope) {
+                j += 1;
             }
-            *hit = match strips.get(j) {
-                Some(s) if s.a_min_m <= a_reach_m => {
-                    self.world
-                        .walk_from(self.origin, *dir, s.a_min_m / along, t_max_m)
+            // Walk exactly through each strip that stops the ray, and skip again past those
+            // it then climbs over: a ray stopped by a rock beside its path walks on only to
+            // the strip's end.
+            let (mut k, mut t_from) = (j, 0.0f64);
+            *hit = 'ray: loop {
+                if !in_reach(k) {
+                    // Over every strip in reach, or off the grid: nothing to hit.
+                    break None;
                 }
-                // Over every strip in reach, or off the grid: nothing to hit.
-                _ => None,
+                let t_start = t_from.max(first_touch(k, slope) / along);
+                let mut t_stop = (strips[k].a_max_m / along).min(t_max_m);
+                let mut walk = match world.near_walk(origin, *dir, t_start, t_stop) {
+                    Ok(w) => w,
+                    Err(Near::ContinueFrom(t)) => break world.cast(origin, *dir, t, t_max_m),
+                    Err(_) => break world.cast(origin, *dir, 0.0, t_max_m),
+                };
+                loop {
+                    match world.near_step(&mut walk) {
+                        None => {}
+                        Some(Near::Settled(Some(t))) => break 'ray Some(t),
+                        Some(Near::Settled(None)) => {
+                            if t_stop >= t_max_m {
+                                break 'ray None;
+                            }
+                            k += 1;
+                            if in_reach(k) && !passes(k, slope) {
+                                // The next strip stops it too: walk on.
+                                t_stop = (strips[k].a_max_m / along).min(t_max_m);
+                                walk.extend_to(t_stop);
+                                continue;
+                            }
+                            while in_reach(k) && passes(k, slope) {
+                                k += 1;
+                            }
+                            t_from = t_stop;
+                            continue 'ray;
+                        }
+                        Some(Near::ContinueFrom(t)) => {
+                            break 'ray world.cast(origin, *dir, t, t_max_m);
+                        }
+                        Some(Near::HitBehindStart) => {
+                            break 'ray world.cast(origin, *dir, 0.0, t_max_m);
+                        }
+                    }
+                }
             };
         }
         true

@@ -37,8 +37,8 @@ pub(super) enum ClearStep {
     Clear,
 }
 
-/// Level-0 cells walked for a short stretch from a proved start (see
-/// [`HeightPyramid::walk_from`]), one cell per [`HeightPyramid::near_step`].
+/// Level-0 cells walked for a short stretch from a proved start (see `fan.rs`), one cell per
+/// [`HeightPyramid::near_step`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct NearWalk {
     origin_z: f64,
@@ -54,6 +54,13 @@ pub(super) struct NearWalk {
     t: f64,
     t_max: f64,
     cells_left: usize,
+}
+
+impl NearWalk {
+    /// Lets a walk that settled on its `t_max` with no hit go on, to `t_max` further out.
+    pub(super) fn extend_to(&mut self, t_max: f64) {
+        self.t_max = t_max;
+    }
 }
 
 /// Cells a near walk takes before handing over to a full cast.
@@ -223,19 +230,25 @@ impl HeightPyramid {
         }
         None
     }
+}
 
-    /// The first hit of a ray from `origin`, walked exactly cell by cell from `t_start`, before
-    /// which it is known to hit nothing.
-    pub(super) fn walk_from(
-        &self,
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The first hit of a ray walked exactly from `t_start`, before which it hits nothing,
+    /// as the fan caster walks it.
+    fn walk_from(
+        p: &HeightPyramid,
         origin: [f64; 3],
         dir: [f64; 3],
         t_start: f64,
         t_max_m: f64,
     ) -> Option<f64> {
-        let settled = match self.near_walk(origin, dir, t_start, t_max_m) {
+        let settled = match p.near_walk(origin, dir, t_start, t_max_m) {
             Ok(mut w) => loop {
-                if let Some(n) = self.near_step(&mut w) {
+                if let Some(n) = p.near_step(&mut w) {
                     break n;
                 }
             },
@@ -243,16 +256,10 @@ impl HeightPyramid {
         };
         match settled {
             Near::Settled(hit) => hit,
-            Near::ContinueFrom(t) => self.cast(origin, dir, t, t_max_m),
-            Near::HitBehindStart => self.cast(origin, dir, 0.0, t_max_m),
+            Near::ContinueFrom(t) => p.cast(origin, dir, t, t_max_m),
+            Near::HitBehindStart => p.cast(origin, dir, 0.0, t_max_m),
         }
     }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use proptest::prelude::*;
 
     proptest! {
         /// Walked from any start before its first hit (or anywhere in range, for a ray that
@@ -273,7 +280,7 @@ mod tests {
             let d = [pitch.cos() * yaw.cos(), pitch.cos() * yaw.sin(), pitch.sin()];
             let cast = p.cast(o, d, 0.0, 6.0);
             let start = cast.unwrap_or(6.0) * start_share;
-            let walked = p.walk_from(o, d, start, 6.0);
+            let walked = walk_from(&p, o, d, start, 6.0);
             match (walked, cast) {
                 (Some(a), Some(b)) => prop_assert!((a - b).abs() < 1e-9, "{} against {}", a, b),
                 (a, b) => prop_assert_eq!(a, b),
