@@ -322,7 +322,7 @@ impl HeightPyramid {
     /// An incremental hierarchical DDA (Amanatides & Woo 1987 at each level): the current cell
     /// and the times of its next x and y boundaries are carried from step to step with
     /// additions, so only a descent recomputes a cell from a position.
-    fn cast_from_level(
+    pub(super) fn cast_from_level(
         &self,
         origin: [f64; 3],
         dir: [f64; 3],
