@@ -9,11 +9,12 @@
 //! whose width is `|kappa|` times the spread of the terrain's heights nearby. Walking that band
 //! once from the camera outwards, strip by strip (a row of 4 x 4-cell blocks), and keeping each
 //! strip's highest cell gives a profile no ray of the fan can hit before: a ray passes a strip
-//! while it stays above the strip's highest cell. The rays climb in order, so one pointer walks the profile for
-//! all of them. Each ray then walks exactly, cell by cell, from where it could first touch the
-//! strip it cannot pass (a falling ray not before it is down to the strip's top), through the
-//! strips that stop it, and skips again over those it climbs over. The answers are those of
-//! [`HeightPyramid::cast`]: the profile only says where to walk.
+//! while it stays above the strip's highest cell. The rays climb in order, so one pointer walks
+//! the profile for all of them. Each ray then walks exactly, cell by cell, from where it could
+//! first touch the strip it cannot pass (a falling ray not before it is down to the strip's
+//! top), through the strips that stop it, and skips again over those it climbs over. The
+//! answers are those of [`HeightPyramid::cast`]: the profile only says where to walk. That
+//! holds for a camera over the grid and above the ground; any other is cast ray by ray.
 //!
 //! This is the column-coherent idea of heightfield "wave surfing" renderers (e.g. Comanche's
 //! voxel space, 1992), made exact for a camera that is pitched and rolled: the band accounts
@@ -31,6 +32,16 @@ struct Strip {
     top_m: f64,
 }
 
+/// A ray of a fan: how far it travels along the fan's horizontal axis per unit of its
+/// parameter, and how much it climbs per metre of that (with their inverses, to multiply by).
+#[derive(Clone, Copy, Debug)]
+struct Ray {
+    along: f64,
+    inv_along: f64,
+    slope: f64,
+    inv_slope: f64,
+}
+
 /// Casts fans of rays from one origin (see the module documentation), reusing its scratch
 /// space from fan to fan.
 #[derive(Debug)]
@@ -42,8 +53,8 @@ pub struct FanCaster<'a> {
     /// bounds to know them (the plain baseline does not: it casts ray by ray).
     heights_m: Option<(f64, f64)>,
     strips: Vec<Strip>,
-    /// Each ray's travel along the fan's horizontal axis and climb per metre of it.
-    rays: Vec<(f64, f64)>,
+    /// The fan's rays as it walks them.
+    rays: Vec<Ray>,
 }
 
 /// How far past the camera's own plane a ray of a fan may lean, per metre of travel, before
@@ -61,11 +72,19 @@ const STRIP_LEVEL: usize = 2;
 impl HeightPyramid {
     /// A caster for fans of rays from `origin` that travel at most `reach_m` horizontally.
     pub fn fan_caster(&self, origin: [f64; 3], reach_m: f64) -> FanCaster<'_> {
+        // The band holds every first touch only for a camera over the grid and above the
+        // cell under it: then a ray is above the terrain up to its first touch, which is
+        // thus at a height the terrain within reach has.
+        let above_ground = self
+            .column_height(origin[0], origin[1])
+            .is_some_and(|h| h < origin[2]);
         FanCaster {
             world: self,
             origin,
             reach_m,
-            heights_m: self.height_bounds(origin, reach_m),
+            heights_m: above_ground
+                .then(|| self.height_bounds(origin, reach_m))
+                .flatten(),
             strips: Vec::new(),
             rays: Vec::new(),
         }
@@ -111,16 +130,26 @@ impl FanCaster<'_> {
             let off = dot(d, &plane.n);
             let horizontal2 = d[0] * d[0] + d[1] * d[1];
             let norm2 = horizontal2 + d[2] * d[2];
-            if along <= 1e-6 * norm2.sqrt() || off * off > tol2 * norm2 || horizontal2 > reach2 {
+            if along <= 0.0
+                || along * along <= 1e-12 * norm2
+                || off * off > tol2 * norm2
+                || horizontal2 > reach2
+            {
                 return false;
             }
-            let slope = d[2] / along;
+            let inv_along = 1.0 / along;
+            let slope = d[2] * inv_along;
             if slope < slope_before {
                 return false;
             }
             slope_before = slope;
             a_end_m = a_end_m.max(t_max_m * along);
-            self.rays.push((along, slope));
+            self.rays.push(Ray {
+                along,
+                inv_along,
+                slope,
+                inv_slope: 1.0 / slope,
+            });
         }
         Band::new(self.world, &plane, self.origin, z_lo, z_hi).profile(a_end_m, &mut self.strips);
 
@@ -128,7 +157,7 @@ impl FanCaster<'_> {
         let z0 = origin[2];
         let strips = &self.strips;
         // Strip `k` stops a ray that climbs `slope` unless the ray stays above its top.
-        let passes = |k: usize, slope: f64| {
+        let passes = |k: usize, &Ray { slope, .. }: &Ray| {
             let s = &strips[k];
             let a_low = if slope >= 0.0 { s.a_min_m } else { s.a_max_m };
             z0 + slope * a_low > s.top_m
@@ -136,14 +165,14 @@ impl FanCaster<'_> {
         // Where a ray stopped at strip `k` may first touch a cell: a falling ray touches none
         // of a strip's cells before it is down to the strip's top, but strips overlap along
         // the band, so those after `k` that begin before that point count too.
-        let first_touch = |k: usize, slope: f64| {
+        let first_touch = |k: usize, ray: &Ray| {
             let mut first = f64::INFINITY;
             for s in &strips[k..] {
                 if s.a_min_m >= first {
                     break;
                 }
-                let a_down = if slope < 0.0 {
-                    (s.top_m - z0) / slope
+                let a_down = if ray.slope < 0.0 {
+                    (s.top_m - z0) * ray.inv_slope
                 } else {
                     0.0
                 };
@@ -152,12 +181,12 @@ impl FanCaster<'_> {
             first
         };
         let mut j = 0;
-        for ((hit, dir), &(along, slope)) in hits.iter_mut().zip(dirs).zip(&self.rays) {
-            let a_reach_m = t_max_m * along;
+        for ((hit, dir), ray) in hits.iter_mut().zip(dirs).zip(&self.rays) {
+            let a_reach_m = t_max_m * ray.along;
             let in_reach = |k: usize| strips.get(k).is_some_and(|s| s.a_min_m <= a_reach_m);
             // Past every strip this ray climbs over; the rays below climbed over none that
             // this one does not, so the pointer only moves on.
-            while in_reach(j) && passes(j, slope) {
+            while in_reach(j) && passes(j, ray) {
                 j += 1;
             }
             // Walk exactly through each strip that stops the ray, and skip again past those
@@ -169,8 +198,8 @@ impl FanCaster<'_> {
                     // Over every strip in reach, or off the grid: nothing to hit.
                     break None;
                 }
-                let t_start = t_from.max(first_touch(k, slope) / along);
-                let mut t_stop = (strips[k].a_max_m / along).min(t_max_m);
+                let t_start = t_from.max(first_touch(k, ray) * ray.inv_along);
+                let mut t_stop = (strips[k].a_max_m * ray.inv_along).min(t_max_m);
                 let mut walk = match world.near_walk(origin, *dir, t_start, t_stop) {
                     Ok(w) => w,
                     Err(Near::ContinueFrom(t)) => break world.cast(origin, *dir, t, t_max_m),
@@ -185,13 +214,13 @@ impl FanCaster<'_> {
                                 break 'ray None;
                             }
                             k += 1;
-                            if in_reach(k) && !passes(k, slope) {
+                            if in_reach(k) && !passes(k, ray) {
                                 // The next strip stops it too: walk on.
-                                t_stop = (strips[k].a_max_m / along).min(t_max_m);
+                                t_stop = (strips[k].a_max_m * ray.inv_along).min(t_max_m);
                                 walk.extend_to(t_stop);
                                 continue;
                             }
-                            while in_reach(k) && passes(k, slope) {
+                            while in_reach(k) && passes(k, ray) {
                                 k += 1;
                             }
                             t_from = t_stop;
@@ -211,28 +240,29 @@ impl FanCaster<'_> {
     }
 }
 
-/// The ground a fan's rays can first touch, strip of cells by strip of cells from the camera
-/// outwards: each strip is one row or column of cells (whichever the band runs along most),
-/// cut to the lateral offsets the plane's points have at the heights the terrain nearby has.
+/// The ground a fan's rays can first touch, strip by strip from the camera outwards: each
+/// strip is one row or column of the pyramid's blocks at `STRIP_LEVEL` (whichever way the band
+/// runs most), cut to the lateral offsets the plane's points have at the heights the terrain
+/// nearby has. Coordinates below are in blocks.
 struct Band<'a> {
     level: &'a super::Level,
     x_major: bool,
-    /// First strip, and the step to the next.
-    p: i64,
+    /// From strip to strip along p: +1 or -1.
     step: i64,
     p_cells: i64,
     q_cells: i64,
-    /// Camera in cell coordinates (p along the band's main axis, q across).
+    /// Camera in block coordinates (p along the band's main axis, q across).
     cp: f64,
     cq: f64,
+    hp: f64,
     inv_hp: f64,
     hq: f64,
-    /// How far along (`mu`) and across (`nu`) the band a cell of lateral offset moves a point.
+    /// How far along (`mu`) and across (`nu`) the band a block of lateral offset moves a point.
     mu: f64,
     nu: f64,
-    /// Lateral offsets (cells) of the plane's points at the nearby terrain's extreme heights.
+    /// Lateral offsets (blocks) of the plane's points at the nearby terrain's extreme heights.
     full_lateral: (f64, f64),
-    /// Cell size, metres.
+    /// Block size, metres.
     res: f64,
 }
 
@@ -269,12 +299,12 @@ impl<'a> Band<'a> {
             nu: mq - mp * hq / hp,
             full_lateral: (l_a.min(l_b) - 1e-6, l_a.max(l_b) + 1e-6),
             x_major,
-            p: cp.floor() as i64,
             step: if hp > 0.0 { 1 } else { -1 },
             p_cells,
             q_cells,
             cp,
             cq,
+            hp,
             inv_hp: 1.0 / hp,
             hq,
             res,
@@ -284,7 +314,7 @@ impl<'a> Band<'a> {
     /// The band's strips from the camera out to `a_end_m` along it, or to the grid's edge.
     fn profile(&self, a_end_m: f64, strips: &mut Vec<Strip>) {
         strips.clear();
-        // A point at lateral offset l (cells) on a strip edge `edge` lies at a = e - l mu
+        // A point at lateral offset l (blocks) on a strip edge `edge` lies at a = e - l mu
         // cells along the band and q = cq + e hq + l nu across it, where e = (edge - cp) / hp
         // is where the band's middle line crosses the edge. Both move by fixed steps from
         // strip to strip.
@@ -295,7 +325,15 @@ impl<'a> Band<'a> {
         };
         let (mu_lo, mu_hi) = span(self.mu);
         let (nu_lo, nu_hi) = span(self.nu);
-        let mut p = self.p;
+        // A steep ray in a tilted plane can turn back along p before it reaches the band's
+        // heights: the band's first strip is where its nearest point lies, a = 0 at the
+        // lateral offset that sets it furthest back (or the camera's own, if further back).
+        let back = self.cp + self.hp * mu_lo.min(0.0);
+        let mut p = if self.step > 0 {
+            (back.floor() as i64).max(0)
+        } else {
+            (back.floor() as i64).min(self.p_cells - 1)
+        };
         let e_step = self.inv_hp.abs();
         let mut e_near = (p as f64 + if self.step > 0 { 0.0 } else { 1.0 } - self.cp) * self.inv_hp;
         let q_step = e_step * self.hq;
@@ -392,56 +430,55 @@ fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-
-/// The rays of image column `u` of a 106 x 60 pinhole camera (87 x 58 degrees) at
-/// `origin`, rolled, pitched down and yawed, bottom row first.
-#[cfg(test)]
-fn tests_column(u: u32, roll: f64, pitch_down: f64, yaw: f64) -> Vec<[f64; 3]> {
-    let (fx, fy) = (
-        53.0 / 43.5f64.to_radians().tan(),
-        30.0 / 29f64.to_radians().tan(),
-    );
-    let (cr, sr, cp, sp, cy, sy) = (
-        roll.cos(),
-        roll.sin(),
-        pitch_down.cos(),
-        pitch_down.sin(),
-        yaw.cos(),
-        yaw.sin(),
-    );
-    (0..60)
-        .rev()
-        .map(|v| {
-            // Optical (x right, y down, z forward) to body (x forward, y left, z up).
-            let r = [
-                (u as f64 + 0.5 - 53.0) / fx,
-                (v as f64 + 0.5 - 30.0) / fy,
-                1.0,
-            ];
-            let b = [r[2], -r[0], -r[1]];
-            // Roll about x, then pitch down about y, then yaw about z.
-            let b = [b[0], cr * b[1] - sr * b[2], sr * b[1] + cr * b[2]];
-            let b = [cp * b[0] + sp * b[2], b[1], -sp * b[0] + cp * b[2]];
-            [cy * b[0] - sy * b[1], sy * b[0] + cy * b[1], b[2]]
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    use super::tests_column as column;
+    /// The rays of image column `u` of a 106 x 60 pinhole camera (87 x 58 degrees) at
+    /// `origin`, rolled, pitched down and yawed, bottom row first.
+    fn column(u: u32, roll: f64, pitch_down: f64, yaw: f64) -> Vec<[f64; 3]> {
+        let (fx, fy) = (
+            53.0 / 43.5f64.to_radians().tan(),
+            30.0 / 29f64.to_radians().tan(),
+        );
+        let (cr, sr, cp, sp, cy, sy) = (
+            roll.cos(),
+            roll.sin(),
+            pitch_down.cos(),
+            pitch_down.sin(),
+            yaw.cos(),
+            yaw.sin(),
+        );
+        (0..60)
+            .rev()
+            .map(|v| {
+                // Optical (x right, y down, z forward) to body (x forward, y left, z up).
+                let r = [
+                    (u as f64 + 0.5 - 53.0) / fx,
+                    (v as f64 + 0.5 - 30.0) / fy,
+                    1.0,
+                ];
+                let b = [r[2], -r[0], -r[1]];
+                // Roll about x, then pitch down about y, then yaw about z.
+                let b = [b[0], cr * b[1] - sr * b[2], sr * b[1] + cr * b[2]];
+                let b = [cp * b[0] + sp * b[2], b[1], -sp * b[0] + cp * b[2]];
+                [cy * b[0] - sy * b[1], sy * b[0] + cy * b[1], b[2]]
+            })
+            .collect()
+    }
+
     proptest! {
         /// Every ray of an image column cast as a fan hits what a plain cast of it alone hits,
-        /// on rocky, sloping ground with a pit, from anywhere on the grid (strips then run off
-        /// its edge), with the camera rolled and pitched.
+        /// on rocky, sloping ground with a pit: from anywhere on the grid (strips then run off
+        /// its edge) or off it, with the camera rolled, pitched up or steeply down, above or
+        /// below the ground. Where the fan applies (a camera over the grid, above the ground,
+        /// tilted as a rover's is), it is cast as a fan.
         #[test]
         fn a_fan_hits_what_each_of_its_rays_hits_alone(
             seed in 0u64..1000,
-            ox in 0.1..9.9f64, oy in 0.1..9.9f64, above in 0.15..0.6f64,
-            yaw in -3.2..3.2f64, roll in -0.4..0.4f64, pitch_down in -0.3..0.6f64,
+            ox in -0.5..10.5f64, oy in -0.5..10.5f64, above in -0.3..0.6f64,
+            yaw in -3.2..3.2f64, roll in -0.9..0.9f64, pitch_down in -0.3..1.2f64,
             u in 0u32..106,
         ) {
             let grid = super::super::tests::field(200, 200, |x, y| {
@@ -452,17 +489,52 @@ mod tests {
                 if v < 3 { floor + 0.4 } else { floor }
             });
             let p = HeightPyramid::new(&grid);
-            let ground = p.column_height(ox, oy).expect("on the grid");
-            let origin = [ox, oy, ground + above];
+            let ground = p.column_height(ox, oy);
+            let origin = [ox, oy, ground.unwrap_or(0.0) + above];
             let dirs = column(u, roll, pitch_down, yaw);
             let mut caster = p.fan_caster(origin, 6.0 * 1.5);
             let mut hits = vec![None; dirs.len()];
-            prop_assert!(caster.cast_as_fan(&dirs, 6.0, &mut hits), "cast ray by ray instead");
+            if ground.is_some() && above > 0.0 && roll.abs() <= 0.4 && pitch_down <= 0.6 {
+                prop_assert!(caster.cast_as_fan(&dirs, 6.0, &mut hits), "cast ray by ray instead");
+            } else {
+                caster.cast(&dirs, 6.0, &mut hits);
+            }
             for (i, (hit, dir)) in hits.iter().zip(&dirs).enumerate() {
                 let alone = p.cast(origin, *dir, 0.0, 6.0);
                 match (hit, alone) {
-                    (Some(a), Some(b)) => prop_assert!((a - b).abs() < 1e-9, "row {}: {} against {}", i, a, b),
+                    (Some(a), Some(b)) => {
+                        prop_assert!((a - b).abs() < 1e-9, "row {}: {} against {}", i, a, b)
+                    }
                     (a, b) => prop_assert_eq!(*a, b, "row {}", i),
+                }
+            }
+        }
+    }
+
+    /// A camera tilted 56 degrees down: the rays at the image's edge fall steeply in a tilted
+    /// plane and their ground track turns back along the band before it reaches the ground.
+    /// A rock beside the camera, behind the band's middle line, is hit all the same (found by
+    /// review: the band once began at the camera's own strip).
+    #[test]
+    fn a_steep_rays_side_hit_on_a_rock_behind_the_band_start_is_found() {
+        // The cell the steep ray of column 2 meets first, beside and behind the band's start.
+        let (rx, ry) = ((5.645 / 0.05) as usize - 1, (4.596 / 0.05) as usize + 8);
+        let grid =
+            super::super::tests::field(200, 200, |x, y| if (x, y) == (rx, ry) { 0.5 } else { 0.0 });
+        let p = HeightPyramid::new(&grid);
+        let origin = [5.645, 4.596, 0.601];
+        for u in 0..106 {
+            let dirs = column(u, 0.036, 0.977, 0.316);
+            let mut caster = p.fan_caster(origin, 9.0);
+            let mut hits = vec![None; dirs.len()];
+            caster.cast(&dirs, 6.0, &mut hits);
+            for (hit, dir) in hits.iter().zip(&dirs) {
+                let alone = p.cast(origin, *dir, 0.0, 6.0);
+                match (hit, alone) {
+                    (Some(a), Some(b)) => {
+                        assert!((a - b).abs() < 1e-9, "column {u}: {a} against {b}")
+                    }
+                    (a, b) => assert_eq!(*a, b, "column {u}"),
                 }
             }
         }

@@ -1,6 +1,7 @@
 //! Ray casting against the heightfield, shared by the lidar, the depth camera and the camera.
 //!
-//! Cells are flat-topped columns. Two accelerations, both exact:
+//! Cells are flat-topped columns. Every answer is that of a plain cell-by-cell walk; three
+//! accelerations get there sooner:
 //! - A layered clearance field: for height layers every few centimetres, the chessboard
 //!   distance from each 2 x 2 block of cells to the nearest cell reaching that layer. A ray
 //!   above a layer can step that far at once (sphere tracing, Hart 1996, on a 2.5D field), so
@@ -8,6 +9,8 @@
 //! - A pyramid of maximum heights (a "maximum mipmap", after Tevs, Ihrke & Seidel, "Maximum
 //!   Mipmaps for Fast, Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008) for
 //!   the last stretch before a hit, where it skips any block the ray passes entirely above.
+//! - For images, fans (`fan.rs`): the rays of an image column lie in one plane, so one pass
+//!   along the band of ground they can touch tells each where to walk exactly.
 
 mod fan;
 mod walk;
@@ -322,7 +325,7 @@ impl HeightPyramid {
     /// An incremental hierarchical DDA (Amanatides & Woo 1987 at each level): the current cell
     /// and the times of its next x and y boundaries are carried from step to step with
     /// additions, so only a descent recomputes a cell from a position.
-    pub(super) fn cast_from_level(
+    fn cast_from_level(
         &self,
         origin: [f64; 3],
         dir: [f64; 3],

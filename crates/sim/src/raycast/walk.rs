@@ -5,9 +5,9 @@
 //!
 //! Each clearance step is a short chain of dependent arithmetic and one load, so the lidar's
 //! beams are walked four side by side ([`HeightPyramid::cast_side_by_side`]): the core
-//! overlaps their chains, and a scan along a drive takes about 29 us instead of 41 us
-//! (BENCHMARKS.md, twenty-fifth session). The near walks of image pixels are a few cells each;
-//! stepping those side by side was slower than one after the other.
+//! overlaps their chains, and a scan takes about a quarter less time (BENCHMARKS.md,
+//! twenty-fifth session). The near walks of image pixels are a few cells each; stepping those
+//! side by side was slower than one after the other.
 
 use super::{CLEAR_BLOCK, Clearance, HeightPyramid, Level, exit_time, step_sign};
 
@@ -58,7 +58,8 @@ pub(super) struct NearWalk {
 }
 
 impl NearWalk {
-    /// Lets a walk that settled on its `t_max` with no hit go on, to `t_max` further out.
+    /// Lets a walk that settled on its `t_max` with no hit go on, to `t_max` further out. The
+    /// cells it has left to walk are not renewed: past them it hands over to a full cast.
     pub(super) fn extend_to(&mut self, t_max: f64) {
         self.t_max = t_max;
     }
