@@ -68,8 +68,8 @@ const OFF_PLANE_TOLERANCE: f64 = 1e-9;
 const MAX_KAPPA: f64 = 4.0;
 /// Pyramid level the strips are cut from: blocks of 4 x 4 cells (20 cm at 5 cm), each holding
 /// its highest cell. Single cells make the exact walks shortest but need four times the strips,
-/// each as dear as a step of a walk; blocks of 2 or 4 cells a side cost about the same in all
-/// (BENCHMARKS.md, twenty-fifth session).
+/// each as dear as a step of a walk; blocks of 2 x 2 cells were slower too (BENCHMARKS.md,
+/// twenty-fifth session).
 const STRIP_LEVEL: usize = 2;
 
 impl HeightPyramid {
