@@ -205,37 +205,28 @@ impl FanCaster<'_> {
                 let mut t_stop = (strips[k].a_max_m * ray.inv_along).min(t_max_m);
                 let mut walk = match world.near_walk(origin, *dir, t_start, t_stop) {
                     Ok(w) => w,
-                    Err(Near::ContinueFrom(t)) => break world.cast(origin, *dir, t, t_max_m),
-                    Err(_) => break world.cast(origin, *dir, 0.0, t_max_m),
+                    Err(near) => break world.finish(origin, *dir, near, t_max_m),
                 };
                 loop {
-                    match world.near_step(&mut walk) {
-                        None => {}
-                        Some(Near::Settled(Some(t))) => break 'ray Some(t),
-                        Some(Near::Settled(None)) => {
-                            if t_stop >= t_max_m {
-                                break 'ray None;
-                            }
-                            k += 1;
-                            if in_reach(k) && !passes(k, ray) {
-                                // The next strip stops it too: walk on.
-                                t_stop = (strips[k].a_max_m * ray.inv_along).min(t_max_m);
-                                walk.extend_to(t_stop);
-                                continue;
-                            }
-                            while in_reach(k) && passes(k, ray) {
-                                k += 1;
-                            }
-                            t_from = t_stop;
-                            continue 'ray;
-                        }
-                        Some(Near::ContinueFrom(t)) => {
-                            break 'ray world.cast(origin, *dir, t, t_max_m);
-                        }
-                        Some(Near::HitBehindStart) => {
-                            break 'ray world.cast(origin, *dir, 0.0, t_max_m);
-                        }
+                    let Some(near) = world.near_step(&mut walk) else {
+                        continue;
+                    };
+                    // Anything but reaching the strip's end short of the range is the answer.
+                    if near != Near::Settled(None) || t_stop >= t_max_m {
+                        break 'ray world.finish(origin, *dir, near, t_max_m);
                     }
+                    k += 1;
+                    if in_reach(k) && !passes(k, ray) {
+                        // The next strip stops it too: walk on.
+                        t_stop = (strips[k].a_max_m * ray.inv_along).min(t_max_m);
+                        walk.extend_to(t_stop);
+                        continue;
+                    }
+                    while in_reach(k) && passes(k, ray) {
+                        k += 1;
+                    }
+                    t_from = t_stop;
+                    continue 'ray;
                 }
             };
         }
