@@ -301,9 +301,29 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     }
                 };
                 if args.verbose {
-                    let t = at_truth;
+                    // How far the true heading lies from the direction peaks the search
+                    // starts from (degrees, modulo half a turn).
+                    let (peaks, ratio) = realms_merge::rotation::candidates(
+                        &a.directions,
+                        &b.directions,
+                        params.direction_peaks,
+                        5,
+                    );
+                    let truth_deg = truth_grid.yaw_rad.to_degrees();
+                    let off_peak = peaks
+                        .iter()
+                        .map(|p| {
+                            let d = (truth_deg - p).rem_euclid(180.0);
+                            d.min(180.0 - d)
+                        })
+                        .fold(f64::INFINITY, f64::min);
                     eprintln!(
-                        "  truth: agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
+                        "  true heading {off_peak:.1} deg from the nearest direction peak (ratio {ratio:.2})"
+                    );
+                    let t = at_truth;
+                    let close = realms_merge::verify::closeness(&a, &b, &truth_grid);
+                    eprintln!(
+                        "  truth: close {close:.0} agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
                         t.agree,
                         t.conflict,
                         t.shape_agree,
@@ -315,8 +335,15 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     );
                     for (p, e) in &est.verified {
                         let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
+                        let grid_p = pair
+                            .a
+                            .frame_from_grid()
+                            .inverse()
+                            .compose(p)
+                            .compose(&pair.b.frame_from_grid());
+                        let close = realms_merge::verify::closeness(&a, &b, &grid_p);
                         eprintln!(
-                            "    verified err {em:.2} m {:.2} deg: agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
+                            "    verified err {em:.2} m {:.2} deg: close {close:.0} agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
                             er.to_degrees(),
                             e.agree,
                             e.conflict,

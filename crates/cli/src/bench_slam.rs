@@ -106,6 +106,11 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "no-ndt-refine",
+        what: "tracking matches taken from the occupancy grid as they are, not refined on the submap's hits",
+        apply: |c| c.mapper.ndt_refine = None,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

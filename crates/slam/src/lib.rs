@@ -7,6 +7,7 @@
 //! - [`eval`]: the relative pose error of Kümmerle et al. 2009 against `.relations` files.
 //! - [`occupancy`]: a log-odds occupancy grid that grows as the robot explores.
 //! - [`matcher`]: multi-resolution Gauss-Newton scan-to-map matching.
+//! - [`ndt`]: a match refined on the hits themselves, per-cell means and spreads (sub-cell).
 //! - [`odometry`]: the motion prediction a match starts from, with stalled odometry applied once.
 //! - [`frontend`]: runs a log through the matcher and the map, scan by scan.
 //! - [`bnb`]: branch-and-bound correlative search over large windows (loop closure).
@@ -27,6 +28,7 @@ pub mod frontend;
 pub mod health;
 pub mod mapper;
 pub mod matcher;
+pub mod ndt;
 pub mod numeric_lines;
 pub mod occupancy;
 pub mod odometry;

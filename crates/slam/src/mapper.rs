@@ -25,6 +25,7 @@ use crate::carmen::LaserReading;
 use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
+use crate::ndt::{NdtConfig, NdtMap};
 use crate::occupancy::CellState;
 use crate::odometry::{OdomPredictor, OdomSample};
 use crate::posegraph::{Edge, GraphSolver, PoseGraph, RobustLoss};
@@ -123,6 +124,10 @@ pub struct MapperConfig {
     /// headings: with a gyro, `max_heading_step_rad` holds the heading instead, and would
     /// redo a searched match.
     pub fast_turn: Option<FastTurn>,
+    /// Refine each tracking match on the tracking submap's hits themselves, per-cell means
+    /// and spreads, free of the occupancy grid's pull towards cell centres (see
+    /// [`crate::ndt`]); `None`: the occupancy match as it is.
+    pub ndt_refine: Option<NdtConfig>,
 }
 
 /// Over a scan whose predicted turn exceeds `turn_rad`, the headings within
@@ -284,6 +289,7 @@ impl Default for MapperConfig {
                 step_rad: 1f64.to_radians(),
                 margin: 0.1,
             }),
+            ndt_refine: None,
         }
     }
 }
@@ -298,6 +304,8 @@ struct Submap {
     precomputed: Option<PrecomputedMap>,
     /// Its grids were dropped because a newer submap covers the same ground.
     trimmed: bool,
+    /// Its keyframes' hits per cell, for refining tracking matches; while it is active.
+    hits: Option<NdtMap>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -453,6 +461,13 @@ impl Mapper {
         let s = &mut self.submaps[submap];
         s.map.insert(local.position(), &world);
         s.keyframes += 1;
+        if let Some(hits) = &mut s.hits {
+            hits.insert(
+                self.keyframe_points[node]
+                    .iter()
+                    .map(|p| local.transform_point(*p)),
+            );
+        }
     }
 
     /// Adds a scan from a CARMEN log.
@@ -559,6 +574,17 @@ impl Mapper {
                         };
                         m = match_scan(map, &dense, prior, &held);
                         self.heading_holds += 1;
+                    }
+                    if let Some(hits) = &self.submaps[i].hits {
+                        let matcher = &self.cfg.frontend.matcher;
+                        if let Some(refined) = hits.refine(
+                            &points,
+                            m.pose,
+                            matcher.prior_translation_weight,
+                            matcher.prior_rotation_weight,
+                        ) {
+                            m.pose = refined;
+                        }
                     }
                     score = Some(m.score);
                     self.last_information = m.information;
@@ -800,6 +826,7 @@ impl Mapper {
                 finished: false,
                 precomputed: None,
                 trimmed: false,
+                hits: self.cfg.ndt_refine.map(NdtMap::new),
             });
         }
         let active: Vec<usize> = (0..self.submaps.len())
@@ -811,6 +838,7 @@ impl Mapper {
             into.push((s, self.graph.nodes[self.submaps[s].origin_node]));
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
+                self.submaps[s].hits = None;
                 self.trim_submaps(s);
             }
         }
@@ -1297,6 +1325,7 @@ mod tests {
                 finished: true,
                 precomputed: None,
                 trimmed: false,
+                hits: None,
             });
         }
         mapper.trim_submaps(1);
@@ -1495,6 +1524,47 @@ mod tests {
         // With the endpoints as they are, 0.66 degrees: the second keyframe's map holds the
         // turn the first match took.
         assert!(filled < 0.1, "mean heading error {filled:.3} deg");
+    }
+
+    /// Drives east 20 m through the sparse hall with exact odometry, a path 3 m off the
+    /// south wall, past the boulders and the lander (further on, with the south wall alone in
+    /// view, nothing pins the pose along it); returns the largest position error of the
+    /// tracked pose, metres.
+    fn worst_error_driving_with_exact_odometry(refine: Option<NdtConfig>) -> f64 {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        cfg.ndt_refine = refine;
+        let mut mapper = Mapper::new(cfg);
+        let mut worst: f64 = 0.0;
+        for k in 0..=500 {
+            let truth = Pose2::new(
+                -6.0 + 0.04 * k as f64,
+                -7.0 + 0.1 * (0.01 * k as f64).sin(),
+                0.0,
+            );
+            let tracked = mapper.add_points(0.1 * k as f64, truth, sparse_hall_scan(truth));
+            worst = worst.max(tracked.pose.position().distance_m(truth.position()));
+        }
+        worst
+    }
+
+    #[test]
+    fn matches_refined_on_the_hits_do_not_drift_with_exact_odometry() {
+        let refined = worst_error_driving_with_exact_odometry(Some(NdtConfig::default()));
+        let grid = worst_error_driving_with_exact_odometry(None);
+        // The occupancy grid pulls every match towards cell centres and maps each newly seen
+        // wall with that offset; the hits themselves carry no such pull.
+        // 0.011 m against 0.086 m when written.
+        assert!(
+            refined < 0.02,
+            "refined: {refined:.4} m (grid alone {grid:.4} m)"
+        );
+        assert!(
+            grid > 3.0 * refined,
+            "grid alone {grid:.4} m, refined {refined:.4} m"
+        );
     }
 
     /// Drives east through the sparse hall on wheels that over-report the travel by 13.6 %

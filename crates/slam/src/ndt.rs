@@ -1,0 +1,486 @@
+//! Sub-cell refinement of a scan match on the points themselves: the Normal Distributions
+//! Transform of Biber and Straßer ("The normal distributions transform: a new approach to
+//! laser scan matching", IROS 2003), with line-like cells matched point to line.
+//!
+//! The occupancy matcher ([`crate::matcher`]) climbs a bilinear grid whose peaks sit at cell
+//! centres. A straight wall's hits all share one offset within their cells, so a match is
+//! pulled by up to half a cell (2.5 cm on the 5 cm grid), and each time new walls come into
+//! view they are mapped with that offset: in a noise-free simulated hall with exact odometry
+//! the rovers' maps drifted 0.10 m in ten minutes (BENCHMARKS.md). Here each coarse cell keeps
+//! the mean and spread of the hits that fell in it, which lose nothing to the grid. A cell
+//! whose hits lie along a line pulls a point only across that line (its normal from the
+//! spread), so the match slides freely along a wall where the grid decides; other cells pull
+//! by their full spread. The start is the occupancy match, so the association is local.
+
+use realms_core::{Point2, Pose2};
+
+/// Refinement tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NdtConfig {
+    /// Side of the cells whose hits are summarised, metres.
+    pub cell_m: f64,
+    /// A cell needs this many hits to pull.
+    pub min_hits: u32,
+    /// Variance added to every spread: the lidar's noise floor, square metres.
+    pub noise_var_m2: f64,
+    /// A cell whose smaller spread is below this share of its larger one is a line.
+    pub line_ratio: f64,
+    /// Points farther than this from every cell mean near them are left out, metres.
+    pub max_distance_m: f64,
+    /// Rounds of association, each followed by Gauss-Newton steps.
+    pub rounds: usize,
+    /// Gauss-Newton steps per round.
+    pub steps: usize,
+    /// A refinement moving the start more than this is not taken, metres ...
+    pub max_shift_m: f64,
+    /// ... or turning it more than this, radians.
+    pub max_turn_rad: f64,
+}
+
+impl Default for NdtConfig {
+    fn default() -> Self {
+        NdtConfig {
+            cell_m: 0.25,
+            min_hits: 4,
+            noise_var_m2: 1e-4,
+            line_ratio: 0.1,
+            max_distance_m: 0.25,
+            rounds: 2,
+            steps: 2,
+            // The grid's pull is at most half a 5 cm cell, plus noise: a refinement going
+            // further has paired points with the wrong surfaces (on the rovers' replays,
+            // 0.1 m and 1 degree let a rover's map tear by a metre; BENCHMARKS.md).
+            max_shift_m: 0.04,
+            max_turn_rad: 0.5f64.to_radians(),
+        }
+    }
+}
+
+/// Running sums of the hits in one cell, about the cell's corner (small numbers keep the
+/// spread's cancellation harmless).
+#[derive(Clone, Copy, Debug, Default)]
+struct Sums {
+    n: u32,
+    x: f64,
+    y: f64,
+    xx: f64,
+    xy: f64,
+    yy: f64,
+}
+
+/// What one cell pulls with: its mean and the information matrix of a point's offset.
+#[derive(Clone, Copy, Debug)]
+struct Pull {
+    mean: Point2,
+    /// Symmetric 2 x 2: [xx, xy, yy].
+    information: [f64; 3],
+}
+
+impl Pull {
+    fn mahalanobis2(&self, q: Point2) -> f64 {
+        let (dx, dy) = (q.x_m - self.mean.x_m, q.y_m - self.mean.y_m);
+        let [a, b, c] = self.information;
+        a * dx * dx + 2.0 * b * dx * dy + c * dy * dy
+    }
+}
+
+/// Cells in a rectangle that grows to take whatever is added.
+#[derive(Clone, Debug, Default)]
+struct Cells {
+    x0: i64,
+    y0: i64,
+    width: usize,
+    height: usize,
+    sums: Vec<Sums>,
+}
+
+impl Cells {
+    /// Room beyond what is asked for when the rectangle grows, cells.
+    const MARGIN: i64 = 16;
+
+    fn index(&self, (x, y): (i64, i64)) -> Option<usize> {
+        let (dx, dy) = (x - self.x0, y - self.y0);
+        (dx >= 0 && dy >= 0 && (dx as usize) < self.width && (dy as usize) < self.height)
+            .then(|| dy as usize * self.width + dx as usize)
+    }
+
+    fn get(&self, key: (i64, i64)) -> Option<&Sums> {
+        self.index(key).map(|i| &self.sums[i])
+    }
+
+    /// Grows the rectangle to hold the cells from `lo` to `hi` (inclusive).
+    fn cover(&mut self, lo: (i64, i64), hi: (i64, i64)) {
+        if self.index(lo).is_some() && self.index(hi).is_some() {
+            return;
+        }
+        let (old_x1, old_y1) = (self.x0 + self.width as i64, self.y0 + self.height as i64);
+        let (x0, y0, x1, y1) = if self.sums.is_empty() {
+            (lo.0, lo.1, hi.0 + 1, hi.1 + 1)
+        } else {
+            (
+                self.x0.min(lo.0),
+                self.y0.min(lo.1),
+                old_x1.max(hi.0 + 1),
+                old_y1.max(hi.1 + 1),
+            )
+        };
+        let (x0, y0) = (x0 - Self::MARGIN, y0 - Self::MARGIN);
+        let (width, height) = (
+            (x1 + Self::MARGIN - x0) as usize,
+            (y1 + Self::MARGIN - y0) as usize,
+        );
+        let mut sums = vec![Sums::default(); width * height];
+        for row in 0..self.height {
+            let from = row * self.width;
+            let to = (row as i64 + self.y0 - y0) as usize * width + (self.x0 - x0) as usize;
+            sums[to..to + self.width].copy_from_slice(&self.sums[from..from + self.width]);
+        }
+        *self = Cells {
+            x0,
+            y0,
+            width,
+            height,
+            sums,
+        };
+    }
+}
+
+/// The hits of a submap summarised per coarse cell.
+#[derive(Clone, Debug)]
+pub struct NdtMap {
+    cfg: NdtConfig,
+    cells: Cells,
+}
+
+impl NdtMap {
+    /// An empty map.
+    pub fn new(cfg: NdtConfig) -> Self {
+        NdtMap {
+            cfg,
+            cells: Cells::default(),
+        }
+    }
+
+    fn key(&self, p: Point2) -> (i64, i64) {
+        (
+            (p.x_m / self.cfg.cell_m).floor() as i64,
+            (p.y_m / self.cfg.cell_m).floor() as i64,
+        )
+    }
+
+    /// Adds hits (in the map's frame).
+    pub fn insert(&mut self, hits: impl IntoIterator<Item = Point2>) {
+        let c = self.cfg.cell_m;
+        let keyed: Vec<(Point2, (i64, i64))> = hits.into_iter().map(|p| (p, self.key(p))).collect();
+        let Some(first) = keyed.first().map(|k| k.1) else {
+            return;
+        };
+        let (lo, hi) = keyed.iter().fold((first, first), |(lo, hi), (_, k)| {
+            (
+                (lo.0.min(k.0), lo.1.min(k.1)),
+                (hi.0.max(k.0), hi.1.max(k.1)),
+            )
+        });
+        self.cells.cover(lo, hi);
+        for (p, key) in keyed {
+            let (x, y) = (p.x_m - key.0 as f64 * c, p.y_m - key.1 as f64 * c);
+            let Some(i) = self.cells.index(key) else {
+                continue;
+            };
+            let s = &mut self.cells.sums[i];
+            s.n += 1;
+            s.x += x;
+            s.y += y;
+            s.xx += x * x;
+            s.xy += x * y;
+            s.yy += y * y;
+        }
+    }
+
+    /// Number of cells holding hits.
+    pub fn cells(&self) -> usize {
+        self.cells.sums.iter().filter(|s| s.n > 0).count()
+    }
+
+    fn pull(&self, key: (i64, i64)) -> Option<Pull> {
+        let s = self.cells.get(key)?;
+        if s.n < self.cfg.min_hits {
+            return None;
+        }
+        let n = s.n as f64;
+        let (mx, my) = (s.x / n, s.y / n);
+        let (vxx, vxy, vyy) = (s.xx / n - mx * mx, s.xy / n - mx * my, s.yy / n - my * my);
+        // Eigenvalues of the spread, smaller first, and the smaller one's axis.
+        let half_trace = 0.5 * (vxx + vyy);
+        let root = (0.25 * (vxx - vyy).powi(2) + vxy * vxy).sqrt();
+        let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
+        let noise = self.cfg.noise_var_m2;
+        let information = if small < self.cfg.line_ratio * large {
+            // Across the line only: the normal is the smaller eigenvalue's axis.
+            let (nx, ny) = if vxy.abs() > 1e-15 {
+                let (ex, ey) = (vxy, small - vxx);
+                let norm = ex.hypot(ey);
+                (ex / norm, ey / norm)
+            } else if vxx <= vyy {
+                (1.0, 0.0)
+            } else {
+                (0.0, 1.0)
+            };
+            let w = 1.0 / (small + noise);
+            [w * nx * nx, w * nx * ny, w * ny * ny]
+        } else {
+            let (a, b, c) = (vxx + noise, vxy, vyy + noise);
+            let det = a * c - b * b;
+            [c / det, -b / det, a / det]
+        };
+        let corner = (
+            key.0 as f64 * self.cfg.cell_m,
+            key.1 as f64 * self.cfg.cell_m,
+        );
+        Some(Pull {
+            mean: Point2::new(corner.0 + mx, corner.1 + my),
+            information,
+        })
+    }
+
+    /// The cell near `q` that explains it best: the smallest Mahalanobis distance, plus the
+    /// squared distance to the mean in cells (a line pulls only across itself, so a line cell
+    /// further along the wall must not win on that alone).
+    fn associate(&self, q: Point2) -> Option<Pull> {
+        let (kx, ky) = self.key(q);
+        let max2 = self.cfg.max_distance_m.powi(2);
+        let cell2 = self.cfg.cell_m.powi(2);
+        let mut best: Option<(f64, Pull)> = None;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let Some(pull) = self.pull((kx + dx, ky + dy)) else {
+                    continue;
+                };
+                let d2 = q.distance_m(pull.mean).powi(2);
+                if d2 > max2 {
+                    continue;
+                }
+                let cost = pull.mahalanobis2(q) + d2 / cell2;
+                if best.is_none_or(|(c, _)| cost < c) {
+                    best = Some((cost, pull));
+                }
+            }
+        }
+        best.map(|(_, p)| p)
+    }
+
+    /// `start` (pose of the scan in the map's frame) refined so that `points` (scan frame)
+    /// lie on the cells' hits; pulled towards `start` by `prior_translation` and
+    /// `prior_rotation` per point (per square metre and square radian), which decides the
+    /// directions the scene leaves free. `None` when too few points found a cell, or the
+    /// refinement went further than a refinement should.
+    pub fn refine(
+        &self,
+        points: &[Point2],
+        start: Pose2,
+        prior_translation: f64,
+        prior_rotation: f64,
+    ) -> Option<Pose2> {
+        const MIN_PAIRED: usize = 20;
+        let mut pose = start;
+        let mut pairs: Vec<(Point2, Pull)> = Vec::with_capacity(points.len());
+        for _ in 0..self.cfg.rounds {
+            pairs.clear();
+            pairs.extend(
+                points
+                    .iter()
+                    .filter_map(|p| self.associate(pose.transform_point(*p)).map(|c| (*p, c))),
+            );
+            if pairs.len() < MIN_PAIRED {
+                return None;
+            }
+            for _ in 0..self.cfg.steps {
+                let step = self.gauss_newton_step(
+                    &pairs,
+                    &pose,
+                    &start,
+                    [prior_translation, prior_rotation],
+                )?;
+                pose = Pose2::new(
+                    pose.x_m + step[0],
+                    pose.y_m + step[1],
+                    pose.yaw_rad + step[2],
+                );
+                if step[0].abs() < 1e-5 && step[1].abs() < 1e-5 && step[2].abs() < 1e-6 {
+                    break;
+                }
+            }
+        }
+        let moved = start.relative_to(&pose);
+        (pose.position().distance_m(start.position()) <= self.cfg.max_shift_m
+            && moved.yaw_rad.abs() <= self.cfg.max_turn_rad)
+            .then_some(pose)
+    }
+
+    /// One Gauss-Newton step for the paired points, with a Cauchy weight on each pair's
+    /// Mahalanobis distance (a point on a rock the cell never saw is not a wall's) and the
+    /// prior towards `start`.
+    fn gauss_newton_step(
+        &self,
+        pairs: &[(Point2, Pull)],
+        pose: &Pose2,
+        start: &Pose2,
+        [prior_translation, prior_rotation]: [f64; 2],
+    ) -> Option<[f64; 3]> {
+        // Cauchy's scale, in squared Mahalanobis units: three noise deviations.
+        const CAUCHY2: f64 = 9.0;
+        let (s, c) = pose.yaw_rad.sin_cos();
+        let mut h = [[0.0; 3]; 3];
+        let mut g = [0.0; 3];
+        for (p, pull) in pairs {
+            let q = pose.transform_point(*p);
+            let e = [q.x_m - pull.mean.x_m, q.y_m - pull.mean.y_m];
+            let [a, b, d] = pull.information;
+            let w = 1.0 / (1.0 + pull.mahalanobis2(q) / CAUCHY2);
+            // d q / d theta.
+            let (tx, ty) = (-s * p.x_m - c * p.y_m, c * p.x_m - s * p.y_m);
+            // Columns of J (2 x 3): x, y, theta; Omega J column by column.
+            let j = [[1.0, 0.0], [0.0, 1.0], [tx, ty]];
+            let oj: [[f64; 2]; 3] = j.map(|col| [a * col[0] + b * col[1], b * col[0] + d * col[1]]);
+            for r in 0..3 {
+                g[r] += w * (oj[r][0] * e[0] + oj[r][1] * e[1]);
+                for k in 0..3 {
+                    h[r][k] += w * (oj[r][0] * j[k][0] + oj[r][1] * j[k][1]);
+                }
+            }
+        }
+        let n = pairs.len() as f64;
+        let d = [
+            pose.x_m - start.x_m,
+            pose.y_m - start.y_m,
+            realms_core::geometry::normalize_angle_rad(pose.yaw_rad - start.yaw_rad),
+        ];
+        for (k, w) in [prior_translation, prior_translation, prior_rotation]
+            .into_iter()
+            .enumerate()
+        {
+            h[k][k] += w * n;
+            g[k] += w * n * d[k];
+        }
+        let step = crate::matcher::solve3(&h, &g)?;
+        Some([-step[0], -step[1], -step[2]])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hits along the walls of a room 8 m x 5 m with a round pillar, every `spacing_m`,
+    /// placed off the cell lattice on purpose.
+    fn room(spacing_m: f64) -> Vec<Point2> {
+        let (x0, y0, x1, y1) = (0.013, 0.037, 8.013, 5.037);
+        let mut hits = Vec::new();
+        let mut t = 0.0;
+        while t <= 1.0 {
+            for (ax, ay, bx, by) in [
+                (x0, y0, x1, y0),
+                (x1, y0, x1, y1),
+                (x1, y1, x0, y1),
+                (x0, y1, x0, y0),
+            ] {
+                hits.push(Point2::new(ax + t * (bx - ax), ay + t * (by - ay)));
+            }
+            t += spacing_m / 8.0;
+        }
+        for k in 0..60 {
+            let a = k as f64 * std::f64::consts::TAU / 60.0;
+            hits.push(Point2::new(5.21 + 0.4 * a.cos(), 2.63 + 0.4 * a.sin()));
+        }
+        hits
+    }
+
+    #[test]
+    fn a_match_a_few_centimetres_off_is_brought_onto_the_hits() {
+        let mut map = NdtMap::new(NdtConfig::default());
+        map.insert(room(0.01));
+        let truth = Pose2::new(3.1, 2.2, 0.3);
+        // The scan: the same walls seen from `truth`, sampled elsewhere along them.
+        let scan: Vec<Point2> = room(0.07)
+            .into_iter()
+            .map(|p| truth.inverse().transform_point(p))
+            .collect();
+        for (dx, dy, dyaw) in [
+            (0.025, 0.0, 0.0),
+            (-0.02, 0.024, 0.004),
+            (0.0, -0.03, -0.008),
+        ] {
+            let start = Pose2::new(truth.x_m + dx, truth.y_m + dy, truth.yaw_rad + dyaw);
+            let refined = map.refine(&scan, start, 3.0, 3.0).expect("refined");
+            let err = refined.relative_to(&truth);
+            assert!(
+                err.x_m.hypot(err.y_m) < 0.002 && err.yaw_rad.abs() < 2e-4,
+                "from {start:?}: {refined:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn along_a_lone_wall_the_start_is_kept() {
+        let mut map = NdtMap::new(NdtConfig::default());
+        let wall: Vec<Point2> = (0..800)
+            .map(|i| Point2::new(i as f64 * 0.01, 1.013))
+            .collect();
+        map.insert(wall.iter().copied());
+        let truth = Pose2::new(4.0, 0.0, 0.0);
+        let scan: Vec<Point2> = (0..100)
+            .map(|i| {
+                truth
+                    .inverse()
+                    .transform_point(Point2::new(2.0 + i as f64 * 0.04, 1.013))
+            })
+            .collect();
+        // 3 cm along the wall and 2 cm across it: across is corrected, along is left.
+        let start = Pose2::new(4.03, 0.02, 0.0);
+        let refined = map.refine(&scan, start, 3.0, 3.0).expect("refined");
+        assert!((refined.y_m - 0.0).abs() < 0.001, "{refined:?}");
+        assert!((refined.x_m - 4.03).abs() < 0.001, "{refined:?}");
+    }
+
+    #[test]
+    fn hits_added_a_few_at_a_time_anywhere_sum_as_if_added_at_once() {
+        let hits: Vec<Point2> = room(0.01)
+            .into_iter()
+            .map(|p| Point2::new(p.x_m * 3.0 - 11.0, p.y_m * 2.0 - 7.0))
+            .collect();
+        let mut at_once = NdtMap::new(NdtConfig::default());
+        at_once.insert(hits.iter().copied());
+        let mut in_parts = NdtMap::new(NdtConfig::default());
+        // Far apart first, so the rectangle grows in every direction.
+        for part in [3, 0, 2, 1] {
+            in_parts.insert(hits.iter().skip(part).step_by(4).copied());
+        }
+        assert_eq!(at_once.cells(), in_parts.cells());
+        for p in hits.iter().step_by(37) {
+            let key = at_once.key(*p);
+            let (a, b) = match (at_once.pull(key), in_parts.pull(key)) {
+                (Some(a), Some(b)) => (a, b),
+                (None, None) => continue,
+                _ => panic!("{key:?} pulls in one map only"),
+            };
+            assert!(a.mean.distance_m(b.mean) < 1e-12, "{key:?}");
+            for k in 0..3 {
+                let scale = a.information[k].abs().max(1.0);
+                assert!((a.information[k] - b.information[k]).abs() < 1e-6 * scale);
+            }
+        }
+    }
+
+    #[test]
+    fn too_few_points_near_the_hits_give_no_refinement() {
+        let mut map = NdtMap::new(NdtConfig::default());
+        map.insert(room(0.01));
+        let far: Vec<Point2> = (0..50)
+            .map(|i| Point2::new(20.0 + i as f64, 20.0))
+            .collect();
+        assert!(
+            map.refine(&far, Pose2::new(0.0, 0.0, 0.0), 3.0, 3.0)
+                .is_none()
+        );
+    }
+}
