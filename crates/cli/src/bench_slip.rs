@@ -72,7 +72,8 @@ fn detector_floor_m() -> f64 {
 struct Run {
     seed: u64,
     bursts: Vec<Burst>,
-    false_alarms: Vec<FalseAlarm>,
+    /// With the rover's name.
+    false_alarms: Vec<(String, FalseAlarm)>,
     rover_hours: f64,
     wall_s: f64,
 }
@@ -165,6 +166,7 @@ fn odometry_travel(record: &RoverSlamRecord, from_s: f64, to_s: f64) -> f64 {
 /// moved off the true motion.
 #[derive(Clone, Copy, Debug)]
 struct FalseAlarm {
+    t_s: f64,
     odometry_off_m: f64,
     estimate_off_m: f64,
 }
@@ -173,6 +175,7 @@ fn false_alarm(record: &RoverSlamRecord, t_s: f64) -> FalseAlarm {
     let at = |ts: f64| record.checks.iter().rev().find(|c| c.t.as_secs_f64() <= ts);
     let (Some(a), Some(b)) = (at(t_s - 2.0), at(t_s)) else {
         return FalseAlarm {
+            t_s,
             odometry_off_m: f64::NAN,
             estimate_off_m: f64::NAN,
         };
@@ -184,6 +187,7 @@ fn false_alarm(record: &RoverSlamRecord, t_s: f64) -> FalseAlarm {
             .distance_m(truth.position())
     };
     FalseAlarm {
+        t_s,
         odometry_off_m: off(a.odometry, b.odometry),
         estimate_off_m: off(a.estimate, b.estimate),
     }
@@ -303,7 +307,8 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             let mine: Vec<&Fault> = s.faults.iter().filter(|f| f.rover == name).collect();
             let (bursts, false_alarms) = grade(record, &mine, end_s);
             run.bursts.extend(bursts);
-            run.false_alarms.extend(false_alarms);
+            run.false_alarms
+                .extend(false_alarms.into_iter().map(|f| (name.clone(), f)));
             run.rover_hours += end_s / 3600.0;
         }
         run.wall_s = t0.elapsed().as_secs_f64();
@@ -343,7 +348,18 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
     let hours: f64 = runs.iter().map(|r| r.rover_hours).sum();
     let false_alarms: Vec<FalseAlarm> = runs
         .iter()
-        .flat_map(|r| r.false_alarms.iter().copied())
+        .flat_map(|r| r.false_alarms.iter().map(|(_, f)| *f))
+        .collect();
+    let alarm_places: Vec<String> = runs
+        .iter()
+        .flat_map(|r| {
+            r.false_alarms.iter().map(move |(rover, f)| {
+                format!(
+                    "seed {} {rover} at {:.0} s (pose {:.2} m off the true motion)",
+                    r.seed, f.t_s, f.estimate_off_m
+                )
+            })
+        })
         .collect();
     let growth: Vec<f64> = all.iter().map(|b| b.growth_m()).collect();
     let within = |v: f64| all.iter().filter(|b| b.error_after_m <= v).count();
@@ -407,6 +423,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             "False alarms: over the 2 s before them, wheel odometry was off the true motion by at least {floor_m} m in {wheels} of {} (natural slip), the published pose in {estimate} (scan matching wrong).",
             false_alarms.len()
         );
+        println!("They came at: {}.", alarm_places.join("; "));
     }
     if !grew.is_empty() {
         println!();

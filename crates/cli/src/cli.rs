@@ -103,11 +103,11 @@ pub struct SlamArgs {
     /// time from the ODOM lines).
     #[arg(long)]
     pub odometry_as_logged: bool,
-    /// Refine each tracking match on the tracking submap's hits themselves (per-cell means
-    /// and spreads), as the rovers do, free of the occupancy grid's pull towards cell
-    /// centres.
+    /// Take each tracking match from the occupancy grid as it is, without refining it on the
+    /// tracking submap's hits themselves (per-cell means and spreads), which the rovers do
+    /// and which frees it of the grid's pull towards cell centres.
     #[arg(long, conflicts_with = "no_loop_closure")]
-    pub refine_on_hits: bool,
+    pub no_refine_on_hits: bool,
 }
 
 /// `realms slam-eval`.

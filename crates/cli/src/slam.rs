@@ -51,9 +51,7 @@ pub fn run(args: SlamArgs) -> Result<()> {
         loop_min_score: args.loop_min_score,
         graph_solver: args.graph_solver.into(),
         track_in_submap_frame: !args.no_track_in_submap,
-        ndt_refine: args
-            .refine_on_hits
-            .then(realms_slam::ndt::NdtConfig::default),
+        ndt_refine: (!args.no_refine_on_hits).then(realms_slam::ndt::NdtConfig::default),
         ..Default::default()
     };
     let mut mapper = realms_slam::mapper::Mapper::new(mcfg);

@@ -47,10 +47,13 @@ impl Default for NdtConfig {
             max_distance_m: 0.25,
             rounds: 2,
             steps: 2,
-            // The grid's pull is at most half a 5 cm cell, plus noise: a refinement going
-            // further has paired points with the wrong surfaces (on the rovers' replays,
-            // 0.1 m and 1 degree let a rover's map tear by a metre; BENCHMARKS.md).
-            max_shift_m: 0.04,
+            // The grid's pull is at most half a 5 cm cell. Refinements allowed further have
+            // paired points with surfaces that move as the rover pitches (a rock's outline
+            // at the scan's height): on the rovers' replays 0.1 m let a map tear by a metre,
+            // and in `realms bench slip` 3-4 cm held poses back until the wheels' travel was
+            // reported as slip, 1.7-2.4 false alarms an hour where 2 cm gives none
+            // (BENCHMARKS.md, "Matches refined on the hits").
+            max_shift_m: 0.02,
             max_turn_rad: 0.5f64.to_radians(),
         }
     }
