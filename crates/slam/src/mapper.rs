@@ -1552,7 +1552,13 @@ mod tests {
 
     #[test]
     fn matches_refined_on_the_hits_do_not_drift_with_exact_odometry() {
-        let refined = worst_error_driving_with_exact_odometry(Some(NdtConfig::default()));
+        // Here the grid pulls by up to its half cell, 2.5 cm; the rovers bound a refinement
+        // at 2 cm, since in the simulated hall surfaces that move with the rover's pitch lure
+        // larger ones astray, and this flat 2D hall has none.
+        let refined = worst_error_driving_with_exact_odometry(Some(NdtConfig {
+            max_shift_m: 0.04,
+            ..NdtConfig::default()
+        }));
         let grid = worst_error_driving_with_exact_odometry(None);
         // The occupancy grid pulls every match towards cell centres and maps each newly seen
         // wall with that offset; the hits themselves carry no such pull.

@@ -409,9 +409,9 @@ mod tests {
             .map(|p| truth.inverse().transform_point(p))
             .collect();
         for (dx, dy, dyaw) in [
-            (0.025, 0.0, 0.0),
-            (-0.02, 0.024, 0.004),
-            (0.0, -0.03, -0.008),
+            (0.018, 0.0, 0.0),
+            (-0.012, 0.014, 0.004),
+            (0.0, -0.019, -0.008),
         ] {
             let start = Pose2::new(truth.x_m + dx, truth.y_m + dy, truth.yaw_rad + dyaw);
             let refined = map.refine(&scan, start, 3.0, 3.0).expect("refined");
@@ -421,6 +421,31 @@ mod tests {
                 "from {start:?}: {refined:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_refinement_further_than_the_bound_is_not_taken() {
+        let mut map = NdtMap::new(NdtConfig::default());
+        map.insert(room(0.01));
+        let truth = Pose2::new(3.1, 2.2, 0.3);
+        let scan: Vec<Point2> = room(0.07)
+            .into_iter()
+            .map(|p| truth.inverse().transform_point(p))
+            .collect();
+        let start = Pose2::new(truth.x_m + 0.03, truth.y_m, truth.yaw_rad);
+        assert!(map.refine(&scan, start, 3.0, 3.0).is_none());
+        let wider = NdtMap {
+            cfg: NdtConfig {
+                max_shift_m: 0.04,
+                ..NdtConfig::default()
+            },
+            ..map
+        };
+        let refined = wider.refine(&scan, start, 3.0, 3.0).expect("within 4 cm");
+        assert!(
+            refined.position().distance_m(truth.position()) < 0.002,
+            "{refined:?}"
+        );
     }
 
     #[test]
