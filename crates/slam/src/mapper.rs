@@ -126,7 +126,9 @@ pub struct MapperConfig {
     pub fast_turn: Option<FastTurn>,
     /// Refine each tracking match on the tracking submap's hits themselves, per-cell means
     /// and spreads, free of the occupancy grid's pull towards cell centres (see
-    /// [`crate::ndt`]); `None`: the occupancy match as it is.
+    /// [`crate::ndt`]), unless the refinement moves the match back against the wheels'
+    /// travel by more than [`NdtConfig::max_hold_back_m`]; `None`: the occupancy match as
+    /// it is.
     pub ndt_refine: Option<NdtConfig>,
 }
 
@@ -577,13 +579,27 @@ impl Mapper {
                     }
                     if let Some(hits) = &self.submaps[i].hits {
                         let matcher = &self.cfg.frontend.matcher;
+                        let hold_back = self.cfg.ndt_refine.map_or(0.0, |c| c.max_hold_back_m);
                         if let Some(refined) = hits.refine(
                             &points,
                             m.pose,
                             matcher.prior_translation_weight,
                             matcher.prior_rotation_weight,
                         ) {
-                            m.pose = refined;
+                            // How far the refinement moves the match back along the travel
+                            // the wheels report since the last pose.
+                            let from = (origin.inverse() * before).position();
+                            let (tx, ty) = (prior.x_m - from.x_m, prior.y_m - from.y_m);
+                            let travel = tx.hypot(ty);
+                            let back = if travel > 1e-3 {
+                                -((refined.x_m - m.pose.x_m) * tx + (refined.y_m - m.pose.y_m) * ty)
+                                    / travel
+                            } else {
+                                0.0
+                            };
+                            if back <= hold_back {
+                                m.pose = refined;
+                            }
                         }
                     }
                     score = Some(m.score);
@@ -1552,13 +1568,7 @@ mod tests {
 
     #[test]
     fn matches_refined_on_the_hits_do_not_drift_with_exact_odometry() {
-        // Here the grid pulls by up to its half cell, 2.5 cm; the rovers bound a refinement
-        // at 2 cm, since in the simulated hall surfaces that move with the rover's pitch lure
-        // larger ones astray, and this flat 2D hall has none.
-        let refined = worst_error_driving_with_exact_odometry(Some(NdtConfig {
-            max_shift_m: 0.04,
-            ..NdtConfig::default()
-        }));
+        let refined = worst_error_driving_with_exact_odometry(Some(NdtConfig::default()));
         let grid = worst_error_driving_with_exact_odometry(None);
         // The occupancy grid pulls every match towards cell centres and maps each newly seen
         // wall with that offset; the hits themselves carry no such pull.
