@@ -586,17 +586,8 @@ impl Mapper {
                             matcher.prior_translation_weight,
                             matcher.prior_rotation_weight,
                         ) {
-                            // How far the refinement moves the match back along the travel
-                            // the wheels report since the last pose.
                             let from = (origin.inverse() * before).position();
-                            let (tx, ty) = (prior.x_m - from.x_m, prior.y_m - from.y_m);
-                            let travel = tx.hypot(ty);
-                            let back = if travel > 1e-3 {
-                                -((refined.x_m - m.pose.x_m) * tx + (refined.y_m - m.pose.y_m) * ty)
-                                    / travel
-                            } else {
-                                0.0
-                            };
+                            let back = held_back_m(from, prior.position(), m.pose, refined);
                             if back <= hold_back {
                                 m.pose = refined;
                             }
@@ -1205,6 +1196,17 @@ impl Mapper {
     }
 }
 
+/// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
+/// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
+fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
+    let (tx, ty) = (predicted.x_m - from.x_m, predicted.y_m - from.y_m);
+    let travel = tx.hypot(ty);
+    if travel <= 1e-3 {
+        return 0.0;
+    }
+    -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
 /// Puts `nodes` back in the relative poses of `drawn` (the same nodes before they moved),
 /// moved as one block so the first keeps its pose now.
 fn move_as_block(nodes: &mut [Pose2], drawn: &[Pose2]) {
@@ -1564,6 +1566,28 @@ mod tests {
             worst = worst.max(tracked.pose.position().distance_m(truth.position()));
         }
         worst
+    }
+
+    #[test]
+    fn a_refinement_is_held_back_only_by_what_it_takes_from_the_wheels_travel() {
+        // Wheels: 4 cm east. The match at 3.9 cm east.
+        let (from, predicted) = (Point2::new(1.0, 2.0), Point2::new(1.04, 2.0));
+        let matched = Pose2::new(1.039, 2.0, 0.0);
+        let at = |x: f64, y: f64| Pose2::new(x, y, 0.0);
+        // 2.5 cm back west: held back 2.5 cm; 1 cm north: not at all; 1 cm east: -1 cm.
+        assert!((held_back_m(from, predicted, matched, at(1.014, 2.0)) - 0.025).abs() < 1e-12);
+        assert!(held_back_m(from, predicted, matched, at(1.039, 2.01)).abs() < 1e-12);
+        assert!((held_back_m(from, predicted, matched, at(1.049, 2.0)) + 0.01).abs() < 1e-12);
+        // Diagonal travel: a move of (-3, -4) cm against a (3, 4)-direction is 5 cm back.
+        let diagonal = held_back_m(
+            Point2::new(0.0, 0.0),
+            Point2::new(0.03, 0.04),
+            at(0.03, 0.04),
+            at(0.0, 0.0),
+        );
+        assert!((diagonal - 0.05).abs() < 1e-12, "{diagonal}");
+        // A rover standing still holds nothing back.
+        assert_eq!(held_back_m(from, from, matched, at(0.9, 2.0)), 0.0);
     }
 
     #[test]
