@@ -256,12 +256,15 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 });
                 let correct = err_m < SUCCESS_CELLS * cell_m && err_rad.to_degrees() < SUCCESS_DEG;
                 // What the maps share at the true pose (outside the timing).
-                let truth_grid = pair
-                    .a
-                    .frame_from_grid()
-                    .inverse()
-                    .compose(&pair.a_from_b)
-                    .compose(&pair.b.frame_from_grid());
+                // A pose of the second map's frame in the first's, as the grids' poses.
+                let to_grid = |p: &realms_core::Pose2| {
+                    pair.a
+                        .frame_from_grid()
+                        .inverse()
+                        .compose(p)
+                        .compose(&pair.b.frame_from_grid())
+                };
+                let truth_grid = to_grid(&pair.a_from_b);
                 let at_truth = realms_merge::verify::verify(
                     &a,
                     &b,
@@ -335,13 +338,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     );
                     for (p, e) in &est.verified {
                         let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
-                        let grid_p = pair
-                            .a
-                            .frame_from_grid()
-                            .inverse()
-                            .compose(p)
-                            .compose(&pair.b.frame_from_grid());
-                        let close = realms_merge::verify::closeness(&a, &b, &grid_p);
+                        let close = realms_merge::verify::closeness(&a, &b, &to_grid(p));
                         eprintln!(
                             "    verified err {em:.2} m {:.2} deg: close {close:.0} agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
                             er.to_degrees(),

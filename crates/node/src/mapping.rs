@@ -130,13 +130,13 @@ pub fn rover_mapper_config() -> MapperConfig {
     // but on the rovers' replays it left the final trajectory as it was and the pose as
     // tracked 8 % worse (BENCHMARKS.md, "Solving the pose graph to its optimum").
     cfg.track_in_submap_frame = false;
+    // The occupancy match's pull towards cell centres drifted the maps 0.10-0.15 m in ten
+    // minutes of a noise-free hall; refined on the submap's hits, the replays' median
+    // rover went from 0.136 m to 0.091 m (BENCHMARKS.md, "Matches refined on the hits").
+    cfg.ndt_refine = Some(realms_slam::ndt::NdtConfig::default());
     // The rovers' gyro (BENCHMARKS.md): 0.003 rad/s of noise at 50 Hz walks 4e-4 rad in a
     // second, and a minute's calibration leaves ~6e-5 rad/s of bias; both taken a few times
     // larger, since a real gyro's bias also wanders with temperature.
-    // The occupancy match's pull towards cell centres drifted the maps 0.10 m in ten
-    // minutes of a noise-free hall; refined on the submap's hits, the replays' median
-    // rover went from 0.145 m to 0.076 m (BENCHMARKS.md, "Matches refined on the hits").
-    cfg.ndt_refine = Some(realms_slam::ndt::NdtConfig::default());
     cfg.gyro_heading = Some(realms_slam::mapper::GyroHeading {
         rad_per_sqrt_s: 1e-3,
         bias_rad_s: 2e-4,

@@ -126,9 +126,8 @@ pub struct MapperConfig {
     pub fast_turn: Option<FastTurn>,
     /// Refine each tracking match on the tracking submap's hits themselves, per-cell means
     /// and spreads, free of the occupancy grid's pull towards cell centres (see
-    /// [`crate::ndt`]), unless the refinement moves the match back against the wheels'
-    /// travel by more than [`NdtConfig::max_hold_back_m`]; `None`: the occupancy match as
-    /// it is.
+    /// [`crate::ndt`]; the refinement is bounded, also in how far it may move the match back
+    /// against the wheels' travel); `None`: the occupancy match as it is.
     pub ndt_refine: Option<NdtConfig>,
 }
 
@@ -579,18 +578,15 @@ impl Mapper {
                     }
                     if let Some(hits) = &self.submaps[i].hits {
                         let matcher = &self.cfg.frontend.matcher;
-                        let hold_back = self.cfg.ndt_refine.map_or(0.0, |c| c.max_hold_back_m);
+                        let wheels = [(origin.inverse() * before).position(), prior.position()];
                         if let Some(refined) = hits.refine(
                             &points,
                             m.pose,
+                            wheels,
                             matcher.prior_translation_weight,
                             matcher.prior_rotation_weight,
                         ) {
-                            let from = (origin.inverse() * before).position();
-                            let back = held_back_m(from, prior.position(), m.pose, refined);
-                            if back <= hold_back {
-                                m.pose = refined;
-                            }
+                            m.pose = refined;
                         }
                     }
                     score = Some(m.score);
@@ -1196,17 +1192,6 @@ impl Mapper {
     }
 }
 
-/// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
-/// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
-fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
-    let (tx, ty) = (predicted.x_m - from.x_m, predicted.y_m - from.y_m);
-    let travel = tx.hypot(ty);
-    if travel <= 1e-3 {
-        return 0.0;
-    }
-    -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
-}
-
 /// Puts `nodes` back in the relative poses of `drawn` (the same nodes before they moved),
 /// moved as one block so the first keeps its pose now.
 fn move_as_block(nodes: &mut [Pose2], drawn: &[Pose2]) {
@@ -1566,28 +1551,6 @@ mod tests {
             worst = worst.max(tracked.pose.position().distance_m(truth.position()));
         }
         worst
-    }
-
-    #[test]
-    fn a_refinement_is_held_back_only_by_what_it_takes_from_the_wheels_travel() {
-        // Wheels: 4 cm east. The match at 3.9 cm east.
-        let (from, predicted) = (Point2::new(1.0, 2.0), Point2::new(1.04, 2.0));
-        let matched = Pose2::new(1.039, 2.0, 0.0);
-        let at = |x: f64, y: f64| Pose2::new(x, y, 0.0);
-        // 2.5 cm back west: held back 2.5 cm; 1 cm north: not at all; 1 cm east: -1 cm.
-        assert!((held_back_m(from, predicted, matched, at(1.014, 2.0)) - 0.025).abs() < 1e-12);
-        assert!(held_back_m(from, predicted, matched, at(1.039, 2.01)).abs() < 1e-12);
-        assert!((held_back_m(from, predicted, matched, at(1.049, 2.0)) + 0.01).abs() < 1e-12);
-        // Diagonal travel: a move of (-3, -4) cm against a (3, 4)-direction is 5 cm back.
-        let diagonal = held_back_m(
-            Point2::new(0.0, 0.0),
-            Point2::new(0.03, 0.04),
-            at(0.03, 0.04),
-            at(0.0, 0.0),
-        );
-        assert!((diagonal - 0.05).abs() < 1e-12, "{diagonal}");
-        // A rover standing still holds nothing back.
-        assert_eq!(held_back_m(from, from, matched, at(0.9, 2.0)), 0.0);
     }
 
     #[test]

@@ -278,12 +278,15 @@ impl NdtMap {
     /// `start` (pose of the scan in the map's frame) refined so that `points` (scan frame)
     /// lie on the cells' hits; pulled towards `start` by `prior_translation` and
     /// `prior_rotation` per point (per square metre and square radian), which decides the
-    /// directions the scene leaves free. `None` when too few points found a cell, or the
-    /// refinement went further than a refinement should.
+    /// directions the scene leaves free. `wheels` is the travel the wheels predict for the
+    /// scan, from the last pose to the prediction (map frame). `None` when too few points
+    /// found a cell, or the refinement went further than a refinement should: past the
+    /// bounds, or back against the wheels' travel.
     pub fn refine(
         &self,
         points: &[Point2],
         start: Pose2,
+        wheels: [Point2; 2],
         prior_translation: f64,
         prior_rotation: f64,
     ) -> Option<Pose2> {
@@ -319,7 +322,8 @@ impl NdtMap {
         }
         let moved = start.relative_to(&pose);
         (pose.position().distance_m(start.position()) <= self.cfg.max_shift_m
-            && moved.yaw_rad.abs() <= self.cfg.max_turn_rad)
+            && moved.yaw_rad.abs() <= self.cfg.max_turn_rad
+            && held_back_m(wheels[0], wheels[1], start, pose) <= self.cfg.max_hold_back_m)
             .then_some(pose)
     }
 
@@ -373,6 +377,17 @@ impl NdtMap {
     }
 }
 
+/// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
+/// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
+fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
+    let (tx, ty) = (predicted.x_m - from.x_m, predicted.y_m - from.y_m);
+    let travel = tx.hypot(ty);
+    if travel <= 1e-3 {
+        return 0.0;
+    }
+    -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -401,23 +416,32 @@ mod tests {
         hits
     }
 
-    #[test]
-    fn a_match_a_few_centimetres_off_is_brought_onto_the_hits() {
+    /// The room's hits in a map, and a scan of the same walls from `truth`, sampled elsewhere
+    /// along them.
+    fn room_and_scan_from(truth: Pose2) -> (NdtMap, Vec<Point2>) {
         let mut map = NdtMap::new(NdtConfig::default());
         map.insert(room(0.01));
-        let truth = Pose2::new(3.1, 2.2, 0.3);
-        // The scan: the same walls seen from `truth`, sampled elsewhere along them.
-        let scan: Vec<Point2> = room(0.07)
+        let scan = room(0.07)
             .into_iter()
             .map(|p| truth.inverse().transform_point(p))
             .collect();
+        (map, scan)
+    }
+
+    /// Wheels that did not move: nothing to hold a refinement back against.
+    const STILL: [Point2; 2] = [Point2 { x_m: 0.0, y_m: 0.0 }; 2];
+
+    #[test]
+    fn a_match_a_few_centimetres_off_is_brought_onto_the_hits() {
+        let truth = Pose2::new(3.1, 2.2, 0.3);
+        let (map, scan) = room_and_scan_from(truth);
         for (dx, dy, dyaw) in [
             (0.025, 0.0, 0.0),
             (-0.02, 0.024, 0.004),
             (0.0, -0.03, -0.008),
         ] {
             let start = Pose2::new(truth.x_m + dx, truth.y_m + dy, truth.yaw_rad + dyaw);
-            let refined = map.refine(&scan, start, 3.0, 3.0).expect("refined");
+            let refined = map.refine(&scan, start, STILL, 3.0, 3.0).expect("refined");
             let err = refined.relative_to(&truth);
             assert!(
                 err.x_m.hypot(err.y_m) < 0.002 && err.yaw_rad.abs() < 2e-4,
@@ -428,15 +452,10 @@ mod tests {
 
     #[test]
     fn a_refinement_further_than_the_bound_is_not_taken() {
-        let mut map = NdtMap::new(NdtConfig::default());
-        map.insert(room(0.01));
         let truth = Pose2::new(3.1, 2.2, 0.3);
-        let scan: Vec<Point2> = room(0.07)
-            .into_iter()
-            .map(|p| truth.inverse().transform_point(p))
-            .collect();
+        let (map, scan) = room_and_scan_from(truth);
         let start = Pose2::new(truth.x_m + 0.05, truth.y_m, truth.yaw_rad);
-        assert!(map.refine(&scan, start, 3.0, 3.0).is_none());
+        assert!(map.refine(&scan, start, STILL, 3.0, 3.0).is_none());
         let wider = NdtMap {
             cfg: NdtConfig {
                 max_shift_m: 0.06,
@@ -444,11 +463,35 @@ mod tests {
             },
             ..map
         };
-        let refined = wider.refine(&scan, start, 3.0, 3.0).expect("within 6 cm");
+        let refined = wider
+            .refine(&scan, start, STILL, 3.0, 3.0)
+            .expect("within 6 cm");
         assert!(
             refined.position().distance_m(truth.position()) < 0.002,
             "{refined:?}"
         );
+    }
+
+    #[test]
+    fn a_refinement_is_held_back_only_by_what_it_takes_from_the_wheels_travel() {
+        // Wheels: 4 cm east. The match at 3.9 cm east.
+        let (from, predicted) = (Point2::new(1.0, 2.0), Point2::new(1.04, 2.0));
+        let matched = Pose2::new(1.039, 2.0, 0.0);
+        let at = |x: f64, y: f64| Pose2::new(x, y, 0.0);
+        // 2.5 cm back west: held back 2.5 cm; 1 cm north: not at all; 1 cm east: -1 cm.
+        assert!((held_back_m(from, predicted, matched, at(1.014, 2.0)) - 0.025).abs() < 1e-12);
+        assert!(held_back_m(from, predicted, matched, at(1.039, 2.01)).abs() < 1e-12);
+        assert!((held_back_m(from, predicted, matched, at(1.049, 2.0)) + 0.01).abs() < 1e-12);
+        // Diagonal travel: a move of (-3, -4) cm against a (3, 4)-direction is 5 cm back.
+        let diagonal = held_back_m(
+            Point2::new(0.0, 0.0),
+            Point2::new(0.03, 0.04),
+            at(0.03, 0.04),
+            at(0.0, 0.0),
+        );
+        assert!((diagonal - 0.05).abs() < 1e-12, "{diagonal}");
+        // A rover standing still holds nothing back.
+        assert_eq!(held_back_m(from, from, matched, at(0.9, 2.0)), 0.0);
     }
 
     #[test]
@@ -468,7 +511,7 @@ mod tests {
             .collect();
         // 3 cm along the wall and 2 cm across it: across is corrected, along is left.
         let start = Pose2::new(4.03, 0.02, 0.0);
-        let refined = map.refine(&scan, start, 3.0, 3.0).expect("refined");
+        let refined = map.refine(&scan, start, STILL, 3.0, 3.0).expect("refined");
         assert!((refined.y_m - 0.0).abs() < 0.001, "{refined:?}");
         assert!((refined.x_m - 4.03).abs() < 0.001, "{refined:?}");
     }
@@ -510,7 +553,7 @@ mod tests {
             .map(|i| Point2::new(20.0 + i as f64, 20.0))
             .collect();
         assert!(
-            map.refine(&far, Pose2::new(0.0, 0.0, 0.0), 3.0, 3.0)
+            map.refine(&far, Pose2::new(0.0, 0.0, 0.0), STILL, 3.0, 3.0)
                 .is_none()
         );
     }
