@@ -90,6 +90,14 @@ impl Pull {
     }
 }
 
+/// One cell: its sums, and what it pulls with, worked out when hits are added (a
+/// refinement looks a cell up far more often than a keyframe changes it).
+#[derive(Clone, Copy, Debug, Default)]
+struct Cell {
+    sums: Sums,
+    pull: Option<Pull>,
+}
+
 /// Cells in a rectangle that grows to take whatever is added.
 #[derive(Clone, Debug, Default)]
 struct Cells {
@@ -97,7 +105,7 @@ struct Cells {
     y0: i64,
     width: usize,
     height: usize,
-    sums: Vec<Sums>,
+    cells: Vec<Cell>,
 }
 
 impl Cells {
@@ -110,8 +118,8 @@ impl Cells {
             .then(|| dy as usize * self.width + dx as usize)
     }
 
-    fn get(&self, key: (i64, i64)) -> Option<&Sums> {
-        self.index(key).map(|i| &self.sums[i])
+    fn get(&self, key: (i64, i64)) -> Option<&Cell> {
+        self.index(key).map(|i| &self.cells[i])
     }
 
     /// Grows the rectangle to hold the cells from `lo` to `hi` (inclusive).
@@ -120,7 +128,7 @@ impl Cells {
             return;
         }
         let (old_x1, old_y1) = (self.x0 + self.width as i64, self.y0 + self.height as i64);
-        let (x0, y0, x1, y1) = if self.sums.is_empty() {
+        let (x0, y0, x1, y1) = if self.cells.is_empty() {
             (lo.0, lo.1, hi.0 + 1, hi.1 + 1)
         } else {
             (
@@ -135,18 +143,18 @@ impl Cells {
             (x1 + Self::MARGIN - x0) as usize,
             (y1 + Self::MARGIN - y0) as usize,
         );
-        let mut sums = vec![Sums::default(); width * height];
+        let mut cells = vec![Cell::default(); width * height];
         for row in 0..self.height {
             let from = row * self.width;
             let to = (row as i64 + self.y0 - y0) as usize * width + (self.x0 - x0) as usize;
-            sums[to..to + self.width].copy_from_slice(&self.sums[from..from + self.width]);
+            cells[to..to + self.width].copy_from_slice(&self.cells[from..from + self.width]);
         }
         *self = Cells {
             x0,
             y0,
             width,
             height,
-            sums,
+            cells,
         };
     }
 }
@@ -188,67 +196,37 @@ impl NdtMap {
             )
         });
         self.cells.cover(lo, hi);
+        let mut touched = Vec::with_capacity(keyed.len());
         for (p, key) in keyed {
             let (x, y) = (p.x_m - key.0 as f64 * c, p.y_m - key.1 as f64 * c);
             let Some(i) = self.cells.index(key) else {
                 continue;
             };
-            let s = &mut self.cells.sums[i];
+            let s = &mut self.cells.cells[i].sums;
             s.n += 1;
             s.x += x;
             s.y += y;
             s.xx += x * x;
             s.xy += x * y;
             s.yy += y * y;
+            touched.push((i, key));
+        }
+        touched.sort_unstable();
+        touched.dedup();
+        for (i, key) in touched {
+            let cell = &mut self.cells.cells[i];
+            cell.pull = pull_of(&self.cfg, key, &cell.sums);
         }
     }
 
     /// Number of cells holding hits.
     pub fn cells(&self) -> usize {
-        self.cells.sums.iter().filter(|s| s.n > 0).count()
+        self.cells.cells.iter().filter(|c| c.sums.n > 0).count()
     }
 
     fn pull(&self, key: (i64, i64)) -> Option<Pull> {
-        let s = self.cells.get(key)?;
-        if s.n < self.cfg.min_hits {
-            return None;
-        }
-        let n = s.n as f64;
-        let (mx, my) = (s.x / n, s.y / n);
-        let (vxx, vxy, vyy) = (s.xx / n - mx * mx, s.xy / n - mx * my, s.yy / n - my * my);
-        // Eigenvalues of the spread, smaller first, and the smaller one's axis.
-        let half_trace = 0.5 * (vxx + vyy);
-        let root = (0.25 * (vxx - vyy).powi(2) + vxy * vxy).sqrt();
-        let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
-        let noise = self.cfg.noise_var_m2;
-        let information = if small < self.cfg.line_ratio * large {
-            // Across the line only: the normal is the smaller eigenvalue's axis.
-            let (nx, ny) = if vxy.abs() > 1e-15 {
-                let (ex, ey) = (vxy, small - vxx);
-                let norm = ex.hypot(ey);
-                (ex / norm, ey / norm)
-            } else if vxx <= vyy {
-                (1.0, 0.0)
-            } else {
-                (0.0, 1.0)
-            };
-            let w = 1.0 / (small + noise);
-            [w * nx * nx, w * nx * ny, w * ny * ny]
-        } else {
-            let (a, b, c) = (vxx + noise, vxy, vyy + noise);
-            let det = a * c - b * b;
-            [c / det, -b / det, a / det]
-        };
-        let corner = (
-            key.0 as f64 * self.cfg.cell_m,
-            key.1 as f64 * self.cfg.cell_m,
-        );
-        Some(Pull {
-            mean: Point2::new(corner.0 + mx, corner.1 + my),
-            information,
-        })
+        self.cells.get(key)?.pull
     }
-
     /// The cell near `q` that explains it best: the smallest Mahalanobis distance, plus the
     /// squared distance to the mean in cells (a line pulls only across itself, so a line cell
     /// further along the wall must not win on that alone).
@@ -262,7 +240,8 @@ impl NdtMap {
                 let Some(pull) = self.pull((kx + dx, ky + dy)) else {
                     continue;
                 };
-                let d2 = q.distance_m(pull.mean).powi(2);
+                let (dx, dy) = (q.x_m - pull.mean.x_m, q.y_m - pull.mean.y_m);
+                let d2 = dx * dx + dy * dy;
                 if d2 > max2 {
                     continue;
                 }
@@ -386,6 +365,44 @@ fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) 
         return 0.0;
     }
     -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
+/// What the cell `key` holding the hits `s` pulls with; `None` below `min_hits`.
+fn pull_of(cfg: &NdtConfig, key: (i64, i64), s: &Sums) -> Option<Pull> {
+    if s.n < cfg.min_hits {
+        return None;
+    }
+    let n = s.n as f64;
+    let (mx, my) = (s.x / n, s.y / n);
+    let (vxx, vxy, vyy) = (s.xx / n - mx * mx, s.xy / n - mx * my, s.yy / n - my * my);
+    // Eigenvalues of the spread, smaller first, and the smaller one's axis.
+    let half_trace = 0.5 * (vxx + vyy);
+    let root = (0.25 * (vxx - vyy).powi(2) + vxy * vxy).sqrt();
+    let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
+    let noise = cfg.noise_var_m2;
+    let information = if small < cfg.line_ratio * large {
+        // Across the line only: the normal is the smaller eigenvalue's axis.
+        let (nx, ny) = if vxy.abs() > 1e-15 {
+            let (ex, ey) = (vxy, small - vxx);
+            let norm = ex.hypot(ey);
+            (ex / norm, ey / norm)
+        } else if vxx <= vyy {
+            (1.0, 0.0)
+        } else {
+            (0.0, 1.0)
+        };
+        let w = 1.0 / (small + noise);
+        [w * nx * nx, w * nx * ny, w * ny * ny]
+    } else {
+        let (a, b, c) = (vxx + noise, vxy, vyy + noise);
+        let det = a * c - b * b;
+        [c / det, -b / det, a / det]
+    };
+    let corner = (key.0 as f64 * cfg.cell_m, key.1 as f64 * cfg.cell_m);
+    Some(Pull {
+        mean: Point2::new(corner.0 + mx, corner.1 + my),
+        information,
+    })
 }
 
 #[cfg(test)]
