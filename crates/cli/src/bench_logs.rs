@@ -39,7 +39,11 @@ pub fn run(args: BenchLogsArgs) -> Result<()> {
         let rel_path = args.data.join(format!("{name}.relations"));
         let relations = read_relations(&rel_path)?;
         let start = Instant::now();
-        let mut mapper = Mapper::new(MapperConfig::default());
+        // As `realms slam` runs by default: matches refined on the hits.
+        let mut mapper = Mapper::new(MapperConfig {
+            ndt_refine: Some(realms_slam::ndt::NdtConfig::default()),
+            ..MapperConfig::default()
+        });
         for scan in &log.scans {
             mapper.add_scan(scan);
         }

@@ -12,7 +12,7 @@
 use crate::bench::{in_parallel, median};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LocalisationState, Message};
 use realms_core::{Pose2, RoverId, Time};
 use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
@@ -137,7 +137,12 @@ struct Replay {
     /// Simulated seconds of input and SLAM's wall seconds on them.
     sim_s: f64,
     wall_s: f64,
+    /// The poses scan by scan as CSV, when asked for (`--trajectories`).
+    csv: Option<String>,
 }
+
+/// The columns of a `--trajectories` file.
+const CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_yaw_rad,tracked_x_m,tracked_y_m,tracked_yaw_rad,final_x_m,final_y_m,final_yaw_rad,state,closures";
 
 /// Runs SLAM for one rover over its captured input.
 fn replay(
@@ -146,10 +151,13 @@ fn replay(
     variant: &'static str,
     cfg: &MappingConfig,
     input: &[CapturedInput],
+    with_csv: bool,
 ) -> Replay {
     let mut mapping = Mapping::new(rover, cfg.clone());
     // Each scan's time, true pose and pose as tracked.
     let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
+    // ... and its state and the closures accepted by then, for the CSV.
+    let mut states: Vec<(LocalisationState, usize)> = Vec::new();
     let (mut lost, mut was_lost) = (0, false);
     let started = Instant::now();
     replay_slam(&mut mapping, input, |c, m| {
@@ -162,6 +170,9 @@ fn replay(
             _ => c.t,
         };
         scans.push((stamp.as_secs_f64(), c.truth, m.pose()));
+        if with_csv {
+            states.push((m.state(), m.mapper().closures));
+        }
         let is_lost = m.state() == LocalisationState::Lost;
         lost += usize::from(is_lost && !was_lost);
         was_lost = is_lost;
@@ -172,8 +183,31 @@ fn replay(
         let k = scans.partition_point(|s| s.0 < t);
         scans.get(k).filter(|s| s.0 == t).map(|s| s.1)
     };
-    let last: Vec<(Pose2, Pose2)> = mapping
-        .trajectory()
+    let trajectory = mapping.trajectory();
+    let csv = with_csv.then(|| {
+        let mut text = format!("{CSV_HEADER}\n");
+        let mut finals = trajectory.iter().peekable();
+        for ((t, truth, tracked), (state, closures)) in scans.iter().zip(&states) {
+            while finals.next_if(|f| f.timestamp_s < *t).is_some() {}
+            let last = finals
+                .peek()
+                .filter(|f| f.timestamp_s == *t)
+                .map(|f| f.pose);
+            let pose = |p: Option<Pose2>| {
+                p.map_or(",,".to_string(), |p| {
+                    format!("{:.4},{:.4},{:.5}", p.x_m, p.y_m, p.yaw_rad)
+                })
+            };
+            text += &format!(
+                "{t:.3},{},{},{},{state:?},{closures}\n",
+                pose(Some(*truth)),
+                pose(Some(*tracked)),
+                pose(last)
+            );
+        }
+        text
+    });
+    let last: Vec<(Pose2, Pose2)> = trajectory
         .iter()
         .filter_map(|s| truth_at(s.timestamp_s).map(|truth| (s.pose, truth)))
         .collect();
@@ -196,6 +230,7 @@ fn replay(
         closures: mapping.mapper().closures,
         sim_s,
         wall_s,
+        csv,
     }
 }
 
@@ -218,6 +253,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     }
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
     let workers = crate::bench::workers(args.jobs);
+    let with_csv = args.trajectories.is_some();
+    if let Some(dir) = &args.trajectories {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     println!("# realms bench slam");
     println!();
     println!(
@@ -258,17 +297,27 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         drop(mission);
         let mut replays = Vec::new();
         for (id, input) in ids.iter().zip(&capture) {
-            replays.push(replay(seed, *id, "baseline", &cfg, input));
+            replays.push(replay(seed, *id, "baseline", &cfg, input, with_csv));
             for v in &variants {
                 let mut changed = cfg.clone();
                 (v.apply)(&mut changed);
-                replays.push(replay(seed, *id, v.name, &changed, input));
+                replays.push(replay(seed, *id, v.name, &changed, input, with_csv));
             }
         }
         replays
     });
     let mut all: Vec<Replay> = results.into_iter().flatten().collect();
     all.sort_by_key(|r| (r.seed, r.rover.0));
+    if let Some(dir) = &args.trajectories {
+        for r in &all {
+            if let Some(csv) = &r.csv {
+                let path = dir.join(format!("seed{}-{}-{}.csv", r.seed, r.rover, r.variant));
+                std::fs::write(&path, csv)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+            }
+        }
+        println!("poses scan by scan: {}", dir.display());
+    }
     println!(
         "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures | SLAM speed |"
     );

@@ -223,6 +223,11 @@ pub struct BenchSlamArgs {
     /// Scenario TOML (default: the built-in one).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
+    /// Also write each replay's poses, scan by scan, to
+    /// `DIR/seed<N>-<rover>-<variant>.csv` (time, truth, tracked and final pose, state,
+    /// closures so far), to see when and where an error grew.
+    #[arg(long, value_name = "DIR")]
+    pub trajectories: Option<PathBuf>,
 }
 
 /// `realms bench slip`.
