@@ -142,7 +142,7 @@ struct Replay {
 }
 
 /// The columns of a `--trajectories` file.
-const CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_yaw_rad,tracked_x_m,tracked_y_m,tracked_yaw_rad,final_x_m,final_y_m,final_yaw_rad,state,closures";
+const CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_yaw_rad,tracked_x_m,tracked_y_m,tracked_yaw_rad,final_x_m,final_y_m,final_yaw_rad,state,closures,wheels_x_m,wheels_y_m,wheels_yaw_rad";
 
 /// Runs SLAM for one rover over its captured input.
 fn replay(
@@ -156,8 +156,21 @@ fn replay(
     let mut mapping = Mapping::new(rover, cfg.clone());
     // Each scan's time, true pose and pose as tracked.
     let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
-    // ... and its state and the closures accepted by then, for the CSV.
-    let mut states: Vec<(LocalisationState, usize)> = Vec::new();
+    // ... and its state, the closures accepted by then and the wheels' odometry as last
+    // published (its own frame), for the CSV.
+    let mut states: Vec<(LocalisationState, usize, Option<Pose2>)> = Vec::new();
+    let mut wheels: Option<Pose2> = None;
+    let mut odometry = input.iter().filter_map(|c| match &c.message {
+        Message::Odometry(o) => {
+            let p = &o.pose.pose;
+            Some((
+                c.t,
+                Pose2::new(p.position.x, p.position.y, p.orientation.yaw_rad()),
+            ))
+        }
+        _ => None,
+    });
+    let mut next_odometry = odometry.next();
     let (mut lost, mut was_lost) = (0, false);
     let started = Instant::now();
     replay_slam(&mut mapping, input, |c, m| {
@@ -171,7 +184,11 @@ fn replay(
         };
         scans.push((stamp.as_secs_f64(), c.truth, m.pose()));
         if with_csv {
-            states.push((m.state(), m.mapper().closures));
+            while let Some((_, pose)) = next_odometry.filter(|(t, _)| *t <= c.t) {
+                wheels = Some(pose);
+                next_odometry = odometry.next();
+            }
+            states.push((m.state(), m.mapper().closures, wheels));
         }
         let is_lost = m.state() == LocalisationState::Lost;
         lost += usize::from(is_lost && !was_lost);
@@ -187,7 +204,7 @@ fn replay(
     let csv = with_csv.then(|| {
         let mut text = format!("{CSV_HEADER}\n");
         let mut finals = trajectory.iter().peekable();
-        for ((t, truth, tracked), (state, closures)) in scans.iter().zip(&states) {
+        for ((t, truth, tracked), (state, closures, wheels)) in scans.iter().zip(&states) {
             while finals.next_if(|f| f.timestamp_s < *t).is_some() {}
             let last = finals
                 .peek()
@@ -199,10 +216,11 @@ fn replay(
                 })
             };
             text += &format!(
-                "{t:.3},{},{},{},{state:?},{closures}\n",
+                "{t:.3},{},{},{},{state:?},{closures},{}\n",
                 pose(Some(*truth)),
                 pose(Some(*tracked)),
-                pose(last)
+                pose(last),
+                pose(*wheels)
             );
         }
         text

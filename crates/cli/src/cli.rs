@@ -225,7 +225,8 @@ pub struct BenchSlamArgs {
     pub scenario: Option<PathBuf>,
     /// Also write each replay's poses, scan by scan, to
     /// `DIR/seed<N>-<rover>-<variant>.csv` (time, truth, tracked and final pose, state,
-    /// closures so far), to see when and where an error grew.
+    /// closures so far, the wheels' odometry as published), to see when and where an error
+    /// grew.
     #[arg(long, value_name = "DIR")]
     pub trajectories: Option<PathBuf>,
 }
