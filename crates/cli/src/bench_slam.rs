@@ -111,6 +111,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.ndt_refine = None,
     },
     Variant {
+        name: "depth-features",
+        what: "the depth camera's points in hazard cells refined on and kept in the hits, beside the lidar's points",
+        apply: |c| c.depth_features = true,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

@@ -64,6 +64,10 @@ pub struct MappingConfig {
     /// 0.6 of itself, and the 1-degree curve of a wall moves the average by under a
     /// millimetre.
     pub smooth_ranges: bool,
+    /// The depth camera's points in hazard cells (rocks below the lidar's plane, rims) go
+    /// into the refinement of each match, beside the lidar's points, as features seen from
+    /// the last depth frame, carried to the scan by odometry (`false`: the lidar alone).
+    pub depth_features: bool,
 }
 
 /// SLAM tuned for the simulated rover: the lidar reaches 12 m, the arena is small, and the
@@ -172,6 +176,11 @@ const SMOOTH_MAX_STEP_M: f64 = 0.05;
 /// ... the share: a wall seen at 80 degrees off its normal steps 10 % a degree.
 const SMOOTH_MAX_STEP_FRACTION: f64 = 0.1;
 
+/// Depth features older than this are not carried to a scan, seconds.
+const DEPTH_FEATURES_MAX_AGE_S: f64 = 1.0;
+/// At most this many depth features a frame.
+const DEPTH_FEATURES_MAX: usize = 300;
+
 /// The on-board SLAM of one rover.
 #[derive(Debug)]
 pub struct Mapping {
@@ -210,6 +219,9 @@ pub struct Mapping {
     published_layer: TiledLayer,
     /// The planner's map, kept between plans (once asked for).
     planner_layer: Option<TiledLayer>,
+    /// The last depth frame's points in hazard cells (rover frame), its time and odometry
+    /// pose.
+    depth_features: Option<(Time, Pose2, Vec<Point2>)>,
 }
 
 impl Mapping {
@@ -239,6 +251,7 @@ impl Mapping {
             snapshot_wanted: false,
             published_layer: TiledLayer::new(1),
             planner_layer: None,
+            depth_features: None,
         }
     }
 
@@ -460,6 +473,29 @@ impl Mapping {
             let rover = origin.inverse() * self.mapper.pose();
             self.hazards.insert(submap, rover, &verdicts);
         }
+        if self.cfg.depth_features {
+            let stamp = cloud.header.stamp;
+            let r = self.cfg.traversability.resolution_m;
+            let key = |x: f64, y: f64| ((x / r).floor() as i64, (y / r).floor() as i64);
+            let hazard: std::collections::BTreeSet<(i64, i64)> = verdicts
+                .iter()
+                .filter(|v| v.1)
+                .map(|v| key(v.0.x_m, v.0.y_m))
+                .collect();
+            let on_hazards: Vec<Point2> = points
+                .iter()
+                .filter(|p| hazard.contains(&key(p[0], p[1])))
+                .map(|p| Point2::new(p[0], p[1]))
+                .collect();
+            let stride = on_hazards.len().div_ceil(DEPTH_FEATURES_MAX).max(1);
+            let kept = on_hazards.into_iter().step_by(stride).collect();
+            self.depth_features = self.odometry_at(stamp).map(|mut odom| {
+                if self.gyro_heard {
+                    odom.yaw_rad = self.gyro_yaw_at(stamp);
+                }
+                (stamp, odom, kept)
+            });
+        }
     }
 
     /// Whether the wheels have missed their last few readings by `t` (a dropout): the
@@ -544,6 +580,17 @@ impl Mapping {
             pose: odom,
             wheels_silent: self.wheels_silent_at(stamp),
         };
+        // The last depth frame's features, where the wheels say they are now.
+        let features = match &self.depth_features {
+            Some((t, at, cells))
+                if (stamp.as_secs_f64() - t.as_secs_f64()).abs() < DEPTH_FEATURES_MAX_AGE_S =>
+            {
+                let moved = odom.inverse() * *at;
+                cells.iter().map(|p| moved.transform_point(*p)).collect()
+            }
+            _ => Vec::new(),
+        };
+        self.mapper.set_features(features);
         let tracked = self
             .mapper
             .add_points_with(stamp.as_secs_f64(), sample, points);
@@ -728,6 +775,7 @@ mod tests {
                 depth_origin_m: [0.2, 0.0, 0.3],
                 traversability: TraversabilityConfig::default(),
                 smooth_ranges: false,
+                depth_features: false,
             },
         )
     }

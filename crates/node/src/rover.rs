@@ -367,6 +367,7 @@ mod tests {
                     depth_origin_m: [0.2, 0.0, 0.3],
                     traversability: TraversabilityConfig::default(),
                     smooth_ranges: false,
+                    depth_features: false,
                 },
                 navigation: NavigationConfig::new(Point2::new(0.0, 0.0)),
                 guard: GuardConfig {

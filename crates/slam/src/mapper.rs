@@ -390,6 +390,9 @@ pub struct Mapper {
     lost_at: Option<Pose2>,
     /// The odometry pose of the last relocalisation attempt.
     last_relocalise_odom: Option<Pose2>,
+    /// Points (robot frame) from another sensor that go into the next scan's refinement and
+    /// its keyframe's hits, beside the scan's own.
+    features: Vec<Point2>,
     /// Relocalisation searches since the rover was declared lost.
     searches_since_lost: usize,
     last_information: [[f64; 3]; 3],
@@ -434,6 +437,7 @@ impl Mapper {
             transitions: Vec::new(),
             lost_at: None,
             last_relocalise_odom: None,
+            features: Vec::new(),
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
@@ -466,9 +470,16 @@ impl Mapper {
             hits.insert(
                 self.keyframe_points[node]
                     .iter()
+                    .chain(&self.features)
                     .map(|p| local.transform_point(*p)),
             );
         }
+    }
+
+    /// Points (robot frame) from another sensor for the next scan: its refinement on the
+    /// hits pairs them too, and its keyframe, if it makes one, adds them to the hits.
+    pub fn set_features(&mut self, features: Vec<Point2>) {
+        self.features = features;
     }
 
     /// Adds a scan from a CARMEN log.
@@ -579,8 +590,15 @@ impl Mapper {
                     if let Some(hits) = &self.submaps[i].hits {
                         let matcher = &self.cfg.frontend.matcher;
                         let wheels = [(origin.inverse() * before).position(), prior.position()];
+                        let with_features: Vec<Point2>;
+                        let refined_on = if self.features.is_empty() {
+                            &points
+                        } else {
+                            with_features = points.iter().chain(&self.features).copied().collect();
+                            &with_features
+                        };
                         if let Some(refined) = hits.refine(
-                            &points,
+                            refined_on,
                             m.pose,
                             wheels,
                             matcher.prior_translation_weight,
