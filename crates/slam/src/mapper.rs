@@ -476,8 +476,8 @@ impl Mapper {
         }
     }
 
-    /// Points (robot frame) from another sensor for the next scan: its refinement on the
-    /// hits pairs them too, and its keyframe, if it makes one, adds them to the hits.
+    /// Points (robot frame) from another sensor for the next scan only: its refinement on
+    /// the hits pairs them too, and its keyframe, if it makes one, adds them to the hits.
     pub fn set_features(&mut self, features: Vec<Point2>) {
         self.features = features;
     }
@@ -674,6 +674,8 @@ impl Mapper {
         });
         self.odometry
             .settle(odom, self.pose, &prediction, relocalised);
+        // They were seen for this scan, and are stale at the next.
+        self.features.clear();
         Tracked {
             pose: self.pose,
             score,
@@ -1624,6 +1626,47 @@ mod tests {
             learnt.abs() < 0.03,
             "with calibration {learnt:.3} m (without {wheels:.3} m)"
         );
+    }
+
+    #[test]
+    fn features_from_another_sensor_go_into_the_hits_of_their_own_scan_only() {
+        // A wall 1 m to the left, seen from x = 0 and x = 0.3 (two keyframes); another
+        // sensor sees a pebble 2.1 m ahead and 3.1 m to the right of the first pose. Given
+        // before the first scan only, the pebble must not come back with the second.
+        let wall_from = |x: f64| -> Vec<Point2> {
+            (0..100)
+                .map(|i| Point2::new(-1.0 + 0.05 * i as f64 - x, 1.0))
+                .collect()
+        };
+        let pebble: Vec<Point2> = (0..10)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / 10.0;
+                Point2::new(2.1 + 0.05 * a.cos(), -3.1 + 0.05 * a.sin())
+            })
+            .collect();
+        // Cells holding hits after the two keyframes, the pebble given before which scans.
+        let hit_cells = |before: [bool; 2]| {
+            let mut cfg = MapperConfig::default();
+            cfg.keyframe_translation_m = 0.25;
+            cfg.ndt_refine = Some(NdtConfig::default());
+            let mut mapper = Mapper::new(cfg);
+            for (k, x) in [0.0, 0.3].into_iter().enumerate() {
+                if before[k] {
+                    mapper.set_features(pebble.clone());
+                }
+                mapper.add_points(0.1 * k as f64, Pose2::new(x, 0.0, 0.0), wall_from(x));
+            }
+            assert_eq!(mapper.graph.nodes.len(), 2, "two keyframes");
+            mapper.submaps[0].hits.as_ref().map_or(0, NdtMap::cells)
+        };
+        let (none, once, twice) = (
+            hit_cells([false, false]),
+            hit_cells([true, false]),
+            hit_cells([true, true]),
+        );
+        // 0.3 m apart, the pebble's two sightings fall in different 25 cm cells.
+        assert_eq!(once, none + 1, "the pebble given once");
+        assert_eq!(twice, none + 2, "the pebble given twice");
     }
 
     #[test]

@@ -227,6 +227,7 @@ impl NdtMap {
     fn pull(&self, key: (i64, i64)) -> Option<Pull> {
         self.cells.get(key)?.pull
     }
+
     /// The cell near `q` that explains it best: the smallest Mahalanobis distance, plus the
     /// squared distance to the mean in cells (a line pulls only across itself, so a line cell
     /// further along the wall must not win on that alone).
