@@ -1646,10 +1646,11 @@ mod tests {
             .collect();
         // Cells holding hits after the two keyframes, the pebble given before which scans.
         let hit_cells = |before: [bool; 2]| {
-            let mut cfg = MapperConfig::default();
-            cfg.keyframe_translation_m = 0.25;
-            cfg.ndt_refine = Some(NdtConfig::default());
-            let mut mapper = Mapper::new(cfg);
+            let mut mapper = Mapper::new(MapperConfig {
+                keyframe_translation_m: 0.25,
+                ndt_refine: Some(NdtConfig::default()),
+                ..MapperConfig::default()
+            });
             for (k, x) in [0.0, 0.3].into_iter().enumerate() {
                 if before[k] {
                     mapper.set_features(pebble.clone());
