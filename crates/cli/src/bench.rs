@@ -128,23 +128,22 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         eprintln!("trial {trial}: {fast:.0}x real time (plain ray casting: {plain:.0}x)");
         ratios.push(fast / plain);
     }
-    if args.trials > 0 && args.no_plain {
+    if args.trials > 0 {
+        // Without the plain trials there is no ratio to report.
+        let ratio = if ratios.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {:.1}x the speed with plain ray casting in the same run",
+                median(ratios)
+            )
+        };
         println!(
-            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial)",
+            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial){ratio}",
             median(speeds),
             args.trials,
             sim_s,
             msgs / args.trials,
-        );
-        println!();
-    } else if args.trials > 0 {
-        println!(
-            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial); {:.1}x the speed with plain ray casting in the same run",
-            median(speeds),
-            args.trials,
-            sim_s,
-            msgs / args.trials,
-            median(ratios)
         );
         println!();
     }

@@ -17,8 +17,10 @@ use super::{CLEAR_BLOCK, Clearance, HeightPyramid, Level, exit_time, step_sign};
 pub(super) struct ClearWalk {
     origin: [f64; 3],
     dir: [f64; 3],
-    /// Cells crossed per unit of t along the axis the ray moves most on.
-    horiz: f64,
+    /// Cells crossed per unit of t along the axis the ray moves most on: the clearance field
+    /// holds chessboard distances, so a step may go that far along that axis, up to 41 %
+    /// further than the same distance taken as a length (diagonal rays).
+    cells_per_t: f64,
     t_per_cell: f64,
     t_per_drop_m: f64,
     inv_res: f64,
@@ -93,12 +95,8 @@ impl HeightPyramid {
         let Some(c) = &self.clearance else {
             return Err(t_min);
         };
-        // Cells crossed per unit of t along the axis the ray moves most on: the clearance
-        // field holds chessboard distances, so a step may go as far along that axis as the
-        // distance allows, up to 41 % further than the same distance taken as a length
-        // (diagonal rays).
-        let horiz = dir[0].abs().max(dir[1].abs()) / self.geometry.resolution_m;
-        if horiz < 1e-9 {
+        let cells_per_t = dir[0].abs().max(dir[1].abs()) / self.geometry.resolution_m;
+        if cells_per_t < 1e-9 {
             return Err(t_min);
         }
         // Inverses up front: each step depends on the one before, so a division in it would
@@ -106,8 +104,8 @@ impl HeightPyramid {
         Ok(ClearWalk {
             origin,
             dir,
-            horiz,
-            t_per_cell: 1.0 / horiz,
+            cells_per_t,
+            t_per_cell: 1.0 / cells_per_t,
             t_per_drop_m: if dir[2] < 0.0 {
                 -1.0 / dir[2]
             } else {
@@ -150,7 +148,7 @@ impl HeightPyramid {
         if drop_limit < step {
             step = drop_limit;
         }
-        if step * w.horiz < 2.0 {
+        if step * w.cells_per_t < 2.0 {
             return ClearStep::Exact(t);
         }
         w.t = t + step;
