@@ -339,8 +339,15 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     for (p, e) in &est.verified {
                         let (em, er) = synth::pose_error(p, &pair.a_from_b, centre);
                         let close = realms_merge::verify::closeness(&a, &b, &to_grid(p));
+                        // Closeness on the points both poses share: the truth's, then this.
+                        let (paired_truth, paired) = realms_merge::verify::paired_closeness(
+                            &a,
+                            &b,
+                            &truth_grid,
+                            &to_grid(p),
+                        );
                         eprintln!(
-                            "    verified err {em:.2} m {:.2} deg: close {close:.0} agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
+                            "    verified err {em:.2} m {:.2} deg: close {close:.0} (paired with truth {paired:.0} against {paired_truth:.0}) agree {} conflict {} (shape {}/{} landmark {}/{}) overlap {:.0} m2 score {:.0}",
                             er.to_degrees(),
                             e.agree,
                             e.conflict,

@@ -351,6 +351,41 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// Among the verified poses near the chosen one (`chosen`, an index into `verified`) that
+/// are as consistent and verify nearly as well, the one whose surfaces lie closest on the
+/// points they share ([`verify::paired_closeness`]). Across a thin band a pose slid a few
+/// cells sideways widens the overlap and outscores the true pose on every sum; compared on
+/// common points it fits worse.
+fn settle_among_neighbours(
+    a: &Prepared,
+    b: &Prepared,
+    verified: &[(Pose2, Evidence)],
+    chosen: usize,
+    params: &Params,
+) -> usize {
+    let (chosen_pose, chosen_e) = verified[chosen];
+    let consistent =
+        |e: &Evidence| e.agreement() >= params.min_agreement && !landmarks_disagree(e, params);
+    if !consistent(&chosen_e) {
+        return chosen;
+    }
+    let mut current = chosen;
+    for (i, (p, e)) in verified.iter().enumerate() {
+        if i == current
+            || !same_pose(p, &chosen_pose, b.centroid, params)
+            || !consistent(e)
+            || e.score < 0.9 * chosen_e.score
+        {
+            continue;
+        }
+        let (at_current, at_p) = verify::paired_closeness(a, b, &verified[current].0, p);
+        if at_p > at_current {
+            current = i;
+        }
+    }
+    current
+}
+
 /// Whether the pose `p` (evidence `e`) keeps the best pose's own landmark pairs (at least
 /// `subset_share` of its agreeing landmark points agree at the best and land within
 /// `subset_tolerance_m` of where it puts them) and owes its consistency to an overlap less
@@ -546,6 +581,7 @@ fn run(
         .collect();
     verified.sort_by(|x, y| y.1.score.total_cmp(&x.1.score));
     let best = choose_best(&verified, b.centroid, params);
+    let best = settle_among_neighbours(a, b, &verified, best, params);
     let chosen_best = verified.remove(best);
     verified.insert(0, chosen_best);
     let (best_pose, evidence) = verified[0];

@@ -263,7 +263,8 @@ impl Relevant {
 /// Refines a hypothesis (grid-local `a_from_b`) by coordinate ascent on the symmetric,
 /// direction-aware field score: first on the coarse level from two coarse cells and two
 /// heading steps, then on the fine level from two fine cells and half a degree down to a
-/// quarter of a fine cell.
+/// quarter of a fine cell; then on the surfaces' distances, summed and last on the points
+/// the steps share ([`paired_closeness`]), which does not reward a wider overlap.
 pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose2 {
     let coarse = a.search.cell_m;
     let fine = a.refine.cell_m;
@@ -287,11 +288,13 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
     );
     // The field score is flat within a cell of slack; finish on distances, which are not,
     // from close enough that the nearest structure is the right one.
-    polish(a, b, pose, fine, deg)
+    let pose = polish(a, b, pose, fine, deg);
+    polish_on_common_points(a, b, pose, fine, deg)
 }
 
 /// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
-/// directions and turned as much either way (about the overlap's centre); the first
+/// directions and turned as much either way (about the overlap's centre, and about either
+/// end of a long overlap by the angle that moves the other end as far); the first
 /// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
 /// and [`fits_as_well`] as the pose (`evidence`, `pose_closeness`). In a narrow overlap of
 /// walls and a rock or two, poses a few cells or a degree apart can explain the maps
@@ -328,6 +331,15 @@ pub fn nearby_alternative(
         .collect();
     probes.push(turned_about(a_from_b, c, turn_rad));
     probes.push(turned_about(a_from_b, c, -turn_rad));
+    // A band pinned at one end (the lander's edge, a crater) swings about it, sliding the
+    // short stretches of wall at its other end along themselves: turned about either end
+    // by the angle that moves the other end `probe_m`.
+    let [e0, e1] = evidence.overlap_ends;
+    let end_turn_rad = (probe_m / e0.distance_m(e1).max(1.0)).min(0.1);
+    for pivot in [e0, e1] {
+        probes.push(turned_about(a_from_b, pivot, end_turn_rad));
+        probes.push(turned_about(a_from_b, pivot, -end_turn_rad));
+    }
     let here = a_from_b.transform_point(c);
     for probe in probes {
         let p = climb(
@@ -339,6 +351,7 @@ pub fn nearby_alternative(
             (fine / 4.0, 0.03 * deg),
         );
         let p = polish(a, b, p, fine, deg);
+        let p = polish_on_common_points(a, b, p, fine, deg);
         let moved = p.transform_point(c).distance_m(here);
         let turned = realms_core::geometry::normalize_angle_rad(p.yaw_rad - a_from_b.yaw_rad).abs();
         if moved <= apart_m && turned <= apart_rad {
@@ -372,6 +385,84 @@ fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
 /// verification's counts, which tolerate a cell and a half, it tells poses a cell apart.
 pub fn closeness(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
     Relevant::pick(a, b, On::Refine, *a_from_b).smooth_score(a, b, a_from_b) as f64
+}
+
+/// [`closeness`] of two poses over the same points: a point counts, at both poses, only
+/// where it lands on the other map's known ground at both. Closeness and the verified
+/// counts are sums, so across a thin band of overlap a pose slid a few cells sideways
+/// scores more by widening the band (more points land near structure) even when every
+/// point it shares with the true pose lies farther from its match. On common points the
+/// comparison is fair: `(closeness at p, closeness at q)`.
+pub fn paired_closeness(a: &Prepared, b: &Prepared, p: &Pose2, q: &Pose2) -> (f64, f64) {
+    paired_on(&b.local_points, &a.local_points, a, b, p, q)
+}
+
+/// [`paired_closeness`] of `b_points` (on `a`) and `a_points` (on `b`).
+fn paired_on(
+    b_points: &[Surface],
+    a_points: &[Surface],
+    a: &Prepared,
+    b: &Prepared,
+    p: &Pose2,
+    q: &Pose2,
+) -> (f64, f64) {
+    fn one_way(points: &[Surface], target: &Level, p: &Pose2, q: &Pose2) -> (f64, f64) {
+        let (rp, rq) = (Rigid::new(p), Rigid::new(q));
+        let earn = |x: Point2| -> Option<f32> {
+            let (cx, cy) = target.cell_under(x);
+            if target.class_at(cx, cy) == Class::Unknown {
+                return None;
+            }
+            dist_interp(target, x).map(|d| (1.0 - d / 2.0).max(0.0))
+        };
+        points.iter().fold((0.0, 0.0), |(sp, sq), s| {
+            match (earn(rp.apply(s.p)), earn(rq.apply(s.p))) {
+                (Some(ep), Some(eq)) => (sp + f64::from(ep), sq + f64::from(eq)),
+                _ => (sp, sq),
+            }
+        })
+    }
+    let (bp, bq) = one_way(b_points, &a.refine, p, q);
+    let (ap, aq) = one_way(a_points, &b.refine, &p.inverse(), &q.inverse());
+    (bp + ap, bq + aq)
+}
+
+/// Coordinate ascent on [`paired_closeness`]: a move is taken when the points it shares
+/// with the current pose lie closer at it, so a wider overlap buys nothing.
+fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
+    let c = b.centroid;
+    let (mut step_xy, mut step_yaw) = (fine, 0.5 * deg);
+    let mut pose = start;
+    let mut relevant = Relevant::pick(a, b, On::Refine, start);
+    for _ in 0..80 {
+        if step_xy < fine / 8.0 && step_yaw < 0.02 * deg {
+            break;
+        }
+        relevant.keep_near(a, b, &pose);
+        let mut gain = 0.0;
+        let mut next = None;
+        for m in [
+            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
+            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
+            turned_about(&pose, c, step_yaw),
+            turned_about(&pose, c, -step_yaw),
+        ] {
+            let (here, there) = paired_on(&relevant.b_points, &relevant.a_points, a, b, &pose, &m);
+            if there - here > gain {
+                (gain, next) = (there - here, Some(m));
+            }
+        }
+        match next {
+            Some(m) => pose = m,
+            None => {
+                step_xy /= 2.0;
+                step_yaw /= 2.0;
+            }
+        }
+    }
+    pose
 }
 
 /// Whether `other` (a pose and its evidence) explains the maps about as well as `best`

@@ -32,6 +32,15 @@ fn run(pairs: &[Pair], what: &str) -> usize {
         let est = estimate_maps(&pair.a, &pair.b, &params);
         if common::accepted_and_right(&est, pair, &format!("{what} #{i}")) {
             accepted += 1;
+        } else {
+            let (m, rad) = est.a_from_b.map_or((f64::NAN, f64::NAN), |p| {
+                common::error(&p, &pair.a_from_b, &pair.b)
+            });
+            eprintln!(
+                "{what} #{i} refused ({m:.2} m, {:.2} deg off): {:?}",
+                rad.to_degrees(),
+                est.refusal
+            );
         }
     }
     accepted
@@ -268,13 +277,16 @@ fn a_band_free_to_swing_about_a_square_at_one_end_is_refused() {
 /// Lunar pairs at 20 % overlap: long bands across the hall. Turned about the band's middle by
 /// 0.3 m at its edge (a fraction of a degree), the walls at the band's ends keep most of
 /// the score even where its rocks pin the pose; the sharpness check turns at least 3
-/// degrees. On these 10 pairs that merges 6, all right; turned by 0.3 m at the edge alone,
-/// 5.
+/// degrees. On these 10 pairs that merges 5, all right; turned by 0.3 m at the edge alone,
+/// 4. (It merged 6 before the precision check also turned the pose about the band's ends:
+/// pair 7, found right to the centimetre, is now refused as imprecise. Over the 500 lunar
+/// pairs of `realms bench merge` at 10 and 20 %, seeds 1-5, that check refused 2 right
+/// merges and 2 wrong ones.)
 #[test]
 fn long_lunar_bands_pinned_by_their_rocks_are_merged() {
     let arena = common::lunar(2, 5, 120);
     let ok = run(&pairs(&arena, 0.2, 22, 10), "lunar 20 %");
-    assert!(ok >= 6, "only {ok} of 10 lunar pairs merged");
+    assert!(ok >= 5, "only {ok} of 10 lunar pairs merged");
 }
 
 /// `realms bench merge --seed 5`, lunar sparse at 10 %, pair 4: a band with a crater rim in
@@ -323,4 +335,37 @@ fn a_merge_a_restart_a_cell_away_explains_as_well_is_not_made() {
     let pair = common::bench_pair(&sources, 3, 20, "lunar-very-sparse", 24);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 3 very sparse 20 % pair 24");
+}
+
+/// `realms bench merge --seed 1`, lunar sparse at 20 % overlap, pair 14: a band with some 300
+/// rock and rim points in it, found right to 0.01 m and refused as imprecise, because
+/// refinement restarted nearby settled 0.14 m away with as large a score and sum of
+/// closeness. Slid sideways, a band widens, and every sum grows with the points that come
+/// into the overlap. Refinement now ends on the points two poses share
+/// ([`realms_merge::verify::paired_closeness`]), where that buys nothing, and the merge is
+/// made, and right.
+#[test]
+fn a_band_slid_sideways_does_not_outscore_the_truth() {
+    let sources: Vec<_> = (1..4).map(|s| common::lunar(s, 5, 120)).collect();
+    let pair = common::bench_pair(&sources, 1, 20, "lunar-sparse", 14);
+    let est = estimate_maps(&pair.a, &pair.b, &Params::default());
+    assert!(
+        common::accepted_and_right(&est, &pair, "seed 1 sparse 20 % pair 14"),
+        "refused: {:?}",
+        est.refusal
+    );
+}
+
+/// `realms bench merge --seed 1`, very sparse lunar arenas at 10 % overlap, pair 9: a band
+/// across the hall holding the lander's edge at one end and short stretches of wall at
+/// both ends. Swung about the lander by a degree, the walls slide along themselves and
+/// nothing else moves much: the truth and a pose 0.3 m off at the band's middle fit alike.
+/// The precision check now also turns the pose about each end of the band; the merge must
+/// not be made wrong (it is refused as imprecise).
+#[test]
+fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
+    let sources: Vec<_> = (1..4).map(common::lunar_very_sparse).collect();
+    let pair = common::bench_pair(&sources, 1, 10, "lunar-very-sparse", 9);
+    let est = estimate_maps(&pair.a, &pair.b, &Params::default());
+    common::accepted_and_right(&est, &pair, "seed 1 very sparse 10 % pair 9");
 }
