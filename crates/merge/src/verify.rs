@@ -397,6 +397,42 @@ pub fn paired_closeness(a: &Prepared, b: &Prepared, p: &Pose2, q: &Pose2) -> (f6
     paired_on(&b.local_points, &a.local_points, a, b, p, q)
 }
 
+/// What a point at grid-local `x` earns on `target` for [`closeness`]; `None` where it
+/// lands on unknown ground.
+fn earned(target: &Level, x: Point2) -> Option<f32> {
+    let (cx, cy) = target.cell_under(x);
+    if target.class_at(cx, cy) == Class::Unknown {
+        return None;
+    }
+    dist_interp(target, x).map(|d| (1.0 - d / 2.0).max(0.0))
+}
+
+/// The points that land on `target`'s known ground at `target_from_source`, each with what
+/// it earns there.
+fn earning(points: &[Surface], target: &Level, target_from_source: &Pose2) -> Vec<(Point2, f32)> {
+    let r = Rigid::new(target_from_source);
+    points
+        .iter()
+        .filter_map(|s| earned(target, r.apply(s.p)).map(|e| (s.p, e)))
+        .collect()
+}
+
+/// Over the points of `earning` that land on known ground at `target_from_source` too:
+/// what they earn at the pose `earning` was taken at, and at this one.
+fn paired_sums(
+    earning: &[(Point2, f32)],
+    target: &Level,
+    target_from_source: &Pose2,
+) -> (f64, f64) {
+    let r = Rigid::new(target_from_source);
+    earning.iter().fold((0.0, 0.0), |(here, there), (p, e)| {
+        match earned(target, r.apply(*p)) {
+            Some(moved) => (here + f64::from(*e), there + f64::from(moved)),
+            None => (here, there),
+        }
+    })
+}
+
 /// [`paired_closeness`] of `b_points` (on `a`) and `a_points` (on `b`).
 fn paired_on(
     b_points: &[Surface],
@@ -406,24 +442,12 @@ fn paired_on(
     p: &Pose2,
     q: &Pose2,
 ) -> (f64, f64) {
-    fn one_way(points: &[Surface], target: &Level, p: &Pose2, q: &Pose2) -> (f64, f64) {
-        let (rp, rq) = (Rigid::new(p), Rigid::new(q));
-        let earn = |x: Point2| -> Option<f32> {
-            let (cx, cy) = target.cell_under(x);
-            if target.class_at(cx, cy) == Class::Unknown {
-                return None;
-            }
-            dist_interp(target, x).map(|d| (1.0 - d / 2.0).max(0.0))
-        };
-        points.iter().fold((0.0, 0.0), |(sp, sq), s| {
-            match (earn(rp.apply(s.p)), earn(rq.apply(s.p))) {
-                (Some(ep), Some(eq)) => (sp + f64::from(ep), sq + f64::from(eq)),
-                _ => (sp, sq),
-            }
-        })
-    }
-    let (bp, bq) = one_way(b_points, &a.refine, p, q);
-    let (ap, aq) = one_way(a_points, &b.refine, &p.inverse(), &q.inverse());
+    let (bp, bq) = paired_sums(&earning(b_points, &a.refine, p), &a.refine, q);
+    let (ap, aq) = paired_sums(
+        &earning(a_points, &b.refine, &p.inverse()),
+        &b.refine,
+        &q.inverse(),
+    );
     (bp + ap, bq + aq)
 }
 
@@ -434,11 +458,19 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
     let (mut step_xy, mut step_yaw) = (fine, 0.5 * deg);
     let mut pose = start;
     let mut relevant = Relevant::pick(a, b, On::Refine, start);
+    let mut here = None;
     for _ in 0..80 {
         if step_xy < fine / 8.0 && step_yaw < 0.02 * deg {
             break;
         }
         relevant.keep_near(a, b, &pose);
+        // What the points earn at the current pose, worked out once for its six moves.
+        let (b_here, a_here) = here.get_or_insert_with(|| {
+            (
+                earning(&relevant.b_points, &a.refine, &pose),
+                earning(&relevant.a_points, &b.refine, &pose.inverse()),
+            )
+        });
         let mut gain = 0.0;
         let mut next = None;
         for m in [
@@ -449,13 +481,17 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
             turned_about(&pose, c, step_yaw),
             turned_about(&pose, c, -step_yaw),
         ] {
-            let (here, there) = paired_on(&relevant.b_points, &relevant.a_points, a, b, &pose, &m);
-            if there - here > gain {
-                (gain, next) = (there - here, Some(m));
+            let (b0, b1) = paired_sums(b_here, &a.refine, &m);
+            let (a0, a1) = paired_sums(a_here, &b.refine, &m.inverse());
+            if (b1 + a1) - (b0 + a0) > gain {
+                (gain, next) = ((b1 + a1) - (b0 + a0), Some(m));
             }
         }
         match next {
-            Some(m) => pose = m,
+            Some(m) => {
+                pose = m;
+                here = None;
+            }
             None => {
                 step_xy /= 2.0;
                 step_yaw /= 2.0;
