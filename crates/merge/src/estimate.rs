@@ -643,8 +643,8 @@ fn run(
                     a,
                     b,
                     (p, e),
-                    (&evidence, best_closeness),
-                    params.precision_share,
+                    (&best_pose, &evidence, best_closeness),
+                    (params.precision_score_share, params.precision_share),
                 )
         });
         if let Some(found) = settled_apart {

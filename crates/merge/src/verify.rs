@@ -358,7 +358,13 @@ pub fn nearby_alternative(
             continue;
         }
         let e = verify(a, b, &p, params.conflict_weight, On::Refine);
-        if fits_as_well(a, b, (&p, &e), (evidence, pose_closeness), share) {
+        if fits_as_well(
+            a,
+            b,
+            (&p, &e),
+            (a_from_b, evidence, pose_closeness),
+            (params.precision_score_share, share),
+        ) {
             return Some((p, e));
         }
     }
@@ -502,18 +508,24 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
 }
 
 /// Whether `other` (a pose and its evidence) explains the maps about as well as `best`
-/// (its evidence and [`closeness`]): at least `share` of its verified score and of its
-/// closeness. Both are needed: verification tolerates a cell and a half, so a pose a cell
-/// or two off that overlaps more ground can count as many agreeing cells as the true one;
-/// its surfaces do not lie as close.
+/// (its pose, evidence and [`closeness`]): at least `score_share` of its verified score, and
+/// `share` of its closeness, summed or on the points both poses share
+/// ([`paired_closeness`]). Verification tolerates a cell and a half, so a pose a cell or two
+/// off that overlaps more ground can count as many agreeing cells as the true one; its
+/// surfaces do not lie as close. And across a band, a pose slid sideways outscores the true
+/// one on every sum; on the points they share, the true pose fits as closely.
 pub fn fits_as_well(
     a: &Prepared,
     b: &Prepared,
     (pose, evidence): (&Pose2, &Evidence),
-    (best, best_closeness): (&Evidence, f64),
-    share: f64,
+    (best_pose, best, best_closeness): (&Pose2, &Evidence, f64),
+    (score_share, share): (f64, f64),
 ) -> bool {
-    evidence.score >= share * best.score && closeness(a, b, pose) >= share * best_closeness
+    evidence.score >= score_share * best.score
+        && (closeness(a, b, pose) >= share * best_closeness || {
+            let (at_best, at_pose) = paired_closeness(a, b, best_pose, pose);
+            at_pose >= share * at_best
+        })
 }
 
 /// Coordinate ascent on [`Relevant::smooth_score`] from half a cell and a quarter degree down.
