@@ -54,13 +54,6 @@ pub fn run(args: SlamArgs) -> Result<()> {
         ndt_refine: (!args.no_refine_on_hits).then(realms_slam::ndt::NdtConfig::default),
         ..Default::default()
     };
-    let mut mcfg = mcfg;
-    if let Some(v) = std::env::var("REALMS_RAD")
-        .ok()
-        .and_then(|v| v.parse().ok())
-    {
-        mcfg.loop_search_radius_m = v;
-    }
     let mut mapper = realms_slam::mapper::Mapper::new(mcfg);
     for scan in &log.scans {
         if !args.no_loop_closure {
@@ -89,10 +82,6 @@ pub fn run(args: SlamArgs) -> Result<()> {
         println!(
             "fast turns: headings searched at {} scans, the searched heading's match kept at {}",
             mapper.fast_turn_searches, mapper.fast_turn_taken
-        );
-        println!(
-            "stalled turns: matched again from the carried-on turn at {} scans, kept at {}",
-            mapper.stall_turn_searches, mapper.stall_turn_taken
         );
     }
     let duration = log.duration_s();
