@@ -351,6 +351,10 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// The share of the chosen pose's verified score a neighbour needs to be weighed against it
+/// in [`settle_among_neighbours`].
+const SETTLE_SCORE_SHARE: f64 = 0.9;
+
 /// Among the verified poses near the chosen one (`chosen`, an index into `verified`) that
 /// are as consistent and verify nearly as well, the one whose surfaces lie closest on the
 /// points they share ([`verify::paired_closeness`]). Across a thin band a pose slid a few
@@ -374,7 +378,7 @@ fn settle_among_neighbours(
         if i == current
             || !same_pose(p, &chosen_pose, b.centroid, params)
             || !consistent(e)
-            || e.score < 0.9 * chosen_e.score
+            || e.score < SETTLE_SCORE_SHARE * chosen_e.score
         {
             continue;
         }

@@ -96,8 +96,9 @@ pub struct Params {
     /// ... with at least `precision_score_share` of the best verified score and this share
     /// of its [`crate::verify::closeness`], summed or on the points both share
     /// ([`crate::verify::fits_as_well`]). In `realms bench merge` (lunar, seeds 1-8, 10 and
-    /// 20 %, 800 pairs) asking for the score and the sum from 0.13 m merged 441 pairs with 4
-    /// wrong, against 440 with 6 for the score alone from 0.15 m.
+    /// 20 %, 800 pairs), before refinement ended on shared points, asking for the score and
+    /// the sum (both at 0.97) from 0.13 m merged 441 pairs with 4 wrong, against 440 with 6
+    /// for the score alone from 0.15 m.
     pub precision_share: f64,
     /// The share of the best verified score a restart must reach to count against the
     /// merge. Lower than `precision_share`: a pose slid sideways across a band widens the

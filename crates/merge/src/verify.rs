@@ -142,13 +142,19 @@ struct Relevant {
     a_corners: [Point2; 4],
 }
 
+/// What a surface point earns for lying `d` fine cells from the other map's nearest
+/// structure: 1 on it, nothing from two cells out.
+fn earn(d: f32) -> f32 {
+    (1.0 - d / 2.0).max(0.0)
+}
+
 /// [`Relevant::smooth_score`] of one map's points landing on the other's level.
 fn smooth_one_way(points: &[Surface], target: &Level, target_from_source: &Pose2) -> f32 {
     let r = Rigid::new(target_from_source);
     points
         .iter()
         .filter_map(|s| dist_interp(target, r.apply(s.p)))
-        .map(|d| (1.0 - d / 2.0).max(0.0))
+        .map(earn)
         .sum()
 }
 
@@ -294,9 +300,10 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
 
 /// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
 /// directions and turned as much either way (about the overlap's centre, and about either
-/// end of a long overlap by the angle that moves the other end as far); the first
+/// end of the overlap's long axis by the angle that moves the other end as far); the first
 /// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
-/// and [`fits_as_well`] as the pose (`evidence`, `pose_closeness`). In a narrow overlap of
+/// and [`fits_as_well`] as the pose (`a_from_b`, `evidence`, `pose_closeness`) with
+/// `params.precision_score_share` of its score and `share` of its closeness. In a narrow overlap of
 /// walls and a rock or two, poses a few cells or a degree apart can explain the maps
 /// equally well; then the merge is not precise, whatever its confidence.
 #[allow(clippy::too_many_arguments)]
@@ -400,7 +407,13 @@ pub fn closeness(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
 /// point it shares with the true pose lies farther from its match. On common points the
 /// comparison is fair: `(closeness at p, closeness at q)`.
 pub fn paired_closeness(a: &Prepared, b: &Prepared, p: &Pose2, q: &Pose2) -> (f64, f64) {
-    paired_on(&b.local_points, &a.local_points, a, b, p, q)
+    let (bp, bq) = paired_sums(&earning(&b.local_points, &a.refine, p), &a.refine, q);
+    let (ap, aq) = paired_sums(
+        &earning(&a.local_points, &b.refine, &p.inverse()),
+        &b.refine,
+        &q.inverse(),
+    );
+    (bp + ap, bq + aq)
 }
 
 /// What a point at grid-local `x` earns on `target` for [`closeness`]; `None` where it
@@ -410,7 +423,7 @@ fn earned(target: &Level, x: Point2) -> Option<f32> {
     if target.class_at(cx, cy) == Class::Unknown {
         return None;
     }
-    dist_interp(target, x).map(|d| (1.0 - d / 2.0).max(0.0))
+    dist_interp(target, x).map(earn)
 }
 
 /// The points that land on `target`'s known ground at `target_from_source`, each with what
@@ -439,24 +452,6 @@ fn paired_sums(
     })
 }
 
-/// [`paired_closeness`] of `b_points` (on `a`) and `a_points` (on `b`).
-fn paired_on(
-    b_points: &[Surface],
-    a_points: &[Surface],
-    a: &Prepared,
-    b: &Prepared,
-    p: &Pose2,
-    q: &Pose2,
-) -> (f64, f64) {
-    let (bp, bq) = paired_sums(&earning(b_points, &a.refine, p), &a.refine, q);
-    let (ap, aq) = paired_sums(
-        &earning(a_points, &b.refine, &p.inverse()),
-        &b.refine,
-        &q.inverse(),
-    );
-    (bp + ap, bq + aq)
-}
-
 /// Coordinate ascent on [`paired_closeness`]: a move is taken when the points it shares
 /// with the current pose lie closer at it, so a wider overlap buys nothing.
 fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
@@ -479,14 +474,7 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
         });
         let mut gain = 0.0;
         let mut next = None;
-        for m in [
-            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
-            turned_about(&pose, c, step_yaw),
-            turned_about(&pose, c, -step_yaw),
-        ] {
+        for m in moves(&pose, c, step_xy, step_yaw) {
             let (b0, b1) = paired_sums(b_here, &a.refine, &m);
             let (a0, a1) = paired_sums(a_here, &b.refine, &m.inverse());
             if (b1 + a1) - (b0 + a0) > gain {
@@ -524,7 +512,8 @@ pub fn fits_as_well(
     evidence.score >= score_share * best.score
         && (closeness(a, b, pose) >= share * best_closeness || {
             let (at_best, at_pose) = paired_closeness(a, b, best_pose, pose);
-            at_pose >= share * at_best
+            // Sharing no points is no evidence of fitting as well.
+            at_best > 0.0 && at_pose >= share * at_best
         })
 }
 
@@ -540,14 +529,7 @@ fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose
             break;
         }
         let mut improved = false;
-        for m in [
-            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
-            turned_about(&pose, c, step_yaw),
-            turned_about(&pose, c, -step_yaw),
-        ] {
+        for m in moves(&pose, c, step_xy, step_yaw) {
             let s = relevant.smooth_score(a, b, &m);
             if s > best {
                 (best, pose, improved) = (s, m, true);
@@ -559,6 +541,19 @@ fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose
         }
     }
     pose
+}
+
+/// The six moves coordinate ascent tries from `pose`: `step_xy` along each axis, and
+/// `step_yaw` either way about the moving map's point `c`.
+fn moves(pose: &Pose2, c: Point2, step_xy: f64, step_yaw: f64) -> [Pose2; 6] {
+    [
+        Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
+        Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
+        Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
+        Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
+        turned_about(pose, c, step_yaw),
+        turned_about(pose, c, -step_yaw),
+    ]
 }
 
 /// `p` turned by `dyaw` about the point `c` of the moving map (grid-local metres).
@@ -589,14 +584,7 @@ fn climb(
         if step_xy < min_steps.0 && step_yaw < min_steps.1 {
             break;
         }
-        let moves = [
-            Pose2::new(pose.x_m + step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m - step_xy, pose.y_m, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m + step_xy, pose.yaw_rad),
-            Pose2::new(pose.x_m, pose.y_m - step_xy, pose.yaw_rad),
-            turned_about(&pose, c, step_yaw),
-            turned_about(&pose, c, -step_yaw),
-        ];
+        let moves = moves(&pose, c, step_xy, step_yaw);
         let mut improved = false;
         for m in moves {
             let s = relevant.field_score(a, b, &m);

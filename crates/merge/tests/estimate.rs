@@ -368,6 +368,13 @@ fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
     let pair = common::bench_pair(&sources, 1, 10, "lunar-very-sparse", 9);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 1 very sparse 10 % pair 9");
+    assert!(
+        est.refusal
+            .as_deref()
+            .is_some_and(|r| r.starts_with("imprecise")),
+        "{:?}",
+        est.refusal
+    );
 }
 
 /// `realms bench merge --seed 8`, lunar sparse at 10 % overlap, pair 8: the best pose is
@@ -382,4 +389,11 @@ fn a_band_slid_sideways_is_not_merged_when_the_truth_fits_as_closely() {
     let pair = common::bench_pair(&sources, 8, 10, "lunar-sparse", 8);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 8 sparse 10 % pair 8");
+    assert!(
+        est.refusal
+            .as_deref()
+            .is_some_and(|r| r.starts_with("imprecise")),
+        "{:?}",
+        est.refusal
+    );
 }
