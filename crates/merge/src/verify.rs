@@ -273,7 +273,6 @@ impl Relevant {
 /// the steps share ([`paired_closeness`]), which does not reward a wider overlap.
 pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose2 {
     let coarse = a.search.cell_m;
-    let fine = a.refine.cell_m;
     let yaw = params.yaw_step_rad;
     let deg = 1f64.to_radians();
     let pose = climb(
@@ -284,11 +283,20 @@ pub fn refine(a: &Prepared, b: &Prepared, start: Pose2, params: &Params) -> Pose
         (2.0 * coarse, 2.0 * yaw),
         (coarse / 2.0, 0.25 * deg),
     );
+    refine_fine(a, b, pose)
+}
+
+/// The fine level's part of [`refine`]: coordinate ascent on the field score from two fine
+/// cells and half a degree down to a quarter of a fine cell, then on the surfaces'
+/// distances, summed and last on the points the steps share.
+fn refine_fine(a: &Prepared, b: &Prepared, start: Pose2) -> Pose2 {
+    let fine = a.refine.cell_m;
+    let deg = 1f64.to_radians();
     let pose = climb(
         a,
         b,
         On::Refine,
-        pose,
+        start,
         (2.0 * fine, 0.5 * deg),
         (fine / 4.0, 0.03 * deg),
     );
@@ -321,8 +329,6 @@ pub fn nearby_alternative(
     if evidence.score <= 0.0 {
         return None;
     }
-    let fine = a.refine.cell_m;
-    let deg = 1f64.to_radians();
     let c = evidence.overlap_centre;
     let turn_rad = (probe_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
     let apart_rad = (apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
@@ -349,16 +355,7 @@ pub fn nearby_alternative(
     }
     let here = a_from_b.transform_point(c);
     for probe in probes {
-        let p = climb(
-            a,
-            b,
-            On::Refine,
-            probe,
-            (2.0 * fine, 0.5 * deg),
-            (fine / 4.0, 0.03 * deg),
-        );
-        let p = polish(a, b, p, fine, deg);
-        let p = polish_on_common_points(a, b, p, fine, deg);
+        let p = refine_fine(a, b, probe);
         let moved = p.transform_point(c).distance_m(here);
         let turned = realms_core::geometry::normalize_angle_rad(p.yaw_rad - a_from_b.yaw_rad).abs();
         if moved <= apart_m && turned <= apart_rad {
@@ -407,13 +404,40 @@ pub fn closeness(a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> f64 {
 /// point it shares with the true pose lies farther from its match. On common points the
 /// comparison is fair: `(closeness at p, closeness at q)`.
 pub fn paired_closeness(a: &Prepared, b: &Prepared, p: &Pose2, q: &Pose2) -> (f64, f64) {
-    let (bp, bq) = paired_sums(&earning(&b.local_points, &a.refine, p), &a.refine, q);
-    let (ap, aq) = paired_sums(
-        &earning(&a.local_points, &b.refine, &p.inverse()),
-        &b.refine,
-        &q.inverse(),
-    );
-    (bp + ap, bq + aq)
+    Earnings::at(&b.local_points, &a.local_points, a, b, p).paired_with(a, b, q)
+}
+
+/// Both maps' points that land on the other's known ground at one pose, each with what it
+/// earns there ([`closeness`]): the first half of [`paired_closeness`], kept to pair with
+/// several poses.
+struct Earnings {
+    /// The second map's points, on the first.
+    b: Vec<(Point2, f32)>,
+    /// The first map's points, on the second.
+    a: Vec<(Point2, f32)>,
+}
+
+impl Earnings {
+    /// What `b_points` earn on `a` and `a_points` on `b` at grid-local `a_from_b`.
+    fn at(
+        b_points: &[Surface],
+        a_points: &[Surface],
+        a: &Prepared,
+        b: &Prepared,
+        a_from_b: &Pose2,
+    ) -> Earnings {
+        Earnings {
+            b: earning(b_points, &a.refine, a_from_b),
+            a: earning(a_points, &b.refine, &a_from_b.inverse()),
+        }
+    }
+
+    /// [`paired_closeness`] of the pose these were taken at and `a_from_b`.
+    fn paired_with(&self, a: &Prepared, b: &Prepared, a_from_b: &Pose2) -> (f64, f64) {
+        let (bp, bq) = paired_sums(&self.b, &a.refine, a_from_b);
+        let (ap, aq) = paired_sums(&self.a, &b.refine, &a_from_b.inverse());
+        (bp + ap, bq + aq)
+    }
 }
 
 /// What a point at grid-local `x` earns on `target` for [`closeness`]; `None` where it
@@ -466,19 +490,15 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
         }
         relevant.keep_near(a, b, &pose);
         // What the points earn at the current pose, worked out once for its six moves.
-        let (b_here, a_here) = here.get_or_insert_with(|| {
-            (
-                earning(&relevant.b_points, &a.refine, &pose),
-                earning(&relevant.a_points, &b.refine, &pose.inverse()),
-            )
+        let earned_here = here.get_or_insert_with(|| {
+            Earnings::at(&relevant.b_points, &relevant.a_points, a, b, &pose)
         });
         let mut gain = 0.0;
         let mut next = None;
         for m in moves(&pose, c, step_xy, step_yaw) {
-            let (b0, b1) = paired_sums(b_here, &a.refine, &m);
-            let (a0, a1) = paired_sums(a_here, &b.refine, &m.inverse());
-            if (b1 + a1) - (b0 + a0) > gain {
-                (gain, next) = ((b1 + a1) - (b0 + a0), Some(m));
+            let (at_pose, at_move) = earned_here.paired_with(a, b, &m);
+            if at_move - at_pose > gain {
+                (gain, next) = (at_move - at_pose, Some(m));
             }
         }
         match next {
@@ -584,9 +604,8 @@ fn climb(
         if step_xy < min_steps.0 && step_yaw < min_steps.1 {
             break;
         }
-        let moves = moves(&pose, c, step_xy, step_yaw);
         let mut improved = false;
-        for m in moves {
+        for m in moves(&pose, c, step_xy, step_yaw) {
             let s = relevant.field_score(a, b, &m);
             if s > best {
                 best = s;

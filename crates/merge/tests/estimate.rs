@@ -25,6 +25,17 @@ fn pairs(
         .collect()
 }
 
+/// Fails unless `est` was refused as imprecise (a second optimum nearby fits as well).
+fn assert_refused_as_imprecise(est: &realms_merge::Estimate) {
+    assert!(
+        est.refusal
+            .as_deref()
+            .is_some_and(|r| r.starts_with("imprecise")),
+        "{:?}",
+        est.refusal
+    );
+}
+
 fn run(pairs: &[Pair], what: &str) -> usize {
     let params = Params::default();
     let mut accepted = 0;
@@ -296,8 +307,7 @@ fn long_lunar_bands_pinned_by_their_rocks_are_merged() {
 /// of the overlap, so it is no alternative; the merge is made, and right.
 #[test]
 fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
-    let sources: Vec<_> = (5..8).map(|s| common::lunar(s, 5, 120)).collect();
-    let pair = common::bench_pair(&sources, 5, 10, "lunar-sparse", 4);
+    let pair = common::lunar_bench_pair("lunar-sparse", 5, 10, 4);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert!(
         common::accepted_and_right(&est, &pair, "seed 5 pair 4"),
@@ -331,8 +341,7 @@ fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
 /// refused as imprecise).
 #[test]
 fn a_merge_a_restart_a_cell_away_explains_as_well_is_not_made() {
-    let sources: Vec<_> = (3..6).map(common::lunar_very_sparse).collect();
-    let pair = common::bench_pair(&sources, 3, 20, "lunar-very-sparse", 24);
+    let pair = common::lunar_bench_pair("lunar-very-sparse", 3, 20, 24);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 3 very sparse 20 % pair 24");
 }
@@ -346,8 +355,7 @@ fn a_merge_a_restart_a_cell_away_explains_as_well_is_not_made() {
 /// made, and right.
 #[test]
 fn a_band_slid_sideways_does_not_outscore_the_truth() {
-    let sources: Vec<_> = (1..4).map(|s| common::lunar(s, 5, 120)).collect();
-    let pair = common::bench_pair(&sources, 1, 20, "lunar-sparse", 14);
+    let pair = common::lunar_bench_pair("lunar-sparse", 1, 20, 14);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert!(
         common::accepted_and_right(&est, &pair, "seed 1 sparse 20 % pair 14"),
@@ -364,17 +372,10 @@ fn a_band_slid_sideways_does_not_outscore_the_truth() {
 /// not be made wrong (it is refused as imprecise).
 #[test]
 fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
-    let sources: Vec<_> = (1..4).map(common::lunar_very_sparse).collect();
-    let pair = common::bench_pair(&sources, 1, 10, "lunar-very-sparse", 9);
+    let pair = common::lunar_bench_pair("lunar-very-sparse", 1, 10, 9);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 1 very sparse 10 % pair 9");
-    assert!(
-        est.refusal
-            .as_deref()
-            .is_some_and(|r| r.starts_with("imprecise")),
-        "{:?}",
-        est.refusal
-    );
+    assert_refused_as_imprecise(&est);
 }
 
 /// `realms bench merge --seed 8`, lunar sparse at 10 % overlap, pair 8: the best pose is
@@ -385,15 +386,8 @@ fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
 /// and 97 % of the closeness, summed or on the shared points, and the merge is refused.
 #[test]
 fn a_band_slid_sideways_is_not_merged_when_the_truth_fits_as_closely() {
-    let sources: Vec<_> = (8..11).map(|s| common::lunar(s, 5, 120)).collect();
-    let pair = common::bench_pair(&sources, 8, 10, "lunar-sparse", 8);
+    let pair = common::lunar_bench_pair("lunar-sparse", 8, 10, 8);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     common::accepted_and_right(&est, &pair, "seed 8 sparse 10 % pair 8");
-    assert!(
-        est.refusal
-            .as_deref()
-            .is_some_and(|r| r.starts_with("imprecise")),
-        "{:?}",
-        est.refusal
-    );
+    assert_refused_as_imprecise(&est);
 }

@@ -84,6 +84,20 @@ pub fn bench_pair(
         .expect("the sources have known cells")
 }
 
+/// Pair `index` of `realms bench merge --seed SEED` for a lunar kind (`lunar-sparse` or
+/// `lunar-very-sparse`) at `overlap_pct`, cut from the kind's three arenas as the bench
+/// builds them.
+pub fn lunar_bench_pair(kind: &str, seed: u64, overlap_pct: u32, index: usize) -> Pair {
+    let sources: Vec<_> = (seed..seed + 3)
+        .map(|s| match kind {
+            "lunar-sparse" => lunar(s, 5, 120),
+            "lunar-very-sparse" => lunar_very_sparse(s),
+            other => panic!("not a lunar kind of the bench: {other}"),
+        })
+        .collect();
+    bench_pair(&sources, seed, overlap_pct, kind, index)
+}
+
 /// Translation error at the second map's known centre (metres) and heading error (radians).
 pub fn error(found: &Pose2, truth: &Pose2, b: &Map) -> (f64, f64) {
     let centre: Point2 = b
