@@ -83,6 +83,10 @@ pub fn run(args: SlamArgs) -> Result<()> {
             "fast turns: headings searched at {} scans, the searched heading's match kept at {}",
             mapper.fast_turn_searches, mapper.fast_turn_taken
         );
+        println!(
+            "stalled turns: matched again from the carried-on turn at {} scans, kept at {}",
+            mapper.stall_turn_searches, mapper.stall_turn_taken
+        );
     }
     let duration = log.duration_s();
     println!(

@@ -107,8 +107,14 @@ pub fn rover_mapper_config() -> MapperConfig {
     // The rover turns at most 6 degrees between scans (1 rad/s), and the gyro's heading
     // holds a match anyway: no search over headings in fast turns.
     cfg.fast_turn = None;
+    cfg.stall_turn = None;
     // The rovers' closure window stays at 2.5 m, what their replays were tuned with.
     cfg.loop_window_m = 2.5;
+    // And their closure candidates are the submaps that began near: searching those that
+    // pass near as well closed more loops in the replays but did no better (seeds 1-8:
+    // median rover 0.085 m against 0.091 m, worst per seed 0.130 m against 0.121 m;
+    // BENCHMARKS.md, twenty-ninth session).
+    cfg.loop_search_nearest_keyframe = false;
     // With the gyro holding the heading the map drifts about 1 % of the path (BENCHMARKS.md);
     // a closure asking for five times that is the lander's square fitted one side over.
     // The heading creeps a degree or two over a whole mission's few hundred metres; 3

@@ -68,8 +68,13 @@ pub struct MapperConfig {
     pub submap_keyframes: usize,
     /// Loop closures are searched at every this many keyframes.
     pub loop_every_keyframes: usize,
-    /// Finished submaps whose origin is within this distance are searched for closures, m.
+    /// Finished submaps within this distance are searched for closures, metres ...
     pub loop_search_radius_m: f64,
+    /// ... measured to the submap's nearest keyframe (`true`) or to its first (`false`). A
+    /// submap spans several metres of path, and one passing a metre away may have begun
+    /// farther off than the radius: ACES's last loop stayed open that way (BENCHMARKS.md,
+    /// twenty-ninth session).
+    pub loop_search_nearest_keyframe: bool,
     /// Half-width of the translation window of the closure search, metres.
     pub loop_window_m: f64,
     /// Half-width of the rotation window of the closure search, radians.
@@ -124,6 +129,10 @@ pub struct MapperConfig {
     /// headings: with a gyro, `max_heading_step_rad` holds the heading instead, and would
     /// redo a searched match.
     pub fast_turn: Option<FastTurn>,
+    /// Where the wheels stop turning while the scans were turning, also match from the
+    /// heading the scans' turn carries on to (see [`StallTurn`]); `None`: the wheels'
+    /// prediction alone. For wheel-only headings: a gyro does not stall with the wheels.
+    pub stall_turn: Option<StallTurn>,
     /// Refine each tracking match on the tracking submap's hits themselves, per-cell means
     /// and spreads, free of the occupancy grid's pull towards cell centres (see
     /// [`crate::ndt`]; the refinement is bounded, also in how far it may move the match back
@@ -148,6 +157,23 @@ pub struct FastTurn {
     /// Step of the search, radians.
     pub step_rad: f64,
     /// Mean occupancy by which the searched heading's match must beat the prediction's.
+    pub margin: f64,
+}
+
+/// Odometry that stalls while the robot turns (the readings stop for most of a second, then
+/// catch up), or whose turn ends a scan before the robot's, predicts no turn where the scans
+/// were turning; matched from there, a scan follows only part of the turn and the heading
+/// is left 10-15 degrees short (MIT CSAIL at 171 and 370 s, BENCHMARKS.md). When the
+/// predicted turn is less than `stalled_share` of the last matched scan's, and that was more
+/// than `min_turn_rad`, the scan is also matched from the heading the last turn carries on
+/// to (a constant turn rate), and that match kept if it scores `margin` more.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StallTurn {
+    /// The last matched scan's turn beyond which the robot counts as turning, radians.
+    pub min_turn_rad: f64,
+    /// The share of that turn the prediction must fall under.
+    pub stalled_share: f64,
+    /// Mean occupancy by which the carried-on turn's match must beat the prediction's.
     pub margin: f64,
 }
 
@@ -253,6 +279,7 @@ impl Default for MapperConfig {
             submap_keyframes: 30,
             loop_every_keyframes: 2,
             loop_search_radius_m: 8.0,
+            loop_search_nearest_keyframe: true,
             // Wide enough for a long loop's drift on wheel odometry (MIT CSAIL's is metres);
             // the drift bound below narrows it where the two ends were joined recently.
             loop_window_m: 5.0,
@@ -288,6 +315,11 @@ impl Default for MapperConfig {
                 turn_rad: 10f64.to_radians(),
                 search_rad: 20f64.to_radians(),
                 step_rad: 1f64.to_radians(),
+                margin: 0.1,
+            }),
+            stall_turn: Some(StallTurn {
+                min_turn_rad: 3f64.to_radians(),
+                stalled_share: 0.5,
                 margin: 0.1,
             }),
             ndt_refine: None,
@@ -406,6 +438,12 @@ pub struct Mapper {
     pub fast_turn_searches: usize,
     /// ... and the matches from the searched heading that were kept.
     pub fast_turn_taken: usize,
+    /// Scans matched again for a stalled turn ([`StallTurn`]) ...
+    pub stall_turn_searches: usize,
+    /// ... and the matches from the carried-on turn that were kept.
+    pub stall_turn_taken: usize,
+    /// The last matched scan's motion, for [`StallTurn`]; `None` after a scan not matched.
+    last_matched_delta: Option<Pose2>,
     /// The finished submaps drawn together, for the map.
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
@@ -445,6 +483,9 @@ impl Mapper {
             relocalise_searches: 0,
             fast_turn_searches: 0,
             fast_turn_taken: 0,
+            stall_turn_searches: 0,
+            stall_turn_taken: 0,
+            last_matched_delta: None,
             assembly: Assembly::new(cfg.frontend.resolution_m)
                 .with_miss_rule(cfg.frontend.miss_rule),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
@@ -575,6 +616,25 @@ impl Mapper {
                             self.fast_turn_taken += 1;
                         }
                     }
+                    if let (Some(stall), Some(last)) =
+                        (self.cfg.stall_turn, self.last_matched_delta)
+                        && last.yaw_rad.abs() > stall.min_turn_rad
+                        && turn_rad.abs() < stall.stalled_share * last.yaw_rad.abs()
+                    {
+                        self.stall_turn_searches += 1;
+                        let carried_on =
+                            Pose2::new(predicted.x_m, predicted.y_m, before.yaw_rad + last.yaw_rad);
+                        let alt = match_scan(
+                            map,
+                            &dense,
+                            origin.inverse() * carried_on,
+                            &self.cfg.frontend.matcher,
+                        );
+                        if alt.score > m.score + stall.margin {
+                            m = alt;
+                            self.stall_turn_taken += 1;
+                        }
+                    }
                     if let Some(gate) = self.cfg.max_heading_step_rad
                         && normalize_angle_rad(m.pose.yaw_rad - prior.yaw_rad).abs() > gate
                     {
@@ -620,6 +680,7 @@ impl Mapper {
             };
             // The first scan fixes the pose as firmly as a match would.
             self.last_matched_odom.get_or_insert(odom);
+            self.last_matched_delta = score.map(|_| before.inverse() * self.pose);
             let observed = TrackedScan {
                 time_s,
                 odom_delta,
@@ -924,9 +985,15 @@ impl Mapper {
                 {
                     return None;
                 }
-                let d = self.graph.nodes[sub.origin_node]
-                    .position()
-                    .distance_m(pose.position());
+                let end = if self.cfg.loop_search_nearest_keyframe {
+                    (sub.origin_node + sub.keyframes).min(self.graph.nodes.len())
+                } else {
+                    sub.origin_node + 1
+                };
+                let d = self.graph.nodes[sub.origin_node..end]
+                    .iter()
+                    .map(|n| n.position().distance_m(pose.position()))
+                    .fold(f64::INFINITY, f64::min);
                 (d <= self.cfg.loop_search_radius_m).then_some((d, s))
             })
             .collect();
