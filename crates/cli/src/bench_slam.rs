@@ -116,6 +116,21 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.depth_features = true,
     },
     Variant {
+        name: "no-still-hold",
+        what: "a rover turning in place matched with the usual pull towards the wheels' position, not held to it",
+        apply: |c| c.mapper.still_hold = None,
+    },
+    Variant {
+        name: "still-hold-30",
+        what: "a rover turning in place pulled towards the wheels' position with a translation prior of 30 per point per m^2, not held to it",
+        apply: |c| {
+            c.mapper.still_hold = Some(realms_slam::mapper::StillHold {
+                below_m: 0.002,
+                translation_weight: 30.0,
+            })
+        },
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,
@@ -283,7 +298,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     println!("# realms bench slam");
     println!();
     println!(
-        "scenario: {source}, {} rovers; seeds {}..{}; missions of {:.0} min{}, ideal communication; each rover's SLAM replayed on the mission's captured sensor input; {workers} seeds at a time; machine: {}",
+        "scenario: {source}, {} rovers; seeds {}..{}; missions of {:.0} min{}, {}; each rover's SLAM replayed on the mission's captured sensor input; {workers} seeds at a time; machine: {}",
         base.rovers.count,
         args.first_seed,
         args.first_seed + args.seeds,
@@ -292,6 +307,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             ", no faults"
         } else {
             ", the scenario's faults"
+        },
+        if args.radio {
+            "the simulated radio"
+        } else {
+            "ideal communication"
         },
         crate::bench::machine()
     );
@@ -307,7 +327,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             s.faults.clear();
         }
         let options = MissionOptions {
-            ideal_comms: true,
+            ideal_comms: !args.radio,
             ..MissionOptions::default()
         };
         let world = World::new(&s);

@@ -217,6 +217,10 @@ pub struct BenchSlamArgs {
     /// Drop the scenario's scheduled faults (slip bursts, sensor dropouts, power loss).
     #[arg(long)]
     pub no_faults: bool,
+    /// Run the missions over the simulated radio, as `realms mission` does (default: ideal
+    /// communication). The rovers then drive the paths the default mission's report grades.
+    #[arg(long)]
+    pub radio: bool,
     /// Seeds run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,

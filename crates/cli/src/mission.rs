@@ -144,10 +144,18 @@ pub fn run(args: MissionArgs) -> Result<()> {
             e.localisation.len(),
             e.map.map_or(String::new(), |m| format!(
                 "; map: {:.1} % of occupied cells right, {:.0} % of the explorable area known, \
-                 {:.0} % of known true hazards flagged ({:.0} % of hazard cells right)",
+                 {} ({:.0} % of hazard cells right)",
                 100.0 * m.occupied_correct,
                 100.0 * m.explorable_known,
-                100.0 * m.true_hazards_flagged,
+                if m.true_hazards_known == 0 {
+                    "no true hazard in the ground it knows".to_string()
+                } else {
+                    format!(
+                        "{:.0} % of the {} true hazard cells it knows flagged",
+                        100.0 * m.true_hazards_flagged,
+                        m.true_hazards_known
+                    )
+                },
                 100.0 * m.hazard_correct
             ))
         );

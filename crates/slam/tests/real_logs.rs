@@ -334,6 +334,39 @@ fn a_match_that_turns_against_the_gyro_is_held_to_its_heading() {
     assert_eq!(holds, 1);
 }
 
+/// The wheels say the robot turned in place; the scan (the same real scan, seen from 5 cm
+/// further ahead) says it also moved. Matched as usual the pose follows the scan; held
+/// ([`realms_slam::mapper::StillHold`], as the rovers are), it keeps the wheels' position.
+#[test]
+fn a_rover_turning_in_place_is_held_where_its_wheels_stood() {
+    use realms_slam::frontend::scan_points;
+    use realms_slam::mapper::{Mapper, MapperConfig, StillHold};
+    let l = log("intel");
+    let points = scan_points(&l.scans[0], 0.1, 25.0);
+    let turned = Pose2::new(0.0, 0.0, 1f64.to_radians());
+    let truly = Pose2::new(0.05, 0.0, 0.0) * turned;
+    let seen: Vec<Point2> = points
+        .iter()
+        .map(|p| truly.inverse().transform_point(*p))
+        .collect();
+    let position_after = |still_hold: Option<StillHold>| {
+        let mut mapper = Mapper::new(MapperConfig {
+            still_hold,
+            ..Default::default()
+        });
+        mapper.add_points(0.0, Pose2::IDENTITY, points.clone());
+        let t = mapper.add_points(0.1, turned, seen.clone());
+        t.pose.position().distance_m(Point2::new(0.0, 0.0))
+    };
+    let free = position_after(None);
+    assert!(free > 0.03, "the match follows the scan: {free}");
+    let held = position_after(Some(StillHold {
+        below_m: 0.002,
+        translation_weight: 1e7,
+    }));
+    assert!(held < 0.002, "held where the wheels stood: {held}");
+}
+
 #[test]
 fn odometry_that_stalls_then_jumps_is_not_counted_twice() {
     use realms_slam::mapper::{Mapper, MapperConfig};
