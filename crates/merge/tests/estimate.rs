@@ -36,6 +36,15 @@ fn assert_refused_as_imprecise(est: &realms_merge::Estimate) {
     );
 }
 
+/// Fails unless `est` merged `pair` right (and says why it refused, if it did).
+fn assert_merged_right(est: &realms_merge::Estimate, pair: &Pair, what: &str) {
+    assert!(
+        common::accepted_and_right(est, pair, what),
+        "{what} refused: {:?}",
+        est.refusal
+    );
+}
+
 fn run(pairs: &[Pair], what: &str) -> usize {
     let params = Params::default();
     let mut accepted = 0;
@@ -309,11 +318,7 @@ fn long_lunar_bands_pinned_by_their_rocks_are_merged() {
 fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
     let pair = common::lunar_bench_pair("lunar-sparse", 5, 10, 4);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
-    assert!(
-        common::accepted_and_right(&est, &pair, "seed 5 pair 4"),
-        "refused: {:?}",
-        est.refusal
-    );
+    assert_merged_right(&est, &pair, "seed 5 pair 4");
     let strict = estimate_maps(
         &pair.a,
         &pair.b,
@@ -357,11 +362,7 @@ fn a_merge_a_restart_a_cell_away_explains_as_well_is_not_made() {
 fn a_band_slid_sideways_does_not_outscore_the_truth() {
     let pair = common::lunar_bench_pair("lunar-sparse", 1, 20, 14);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
-    assert!(
-        common::accepted_and_right(&est, &pair, "seed 1 sparse 20 % pair 14"),
-        "refused: {:?}",
-        est.refusal
-    );
+    assert_merged_right(&est, &pair, "seed 1 sparse 20 % pair 14");
 }
 
 /// `realms bench merge --seed 1`, very sparse lunar arenas at 10 % overlap, pair 9: a band

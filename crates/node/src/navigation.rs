@@ -693,26 +693,10 @@ impl Navigator {
     fn with_bumps(&self, map: &Grid<i8>) -> Grid<i8> {
         let mut out = map.clone();
         let g = *map.geometry();
-        let reach = (BUMP_RADIUS_M / g.resolution_m).ceil() as i64;
         for (p, _) in &self.bumps {
-            let Some(c) = g.world_to_cell(*p) else {
-                continue;
-            };
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let (x, y) = (c.x as i64 + dx, c.y as i64 + dy);
-                    if x < 0 || y < 0 {
-                        continue;
-                    }
-                    let cell = Cell {
-                        x: x as usize,
-                        y: y as usize,
-                    };
-                    if g.cell_center(cell).distance_m(*p) <= BUMP_RADIUS_M
-                        && let Some(v) = out.get_mut(cell.x, cell.y)
-                    {
-                        *v = 100;
-                    }
+            for c in g.cells_within(*p, BUMP_RADIUS_M) {
+                if let Some(v) = out.get_mut(c.x, c.y) {
+                    *v = 100;
                 }
             }
         }

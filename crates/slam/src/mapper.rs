@@ -634,14 +634,9 @@ impl Mapper {
                         && turn_rad.abs() > fast.turn_rad
                     {
                         self.fast_turn_searches += 1;
-                        if let Some(better) = fast.rematch(
-                            map,
-                            &dense,
-                            prior,
-                            turn_rad,
-                            &m,
-                            &self.cfg.frontend.matcher,
-                        ) {
+                        if let Some(better) =
+                            fast.rematch(map, &dense, prior, turn_rad, &m, &matcher)
+                        {
                             m = better;
                             self.fast_turn_taken += 1;
                         }
@@ -654,12 +649,7 @@ impl Mapper {
                         self.stall_turn_searches += 1;
                         let carried_on =
                             Pose2::new(predicted.x_m, predicted.y_m, before.yaw_rad + last.yaw_rad);
-                        let alt = match_scan(
-                            map,
-                            &dense,
-                            origin.inverse() * carried_on,
-                            &self.cfg.frontend.matcher,
-                        );
+                        let alt = match_scan(map, &dense, origin.inverse() * carried_on, &matcher);
                         if alt.score > m.score + stall.margin {
                             m = alt;
                             self.stall_turn_taken += 1;
