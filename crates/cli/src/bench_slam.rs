@@ -17,7 +17,10 @@ use realms_core::msgs::{LocalisationState, Message};
 use realms_core::{Pose2, RoverId, Time};
 use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
-use realms_node::mapping::{Mapping, MappingConfig};
+use realms_node::mapping::{Mapping, MappingConfig, ReliefHop};
+
+/// How far back the relief's reference frame may lie (the node's own rule), metres.
+const RELIEF_REFERENCE_M: f64 = 1.0;
 use realms_sim::World;
 use std::time::Instant;
 
@@ -131,6 +134,40 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "weak-floor-30",
+        what: "where the map pins the position less than 30 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
+        apply: |c| c.mapper.weak_direction_floor = Some(30.0),
+    },
+    Variant {
+        name: "weak-floor-100",
+        what: "where the map pins the position less than 100 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
+        apply: |c| c.mapper.weak_direction_floor = Some(100.0),
+    },
+    Variant {
+        name: "prior-x30",
+        what: "the matcher's pull towards the predicted position 30 times as strong (90 per point per m^2)",
+        apply: |c| c.mapper.frontend.matcher.prior_translation_weight *= 30.0,
+    },
+    Variant {
+        name: "prior-x100",
+        what: "the matcher's pull towards the predicted position 100 times as strong (300 per point per m^2)",
+        apply: |c| c.mapper.frontend.matcher.prior_translation_weight *= 100.0,
+    },
+    Variant {
+        name: "min-hits-20",
+        what: "the refinement's cells pull only with 20 hits or more, not 4 (a cell of a few hits along a wall can look like a line across it)",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.min_hits = 20;
+            }
+        },
+    },
+    Variant {
+        name: "relief",
+        what: "each depth frame fitted onto an earlier one's relief (measured only: the SLAM does not use it yet)",
+        apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,
@@ -159,6 +196,8 @@ struct Replay {
     wall_s: f64,
     /// The poses scan by scan as CSV, when asked for (`--trajectories`).
     csv: Option<String>,
+    /// Each relief fit (variant `relief`) with the true travel over it.
+    relief: Vec<(ReliefHop, Pose2)>,
 }
 
 /// The columns of a `--trajectories` file.
@@ -215,6 +254,7 @@ fn replay(
         was_lost = is_lost;
     });
     let wall_s = started.elapsed().as_secs_f64();
+    let relief = relief_against_truth(mapping.relief_hops(), input);
     // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
         let k = scans.partition_point(|s| s.0 < t);
@@ -269,8 +309,119 @@ fn replay(
         sim_s,
         wall_s,
         csv,
+        relief,
     }
 }
+
+/// Replaces the wheels' odometry in `input` by the truth's motion: each reading moves on
+/// from the one before by what the rover truly did in between, so the wheels neither slip
+/// nor drift (`--perfect-wheels`).
+fn perfect_wheels(input: &mut [CapturedInput]) {
+    let mut before: Option<(Pose2, Pose2)> = None;
+    for c in input.iter_mut() {
+        let Message::Odometry(odom) = &mut c.message else {
+            continue;
+        };
+        let p = &odom.pose.pose;
+        let reported = Pose2::new(p.position.x, p.position.y, p.orientation.yaw_rad());
+        let pose = before.map_or(reported, |(truth, pose)| pose * (truth.inverse() * c.truth));
+        before = Some((c.truth, pose));
+        odom.pose.pose.position.x = pose.x_m;
+        odom.pose.pose.position.y = pose.y_m;
+        odom.pose.pose.orientation =
+            realms_core::Quaternion::from_roll_pitch_yaw(0.0, 0.0, pose.yaw_rad);
+    }
+}
+
+/// Each relief fit with the true travel between its two frames (the truth as each frame was
+/// published, in the reference frame's rover frame).
+fn relief_against_truth(hops: &[ReliefHop], input: &[CapturedInput]) -> Vec<(ReliefHop, Pose2)> {
+    let frames: Vec<(Time, Pose2)> = input
+        .iter()
+        .filter_map(|c| match &c.message {
+            Message::PointCloud(cloud) => Some((cloud.header.stamp, c.truth)),
+            _ => None,
+        })
+        .collect();
+    let truth_at = |t: Time| {
+        let k = frames.partition_point(|f| f.0 < t);
+        frames.get(k).filter(|f| f.0 == t).map(|f| f.1)
+    };
+    hops.iter()
+        .filter_map(|h| Some((*h, truth_at(h.from)?.inverse() * truth_at(h.to)?)))
+        .collect()
+}
+
+/// The relief fits against the wheels, over every rover of `of` (markdown table rows).
+fn relief_table(name: &str, of: &[&Replay]) {
+    // Along and across the true travel, metres.
+    let split = |est: Pose2, truth: Pose2| {
+        let d = truth.x_m.hypot(truth.y_m);
+        let (ux, uy) = (truth.x_m / d, truth.y_m / d);
+        let (ex, ey) = (est.x_m - truth.x_m, est.y_m - truth.y_m);
+        (ex * ux + ey * uy, -ex * uy + ey * ux)
+    };
+    let hops: Vec<&(ReliefHop, Pose2)> = of
+        .iter()
+        .flat_map(|r| &r.relief)
+        .filter(|(_, truth)| truth.x_m.hypot(truth.y_m) >= RELIEF_MIN_TRAVEL_M)
+        .collect();
+    if hops.is_empty() {
+        return;
+    }
+    let abs_pct = |v: Vec<f64>, q: f64| {
+        let mut v: Vec<f64> = v.into_iter().map(f64::abs).collect();
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v[((v.len() - 1) as f64 * q).round() as usize]
+        }
+    };
+    let fitted: Vec<_> = hops
+        .iter()
+        .filter_map(|(h, t)| Some((h, h.fit?, *t)))
+        .collect();
+    let confident: Vec<_> = fitted
+        .iter()
+        .filter(|(h, fit, _)| {
+            let d = h.wheels.x_m.hypot(h.wheels.y_m).max(1e-9);
+            fit.sigma_along_m(h.wheels.x_m / d, h.wheels.y_m / d) < RELIEF_CONFIDENT_M
+        })
+        .collect();
+    let along = |v: &mut dyn Iterator<Item = (Pose2, Pose2)>| -> Vec<f64> {
+        v.map(|(e, t)| split(e, t).0 / t.x_m.hypot(t.y_m)).collect()
+    };
+    let row = |what: &str, est: Vec<f64>| {
+        println!(
+            "| {name} | {what} | {} | {:.1} % | {:.1} % |",
+            est.len(),
+            100.0 * abs_pct(est.clone(), 0.5),
+            100.0 * abs_pct(est, 0.9)
+        );
+    };
+    row(
+        "wheels, every hop",
+        along(&mut hops.iter().map(|(h, t)| (h.wheels, *t))),
+    );
+    row(
+        "relief, every fit",
+        along(&mut fitted.iter().map(|(_, f, t)| (f.motion, *t))),
+    );
+    row(
+        "wheels, where the relief is confident",
+        along(&mut confident.iter().map(|(h, _, t)| (h.wheels, *t))),
+    );
+    row(
+        "relief, where it is confident",
+        along(&mut confident.iter().map(|(_, f, t)| (f.motion, *t))),
+    );
+}
+
+/// Relief fits over less true travel than this are left out of the table, metres.
+const RELIEF_MIN_TRAVEL_M: f64 = 0.3;
+/// A fit is confident along the travel below this standard deviation, metres.
+const RELIEF_CONFIDENT_M: f64 = 0.02;
 
 pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     let (base, source) = load_scenario(args.scenario.as_deref())?;
@@ -315,6 +466,9 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         },
         crate::bench::machine()
     );
+    if args.perfect_wheels {
+        println!("wheels: perfect (the odometry replaced by the truth's motion)");
+    }
     for v in &variants {
         println!("variant {}: {}", v.name, v.what);
     }
@@ -336,8 +490,13 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         let mut mission = Mission::with_options(world, options);
         mission.capture_slam_inputs();
         mission.run_until(Time::from_secs_f64(limit_s));
-        let capture = mission.take_capture();
+        let mut capture = mission.take_capture();
         drop(mission);
+        if args.perfect_wheels {
+            for input in &mut capture {
+                perfect_wheels(input);
+            }
+        }
         let mut replays = Vec::new();
         for (id, input) in ids.iter().zip(&capture) {
             replays.push(replay(seed, *id, "baseline", &cfg, input, with_csv));
@@ -416,6 +575,21 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             median(of.iter().map(|r| r.tracked.rmse_m).collect()),
             median(fleet_speed)
         );
+    }
+    if all.iter().any(|r| !r.relief.is_empty()) {
+        println!();
+        println!(
+            "Relief fits of depth frames onto a reference frame up to {RELIEF_REFERENCE_M} m back, hops of {RELIEF_MIN_TRAVEL_M} m or more; error along the true travel as a share of it; confident: the fit's standard deviation along the travel under {RELIEF_CONFIDENT_M} m"
+        );
+        println!();
+        println!(
+            "| variant | travel from | hops | median error along the travel | 90th percentile |"
+        );
+        println!("| --- | --- | --- | --- | --- |");
+        for v in &variants {
+            let of: Vec<&Replay> = all.iter().filter(|r| r.variant == v.name).collect();
+            relief_table(v.name, &of);
+        }
     }
     Ok(())
 }

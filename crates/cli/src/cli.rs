@@ -221,6 +221,10 @@ pub struct BenchSlamArgs {
     /// communication). The rovers then drive the paths the default mission's report grades.
     #[arg(long)]
     pub radio: bool,
+    /// Replace the wheels' odometry by the truth's motion before the replays (wheels that
+    /// neither slip nor drift), to see what the wheels' errors cost.
+    #[arg(long)]
+    pub perfect_wheels: bool,
     /// Seeds run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,

@@ -104,6 +104,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // trajectory error fell by a sixth (BENCHMARKS.md, "Ranges smoothed along the scan").
         smooth_ranges: true,
         depth_features: false,
+        relief_odometry: None,
     }
 }
 

@@ -23,6 +23,7 @@ use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
 use realms_slam::odometry::OdomSample;
+use realms_slam::relief::{self, ElevationPatch, Registration, ReliefConfig};
 use realms_slam::traversability::{SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps};
 
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
@@ -68,7 +69,30 @@ pub struct MappingConfig {
     /// into the refinement of each match, beside the lidar's points, as features seen from
     /// the last depth frame, carried to the scan by odometry (`false`: the lidar alone).
     pub depth_features: bool,
+    /// Each depth frame is fitted onto the relief of an earlier one
+    /// ([`realms_slam::relief`]), and the travel found is kept ([`Mapping::relief_hops`])
+    /// (`None`: not done). Measured only, not yet used by the SLAM.
+    pub relief_odometry: Option<ReliefConfig>,
 }
+
+/// A depth frame fitted onto the relief of a reference frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReliefHop {
+    /// The reference frame's stamp.
+    pub from: Time,
+    /// The fitted frame's stamp.
+    pub to: Time,
+    /// The travel between them by the wheels and the gyro, the reference's frame.
+    pub wheels: Pose2,
+    /// The fit, if one was found.
+    pub fit: Option<Registration>,
+}
+
+/// A reference frame for the relief fits is kept until the wheels have moved this far from
+/// it, metres ...
+const RELIEF_REFERENCE_TRAVEL_M: f64 = 1.0;
+/// ... or turned this far, radians.
+const RELIEF_REFERENCE_TURN_RAD: f64 = 0.35;
 
 /// SLAM tuned for the simulated rover: the lidar reaches 12 m, the arena is small, and the
 /// rover is slow, so keyframes are sparser than on the office logs, and submaps covering
@@ -238,6 +262,10 @@ pub struct Mapping {
     /// The last depth frame's points in hazard cells (rover frame), its time and odometry
     /// pose.
     depth_features: Option<(Time, Pose2, Vec<Point2>)>,
+    /// The relief fits' reference: its stamp, its patch and the wheels' pose then (the
+    /// gyro's heading).
+    relief_reference: Option<(Time, ElevationPatch, Pose2)>,
+    relief_hops: Vec<ReliefHop>,
 }
 
 impl Mapping {
@@ -268,7 +296,15 @@ impl Mapping {
             published_layer: TiledLayer::new(1),
             planner_layer: None,
             depth_features: None,
+            relief_reference: None,
+            relief_hops: Vec::new(),
         }
+    }
+
+    /// Every depth frame's fit onto its reference's relief so far (when
+    /// [`MappingConfig::relief_odometry`] is on).
+    pub fn relief_hops(&self) -> &[ReliefHop] {
+        &self.relief_hops
     }
 
     /// The SLAM itself, for inspection (its counters, its graph).
@@ -472,6 +508,9 @@ impl Mapping {
             .filter(|p| p.iter().all(|v| v.is_finite()))
             .copied()
             .collect();
+        if let Some(relief) = self.cfg.relief_odometry {
+            self.fit_relief(cloud.header.stamp, &points, &relief);
+        }
         let mut verdicts = judge_frame(&points, &self.cfg.traversability);
         // The organised cloud's columns, for the ground hidden behind rims.
         let (w, h) = (cloud.width as usize, cloud.height as usize);
@@ -511,6 +550,35 @@ impl Mapping {
                 }
                 (stamp, odom, kept)
             });
+        }
+    }
+
+    /// Fits a depth frame's `points` (levelled rover frame) onto the reference frame's relief,
+    /// and makes it the next reference once the rover has moved on far enough.
+    fn fit_relief(&mut self, stamp: Time, points: &[[f64; 3]], cfg: &ReliefConfig) {
+        let Some(mut odom) = self.odometry_at(stamp) else {
+            return;
+        };
+        if self.gyro_heard {
+            odom.yaw_rad = self.gyro_yaw_at(stamp);
+        }
+        let mut refresh = true;
+        if let Some((from, patch, at)) = &self.relief_reference {
+            let wheels = at.inverse() * odom;
+            let fit = relief::register(patch, points, wheels, cfg);
+            refresh = fit.is_none()
+                || wheels.x_m.hypot(wheels.y_m) >= RELIEF_REFERENCE_TRAVEL_M
+                || wheels.yaw_rad.abs() >= RELIEF_REFERENCE_TURN_RAD;
+            self.relief_hops.push(ReliefHop {
+                from: *from,
+                to: stamp,
+                wheels,
+                fit,
+            });
+        }
+        if refresh {
+            self.relief_reference =
+                ElevationPatch::from_points(points, cfg).map(|patch| (stamp, patch, odom));
         }
     }
 
@@ -792,6 +860,7 @@ mod tests {
                 traversability: TraversabilityConfig::default(),
                 smooth_ranges: false,
                 depth_features: false,
+                relief_odometry: None,
             },
         )
     }

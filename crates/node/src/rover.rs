@@ -368,6 +368,7 @@ mod tests {
                     traversability: TraversabilityConfig::default(),
                     smooth_ranges: false,
                     depth_features: false,
+                    relief_odometry: None,
                 },
                 navigation: NavigationConfig::new(Point2::new(0.0, 0.0)),
                 guard: GuardConfig {

@@ -14,6 +14,7 @@
 //! - [`health`]: notices unreliable odometry and lost tracking, from the scans.
 //! - [`posegraph`]: SE(2) pose-graph optimisation with robust loop-closure edges.
 //! - `elimination`: the pose graph's normal equations solved exactly, in minimum-degree order.
+//! - [`relief`]: the travel between two depth frames, from the relief of the ground they see.
 //! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
@@ -33,6 +34,7 @@ pub mod numeric_lines;
 pub mod occupancy;
 pub mod odometry;
 pub mod posegraph;
+pub mod relief;
 pub mod slip;
 pub mod trajectory;
 pub mod traversability;

@@ -55,6 +55,47 @@ fn subsample(points: &[Point2], max: usize) -> Vec<Point2> {
     points.iter().step_by(step).copied().collect()
 }
 
+/// `matched` moved towards `predicted` along the direction in which the match's translation
+/// `information` (which holds the matcher's own pull `prior_weight` towards the prediction)
+/// is weakest, as far as adding the information the map lacks below `floor` there would
+/// move it; unchanged where the map pins both directions at least that firmly.
+fn towards_prediction_where_weak(
+    matched: Pose2,
+    predicted: Pose2,
+    information: &[[f64; 3]; 3],
+    prior_weight: f64,
+    floor: f64,
+) -> Pose2 {
+    let (a, b, c) = (
+        information[0][0] - prior_weight,
+        information[0][1],
+        information[1][1] - prior_weight,
+    );
+    let half_trace = 0.5 * (a + c);
+    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    let weakest = (half_trace - root).max(0.0);
+    if weakest >= floor {
+        return matched;
+    }
+    let (ux, uy) = if b.abs() > 1e-12 {
+        let (ex, ey) = (b, half_trace - root - a);
+        let norm = ex.hypot(ey);
+        (ex / norm, ey / norm)
+    } else if a <= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let added = floor - weakest;
+    let share = added / (weakest + prior_weight + added);
+    let along = (predicted.x_m - matched.x_m) * ux + (predicted.y_m - matched.y_m) * uy;
+    Pose2::new(
+        matched.x_m + share * along * ux,
+        matched.y_m + share * along * uy,
+        matched.yaw_rad,
+    )
+}
+
 /// SLAM tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapperConfig {
@@ -103,6 +144,13 @@ pub struct MapperConfig {
     /// is held to the position the wheels predict (see [`StillHold`]; `None`: the usual
     /// pull, right for odometry that stalls, as the recorded logs' does).
     pub still_hold: Option<StillHold>,
+    /// Where the map pins the match's position less firmly than this in some direction (per
+    /// point, per square metre, the matcher's own prior left out), the position along that
+    /// direction is pulled towards the prediction as if the map's information there were
+    /// this much (`None`: the matcher's prior alone). Beside a bare wall the map's pull along
+    /// it comes from how its hits were sampled, not from the wall (BENCHMARKS.md, "A rover's
+    /// drift along a bare wall").
+    pub weak_direction_floor: Option<f64>,
     /// A closure may correct the pose only as far as the map can have drifted between the
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
@@ -310,6 +358,7 @@ impl Default for MapperConfig {
             motion_filter: None,
             max_heading_step_rad: None,
             still_hold: None,
+            weak_direction_floor: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
             // between its ends, and is searched within a degree of turn a metre. On the
@@ -570,6 +619,7 @@ impl Mapper {
         let mut relocalised = false;
         let mut score = None;
         let mut trusted_along = false;
+        let mut matched_alone = None;
         // Matched and mapped filled in; the live map and closures take the endpoints.
         let dense = match self.cfg.frontend.densify {
             Some(d) => std::borrow::Cow::Owned(crate::frontend::densify(&points, d)),
@@ -686,6 +736,22 @@ impl Mapper {
                             m.pose = refined;
                         }
                     }
+                    // The scans' own verdict, for the odometry's health: it must not
+                    // hear the wheels' claim back as the scans' agreement.
+                    matched_alone = Some(origin * m.pose);
+                    if let Some(floor) = self.cfg.weak_direction_floor
+                        && still.is_none()
+                        && self.health.state() == LocalisationState::Tracking
+                    {
+                        let prior_weight = matcher.prior_translation_weight * dense.len() as f64;
+                        m.pose = towards_prediction_where_weak(
+                            m.pose,
+                            prior,
+                            &m.information,
+                            prior_weight,
+                            floor * dense.len() as f64,
+                        );
+                    }
                     score = Some(m.score);
                     self.last_information = m.information;
                     trusted_along = self.wheel_scale.as_ref().is_some_and(|w| {
@@ -706,7 +772,7 @@ impl Mapper {
                 matched_delta: if self.scans.is_empty() {
                     Pose2::IDENTITY
                 } else {
-                    before.inverse() * self.pose
+                    before.inverse() * matched_alone.unwrap_or(self.pose)
                 },
                 score,
                 wheels_silent: sample.wheels_silent,
@@ -1657,6 +1723,58 @@ mod tests {
             worst = worst.max(tracked.pose.position().distance_m(truth.position()));
         }
         worst
+    }
+
+    #[test]
+    fn a_match_follows_the_prediction_only_where_the_map_pins_it_weakly() {
+        // A wall along x: the map pins y (1000) and barely x (2); the matcher's own pull
+        // towards the prediction is 30 (already in the information).
+        let prior_weight = 30.0;
+        let information = [
+            [2.0 + prior_weight, 0.0, 0.0],
+            [0.0, 1000.0 + prior_weight, 0.0],
+            [0.0, 0.0, 50.0],
+        ];
+        let matched = Pose2::new(1.0, 2.0, 0.1);
+        let predicted = Pose2::new(0.9, 2.05, 0.2);
+        let moved =
+            towards_prediction_where_weak(matched, predicted, &information, prior_weight, 100.0);
+        // Along x, 98 of information added to the 2 + 30 there: 98 / 130 of the way.
+        assert!(
+            (moved.x_m - (1.0 - 0.1 * 98.0 / 130.0)).abs() < 1e-12,
+            "{moved:?}"
+        );
+        assert_eq!((moved.y_m, moved.yaw_rad), (2.0, 0.1));
+        // The same wall running diagonally: moved along the wall only.
+        let (c, s) = (
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+        );
+        let (weak, firm) = (2.0, 1000.0);
+        let info = [
+            [
+                weak * c * c + firm * s * s + prior_weight,
+                (weak - firm) * c * s,
+                0.0,
+            ],
+            [
+                (weak - firm) * c * s,
+                weak * s * s + firm * c * c + prior_weight,
+                0.0,
+            ],
+            [0.0, 0.0, 50.0],
+        ];
+        let predicted = Pose2::new(1.1, 2.1, 0.1);
+        let moved = towards_prediction_where_weak(matched, predicted, &info, prior_weight, 100.0);
+        let share = 98.0 / 130.0;
+        assert!((moved.x_m - (1.0 + 0.1 * share)).abs() < 1e-9, "{moved:?}");
+        assert!((moved.y_m - (2.0 + 0.1 * share)).abs() < 1e-9, "{moved:?}");
+        // Pinned firmly both ways: left alone.
+        let firm_both = [[500.0, 0.0, 0.0], [0.0, 800.0, 0.0], [0.0, 0.0, 50.0]];
+        assert_eq!(
+            towards_prediction_where_weak(matched, predicted, &firm_both, prior_weight, 100.0),
+            matched
+        );
     }
 
     #[test]
