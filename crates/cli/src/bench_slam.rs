@@ -134,6 +134,16 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "refine-pinned-30",
+        what: "the refinement on the hits moves the match only along directions the occupancy match pins at 30 per point per m^2 or more",
+        apply: |c| c.mapper.refine_only_where_pinned = Some(30.0),
+    },
+    Variant {
+        name: "refine-pinned-100",
+        what: "the refinement on the hits moves the match only along directions the occupancy match pins at 100 per point per m^2 or more",
+        apply: |c| c.mapper.refine_only_where_pinned = Some(100.0),
+    },
+    Variant {
         name: "weak-floor-30",
         what: "where the map pins the position less than 30 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
         apply: |c| c.mapper.weak_direction_floor = Some(30.0),

@@ -55,6 +55,29 @@ fn subsample(points: &[Point2], max: usize) -> Vec<Point2> {
     points.iter().step_by(step).copied().collect()
 }
 
+/// The weakest direction of a match's translation `information` once the matcher's own pull
+/// `prior_weight` towards the prediction is taken out: how firmly the map pins it (per square
+/// metre) and its unit vector.
+fn weakest_direction(information: &[[f64; 3]; 3], prior_weight: f64) -> (f64, (f64, f64)) {
+    let (a, b, c) = (
+        information[0][0] - prior_weight,
+        information[0][1],
+        information[1][1] - prior_weight,
+    );
+    let half_trace = 0.5 * (a + c);
+    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    let unit = if b.abs() > 1e-12 {
+        let (ex, ey) = (b, half_trace - root - a);
+        let norm = ex.hypot(ey);
+        (ex / norm, ey / norm)
+    } else if a <= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    ((half_trace - root).max(0.0), unit)
+}
+
 /// `matched` moved towards `predicted` along the direction in which the match's translation
 /// `information` (which holds the matcher's own pull `prior_weight` towards the prediction)
 /// is weakest, as far as adding the information the map lacks below `floor` there would
@@ -66,26 +89,10 @@ fn towards_prediction_where_weak(
     prior_weight: f64,
     floor: f64,
 ) -> Pose2 {
-    let (a, b, c) = (
-        information[0][0] - prior_weight,
-        information[0][1],
-        information[1][1] - prior_weight,
-    );
-    let half_trace = 0.5 * (a + c);
-    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
-    let weakest = (half_trace - root).max(0.0);
+    let (weakest, (ux, uy)) = weakest_direction(information, prior_weight);
     if weakest >= floor {
         return matched;
     }
-    let (ux, uy) = if b.abs() > 1e-12 {
-        let (ex, ey) = (b, half_trace - root - a);
-        let norm = ex.hypot(ey);
-        (ex / norm, ey / norm)
-    } else if a <= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
     let added = floor - weakest;
     let share = added / (weakest + prior_weight + added);
     let along = (predicted.x_m - matched.x_m) * ux + (predicted.y_m - matched.y_m) * uy;
@@ -93,6 +100,29 @@ fn towards_prediction_where_weak(
         matched.x_m + share * along * ux,
         matched.y_m + share * along * uy,
         matched.yaw_rad,
+    )
+}
+
+/// `refined` with no part of its move from `matched` along the direction the occupancy
+/// match's `information` pins less firmly than `floor` (the matcher's prior `prior_weight`
+/// taken out): the refinement removes the grid's pull towards cell centres across what the
+/// scan sees, and has nothing to add along a bare wall.
+fn refined_only_where_pinned(
+    matched: Pose2,
+    refined: Pose2,
+    information: &[[f64; 3]; 3],
+    prior_weight: f64,
+    floor: f64,
+) -> Pose2 {
+    let (weakest, (ux, uy)) = weakest_direction(information, prior_weight);
+    if weakest >= floor {
+        return refined;
+    }
+    let along = (refined.x_m - matched.x_m) * ux + (refined.y_m - matched.y_m) * uy;
+    Pose2::new(
+        refined.x_m - along * ux,
+        refined.y_m - along * uy,
+        refined.yaw_rad,
     )
 }
 
@@ -151,6 +181,12 @@ pub struct MapperConfig {
     /// it comes from how its hits were sampled, not from the wall (BENCHMARKS.md, "A rover's
     /// drift along a bare wall").
     pub weak_direction_floor: Option<f64>,
+    /// The refinement on the hits moves the match only along directions the occupancy match
+    /// pins at least this firmly (per point, per square metre, its prior left out; `None`:
+    /// along any). Its cells of a few hits along a wall can lie across it and pull the
+    /// match back along the wall at every scan (BENCHMARKS.md, "A rover's drift along a bare
+    /// wall").
+    pub refine_only_where_pinned: Option<f64>,
     /// A closure may correct the pose only as far as the map can have drifted between the
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
@@ -359,6 +395,7 @@ impl Default for MapperConfig {
             max_heading_step_rad: None,
             still_hold: None,
             weak_direction_floor: None,
+            refine_only_where_pinned: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
             // between its ends, and is searched within a degree of turn a metre. On the
@@ -733,7 +770,16 @@ impl Mapper {
                             matcher.prior_translation_weight,
                             matcher.prior_rotation_weight,
                         ) {
-                            m.pose = refined;
+                            m.pose = match self.cfg.refine_only_where_pinned {
+                                Some(floor) => refined_only_where_pinned(
+                                    m.pose,
+                                    refined,
+                                    &m.information,
+                                    matcher.prior_translation_weight * dense.len() as f64,
+                                    floor * dense.len() as f64,
+                                ),
+                                None => refined,
+                            };
                         }
                     }
                     // The scans' own verdict, for the odometry's health: it must not
@@ -1774,6 +1820,31 @@ mod tests {
         assert_eq!(
             towards_prediction_where_weak(matched, predicted, &firm_both, prior_weight, 100.0),
             matched
+        );
+    }
+
+    #[test]
+    fn a_refinement_moves_nothing_along_a_direction_the_grid_barely_pins() {
+        let prior_weight = 30.0;
+        // The grid pins y firmly and x barely: a wall along x.
+        let information = [
+            [5.0 + prior_weight, 0.0, 0.0],
+            [0.0, 2000.0 + prior_weight, 0.0],
+            [0.0, 0.0, 50.0],
+        ];
+        let matched = Pose2::new(1.0, 2.0, 0.1);
+        let refined = Pose2::new(0.97, 2.01, 0.102);
+        let kept = refined_only_where_pinned(matched, refined, &information, prior_weight, 100.0);
+        assert!(
+            (kept.x_m - 1.0).abs() < 1e-12 && (kept.y_m - 2.01).abs() < 1e-12,
+            "{kept:?}"
+        );
+        assert_eq!(kept.yaw_rad, 0.102);
+        // Pinned both ways: the refinement as it is.
+        let firm = [[400.0, 0.0, 0.0], [0.0, 400.0, 0.0], [0.0, 0.0, 50.0]];
+        assert_eq!(
+            refined_only_where_pinned(matched, refined, &firm, prior_weight, 100.0),
+            refined
         );
     }
 
