@@ -144,6 +144,24 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.refine_only_where_pinned = Some(100.0),
     },
     Variant {
+        name: "line-hits-10",
+        what: "the refinement's cells pull as lines only with 10 hits or more (not 4); fewer along a line pull not at all",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.min_line_hits = 10;
+            }
+        },
+    },
+    Variant {
+        name: "line-hits-20",
+        what: "the refinement's cells pull as lines only with 20 hits or more (not 4); fewer along a line pull not at all",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.min_line_hits = 20;
+            }
+        },
+    },
+    Variant {
         name: "weak-floor-30",
         what: "where the map pins the position less than 30 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
         apply: |c| c.mapper.weak_direction_floor = Some(30.0),

@@ -21,6 +21,9 @@ pub struct NdtConfig {
     pub cell_m: f64,
     /// A cell needs this many hits to pull.
     pub min_hits: u32,
+    /// ... and this many to pull as a line (fewer along a line pull not at all: a few
+    /// grazing hits on a wall can line up across it by chance).
+    pub min_line_hits: u32,
     /// Variance added to every spread: the lidar's noise floor, square metres.
     pub noise_var_m2: f64,
     /// A cell whose smaller spread is below this share of its larger one is a line.
@@ -44,6 +47,7 @@ impl Default for NdtConfig {
         NdtConfig {
             cell_m: 0.25,
             min_hits: 4,
+            min_line_hits: 4,
             noise_var_m2: 1e-4,
             line_ratio: 0.1,
             max_distance_m: 0.25,
@@ -381,6 +385,9 @@ fn pull_of(cfg: &NdtConfig, key: (i64, i64), s: &Sums) -> Option<Pull> {
     let root = (0.25 * (vxx - vyy).powi(2) + vxy * vxy).sqrt();
     let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
     let noise = cfg.noise_var_m2;
+    if small < cfg.line_ratio * large && s.n < cfg.min_line_hits {
+        return None;
+    }
     let information = if small < cfg.line_ratio * large {
         // Across the line only: the normal is the smaller eigenvalue's axis.
         let (nx, ny) = if vxy.abs() > 1e-15 {
