@@ -17,10 +17,7 @@ use realms_core::msgs::{LocalisationState, Message};
 use realms_core::{Pose2, RoverId, Time};
 use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
-use realms_node::mapping::{Mapping, MappingConfig, ReliefHop};
-
-/// How far back the relief's reference frame may lie (the node's own rule), metres.
-const RELIEF_REFERENCE_M: f64 = 1.0;
+use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
 use realms_sim::World;
 use std::time::Instant;
 
@@ -607,7 +604,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     if all.iter().any(|r| !r.relief.is_empty()) {
         println!();
         println!(
-            "Relief fits of depth frames onto a reference frame up to {RELIEF_REFERENCE_M} m back, hops of {RELIEF_MIN_TRAVEL_M} m or more; error along the true travel as a share of it; confident: the fit's standard deviation along the travel under {RELIEF_CONFIDENT_M} m"
+            "Relief fits of depth frames onto a reference frame up to {RELIEF_REFERENCE_TRAVEL_M} m back, hops of {RELIEF_MIN_TRAVEL_M} m or more; error along the true travel as a share of it; confident: the fit's standard deviation along the travel under {RELIEF_CONFIDENT_M} m"
         );
         println!();
         println!(

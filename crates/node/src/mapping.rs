@@ -90,7 +90,7 @@ pub struct ReliefHop {
 
 /// A reference frame for the relief fits is kept until the wheels have moved this far from
 /// it, metres ...
-const RELIEF_REFERENCE_TRAVEL_M: f64 = 1.0;
+pub const RELIEF_REFERENCE_TRAVEL_M: f64 = 1.0;
 /// ... or turned this far, radians.
 const RELIEF_REFERENCE_TURN_RAD: f64 = 0.35;
 

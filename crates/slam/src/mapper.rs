@@ -59,23 +59,12 @@ fn subsample(points: &[Point2], max: usize) -> Vec<Point2> {
 /// `prior_weight` towards the prediction is taken out: how firmly the map pins it (per square
 /// metre) and its unit vector.
 fn weakest_direction(information: &[[f64; 3]; 3], prior_weight: f64) -> (f64, (f64, f64)) {
-    let (a, b, c) = (
+    let (weakest, _, axis) = crate::ndt::eigen_symmetric2(
         information[0][0] - prior_weight,
         information[0][1],
         information[1][1] - prior_weight,
     );
-    let half_trace = 0.5 * (a + c);
-    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
-    let unit = if b.abs() > 1e-12 {
-        let (ex, ey) = (b, half_trace - root - a);
-        let norm = ex.hypot(ey);
-        (ex / norm, ey / norm)
-    } else if a <= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
-    ((half_trace - root).max(0.0), unit)
+    (weakest, axis)
 }
 
 /// `matched` moved towards `predicted` along the direction in which the match's translation
@@ -716,6 +705,8 @@ impl Mapper {
                         None => self.cfg.frontend.matcher,
                     };
                     let mut m = match_scan(map, &dense, prior, &matcher);
+                    // The match's information sums over these points (floors are per point).
+                    let matched_points = dense.len() as f64;
                     let turn_rad = normalize_angle_rad(predicted.yaw_rad - before.yaw_rad);
                     if let Some(fast) = self.cfg.fast_turn
                         && turn_rad.abs() > fast.turn_rad
@@ -775,8 +766,8 @@ impl Mapper {
                                     m.pose,
                                     refined,
                                     &m.information,
-                                    matcher.prior_translation_weight * dense.len() as f64,
-                                    floor * dense.len() as f64,
+                                    matcher.prior_translation_weight * matched_points,
+                                    floor * matched_points,
                                 ),
                                 None => refined,
                             };
@@ -789,13 +780,12 @@ impl Mapper {
                         && still.is_none()
                         && self.health.state() == LocalisationState::Tracking
                     {
-                        let prior_weight = matcher.prior_translation_weight * dense.len() as f64;
                         m.pose = towards_prediction_where_weak(
                             m.pose,
                             prior,
                             &m.information,
-                            prior_weight,
-                            floor * dense.len() as f64,
+                            matcher.prior_translation_weight * matched_points,
+                            floor * matched_points,
                         );
                     }
                     score = Some(m.score);

@@ -372,6 +372,24 @@ fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) 
     -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
 }
 
+/// The eigenvalues of the symmetric 2 x 2 matrix `[[a, b], [b, c]]`, smaller (at least 0)
+/// then larger, and the smaller one's unit axis.
+pub(crate) fn eigen_symmetric2(a: f64, b: f64, c: f64) -> (f64, f64, (f64, f64)) {
+    let half_trace = 0.5 * (a + c);
+    let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
+    let axis = if b.abs() > 1e-15 {
+        let (ex, ey) = (b, small - a);
+        let norm = ex.hypot(ey);
+        (ex / norm, ey / norm)
+    } else if a <= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    (small, large, axis)
+}
+
 /// What the cell `key` holding the hits `s` pulls with; `None` below `min_hits`.
 fn pull_of(cfg: &NdtConfig, key: (i64, i64), s: &Sums) -> Option<Pull> {
     if s.n < cfg.min_hits {
@@ -380,25 +398,13 @@ fn pull_of(cfg: &NdtConfig, key: (i64, i64), s: &Sums) -> Option<Pull> {
     let n = s.n as f64;
     let (mx, my) = (s.x / n, s.y / n);
     let (vxx, vxy, vyy) = (s.xx / n - mx * mx, s.xy / n - mx * my, s.yy / n - my * my);
-    // Eigenvalues of the spread, smaller first, and the smaller one's axis.
-    let half_trace = 0.5 * (vxx + vyy);
-    let root = (0.25 * (vxx - vyy).powi(2) + vxy * vxy).sqrt();
-    let (small, large) = ((half_trace - root).max(0.0), half_trace + root);
+    let (small, large, (nx, ny)) = eigen_symmetric2(vxx, vxy, vyy);
     let noise = cfg.noise_var_m2;
     if small < cfg.line_ratio * large && s.n < cfg.min_line_hits {
         return None;
     }
     let information = if small < cfg.line_ratio * large {
         // Across the line only: the normal is the smaller eigenvalue's axis.
-        let (nx, ny) = if vxy.abs() > 1e-15 {
-            let (ex, ey) = (vxy, small - vxx);
-            let norm = ex.hypot(ey);
-            (ex / norm, ey / norm)
-        } else if vxx <= vyy {
-            (1.0, 0.0)
-        } else {
-            (0.0, 1.0)
-        };
         let w = 1.0 / (small + noise);
         [w * nx * nx, w * nx * ny, w * ny * ny]
     } else {

@@ -193,9 +193,14 @@ impl Registration {
     /// The standard deviation of the fit's position along the unit direction `(dx, dy)` of
     /// the plane (infinite where the relief says nothing), metres.
     pub fn sigma_along_m(&self, dx: f64, dy: f64) -> f64 {
-        let Some(cov) = invert3(&self.information) else {
+        let m = &self.information;
+        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        if det.abs() < 1e-18 {
             return f64::INFINITY;
-        };
+        }
+        let cov = crate::posegraph::invert(m);
         let var = cov[0][0] * dx * dx + 2.0 * cov[0][1] * dx * dy + cov[1][1] * dy * dy;
         if var > 0.0 { var.sqrt() } else { f64::INFINITY }
     }
@@ -369,23 +374,6 @@ fn solve4(a: &[[f64; 4]; 4], b: &[f64; 4]) -> Option<[f64; 4]> {
         x[i] = (y[i] - (i + 1..4).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
     }
     Some(x)
-}
-
-/// The inverse of a symmetric 3 x 3 matrix; `None` if (nearly) singular.
-fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-    if det.abs() < 1e-18 {
-        return None;
-    }
-    let inv =
-        |a: usize, b: usize, c: usize, d: usize| (m[a][b] * m[c][d] - m[a][d] * m[c][b]) / det;
-    Some([
-        [inv(1, 1, 2, 2), -inv(0, 1, 2, 2), inv(0, 1, 1, 2)],
-        [-inv(1, 0, 2, 2), inv(0, 0, 2, 2), -inv(0, 0, 1, 2)],
-        [inv(1, 0, 2, 1), -inv(0, 0, 2, 1), inv(0, 0, 1, 1)],
-    ])
 }
 
 #[cfg(test)]
