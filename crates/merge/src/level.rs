@@ -157,14 +157,26 @@ fn is_line(class: &[Class], w: usize, h: usize, x: usize, y: usize) -> bool {
         .is_some_and(|(n, coherence, _)| n >= 4.0 && coherence > 0.9)
 }
 
-impl Level {
-    /// Reduces `map` to cells of `cell_m` metres (at least the map's own cell).
-    pub fn build(map: &Map, cell_m: f64) -> Level {
-        Level::build_from(&Despeckled::of(map), cell_m)
-    }
+/// A map reduced to cells of some size: their classes and the surface normals, without the
+/// distance field and landmarks a [`Level`] adds (all the sub-cell fit reads, at the map's
+/// own resolution).
+pub struct Outline {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Cell edge, metres.
+    pub cell_m: f64,
+    /// Classes, row-major from the bottom row.
+    pub class: Vec<Class>,
+    /// As [`Level::normal`].
+    pub normal: Vec<f32>,
+}
 
-    /// [`Level::build`] from a map already despeckled (once for all of a map's levels).
-    pub fn build_from(despeckled: &Despeckled, cell_m: f64) -> Level {
+impl Outline {
+    /// Reduces `despeckled` to cells of `cell_m` metres (at least the map's own cell), as
+    /// the module documentation says.
+    pub fn of(despeckled: &Despeckled, cell_m: f64) -> Outline {
         let (g, fine) = (&despeckled.geometry, &despeckled.cells);
         let r = g.resolution_m;
         let cell_m = cell_m.max(r);
@@ -206,6 +218,31 @@ impl Level {
             }
         }
         let normal = normals(&class, width, height);
+        Outline {
+            width,
+            height,
+            cell_m,
+            class,
+            normal,
+        }
+    }
+}
+
+impl Level {
+    /// Reduces `map` to cells of `cell_m` metres (at least the map's own cell).
+    pub fn build(map: &Map, cell_m: f64) -> Level {
+        Level::build_from(&Despeckled::of(map), cell_m)
+    }
+
+    /// [`Level::build`] from a map already despeckled (once for all of a map's levels).
+    pub fn build_from(despeckled: &Despeckled, cell_m: f64) -> Level {
+        let Outline {
+            width,
+            height,
+            cell_m,
+            class,
+            normal,
+        } = Outline::of(despeckled, cell_m);
         let dist = chamfer(&normal, width, height);
         let bin = normal
             .iter()

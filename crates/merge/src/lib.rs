@@ -17,6 +17,7 @@
 
 pub mod compose;
 pub mod estimate;
+pub mod fine;
 pub mod io;
 pub mod level;
 pub mod map;

@@ -88,23 +88,12 @@ pub struct Params {
     pub sharpness_min_turn_rad: f64,
     /// Refuse below this sharpness ([`crate::verify::sharpness`]).
     pub min_sharpness: f64,
-    /// The precision check restarts refinement from the pose moved this far, metres...
-    pub precision_probe_m: f64,
-    /// ... and refuses if a restart settles farther than this away, metres (or turned as
-    /// much at the overlap's edge) ...
-    pub precision_apart_m: f64,
-    /// ... with at least `precision_score_share` of the best verified score and this share
-    /// of its [`crate::verify::closeness`], summed or on the points both share
-    /// ([`crate::verify::fits_as_well`]). In `realms bench merge` (lunar, seeds 1-8, 10 and
-    /// 20 %, 800 pairs), before refinement ended on shared points, asking for the score and
-    /// the sum (both at 0.97) from 0.13 m merged 441 pairs with 4 wrong, against 440 with 6
-    /// for the score alone from 0.15 m.
-    pub precision_share: f64,
-    /// The share of the best verified score a restart must reach to count against the
-    /// merge. Lower than `precision_share`: a pose slid sideways across a band widens the
-    /// overlap and scores more, so the true pose, found as a restart, scores less. At 0.9
-    /// rather than 0.97 the same 800 pairs merged 467 with 1 wrong, against 473 with 4.
-    pub precision_score_share: f64,
+    /// The precision check: a fit on the surfaces at the maps' own resolution
+    /// ([`crate::fine::nearby`]), restarted around the best, that settles apart from it and
+    /// fits about as closely refuses the merge as imprecise; one that fits clearly more
+    /// closely takes the best's place (at most three times, and within 0.3 m and 2 degrees
+    /// of the verified best).
+    pub precision: crate::fine::RivalRule,
     /// Refuse below this overlap of known cells, square metres.
     pub min_overlap_m2: f64,
     /// Refuse below this confidence.
@@ -176,10 +165,12 @@ impl Default for Params {
             max_landmark_conflict_share: 0.125,
             max_runner_up_ratio: 0.7,
             min_overlap_m2: 8.0,
-            precision_probe_m: 0.4,
-            precision_apart_m: 0.13,
-            precision_share: 0.97,
-            precision_score_share: 0.9,
+            precision: crate::fine::RivalRule {
+                apart_m: 0.1,
+                apart_rad: 0.5f64.to_radians(),
+                max_z: 1.0,
+                better_z: -2.0,
+            },
             sharpness_shift_m: 0.3,
             sharpness_min_turn_rad: 3f64.to_radians(),
             min_sharpness: 0.25,
@@ -237,6 +228,9 @@ pub struct Prepared {
     pub refine: Level,
     /// Surface points for verification.
     pub refine_points: Vec<Surface>,
+    /// The surfaces at the map's own resolution (no finer than half the refinement
+    /// level's cell), for the last, sub-cell alignment ([`crate::fine`]).
+    pub fine: crate::fine::Surfaces,
     /// Known cells of the search level, grid-local metres (for the overlap area).
     pub known_points: Vec<Point2>,
     /// Line directions of the structure.
@@ -286,6 +280,10 @@ impl Prepared {
         let search = Level::build_from(&despeckled, params.search_cell_m);
         let global = Level::build_from(&despeckled, 2.0 * params.search_cell_m);
         let refine = Level::build_from(&despeckled, params.refine_cell_m);
+        let fine = crate::fine::Surfaces::of(&crate::level::Outline::of(
+            &despeckled,
+            map.geometry().resolution_m.max(params.refine_cell_m / 2.0),
+        ));
         let refine_points = refine.surfaces(params.max_refine_points);
         let step = refine_points
             .len()
@@ -313,6 +311,7 @@ impl Prepared {
             known_points,
             known_area_per_point_m2,
             refine_points,
+            fine,
             directions: Directions::of(&refine),
             centroid: map.known_centroid_in_grid(),
             frame_from_grid: map.frame_from_grid(),

@@ -9,8 +9,9 @@
 //! and the overlap of known cells. A true alignment agrees almost everywhere the maps
 //! overlap; a wrong one that lays walls over walls must also put the rest of its structure
 //! on the other map's free space. Two more checks judge how well the pose is pinned down:
-//! [`sharpness`] (does the score fall when the pose moves?) and [`nearby_alternative`] (is
-//! there a second optimum close by that explains the maps as well?).
+//! [`sharpness`] (does the score fall when the pose moves?) here, and
+//! [`crate::fine::rival`] (is there a second optimum close by that lays the surfaces on each
+//! other as closely?).
 
 use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};
 use crate::prepare::{Params, Prepared};
@@ -306,75 +307,6 @@ fn refine_fine(a: &Prepared, b: &Prepared, start: Pose2) -> Pose2 {
     polish_on_common_points(a, b, pose, fine, deg)
 }
 
-/// A second, nearby optimum: refinement restarted from the pose moved `probe_m` in eight
-/// directions and turned as much either way (about the overlap's centre, and about either
-/// end of the overlap's long axis by the angle that moves the other end as far); the first
-/// restart that settles more than `apart_m` (at the overlap's centre) or `apart_rad` away
-/// and [`fits_as_well`] as the pose (`a_from_b`, `evidence`, `pose_closeness`) with
-/// `params.precision_score_share` of its score and `share` of its closeness. In a narrow overlap of
-/// walls and a rock or two, poses a few cells or a degree apart can explain the maps
-/// equally well; then the merge is not precise, whatever its confidence.
-#[allow(clippy::too_many_arguments)]
-pub fn nearby_alternative(
-    a: &Prepared,
-    b: &Prepared,
-    a_from_b: &Pose2,
-    evidence: &Evidence,
-    pose_closeness: f64,
-    params: &Params,
-    probe_m: f64,
-    apart_m: f64,
-    share: f64,
-) -> Option<(Pose2, Evidence)> {
-    if evidence.score <= 0.0 {
-        return None;
-    }
-    let c = evidence.overlap_centre;
-    let turn_rad = (probe_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
-    let apart_rad = (apart_m / evidence.overlap_radius_m.max(1.0)).min(0.1);
-    let mut probes: Vec<Pose2> = (0..8)
-        .map(|k| {
-            let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
-            Pose2::new(
-                a_from_b.x_m + probe_m * co,
-                a_from_b.y_m + probe_m * s,
-                a_from_b.yaw_rad,
-            )
-        })
-        .collect();
-    probes.push(turned_about(a_from_b, c, turn_rad));
-    probes.push(turned_about(a_from_b, c, -turn_rad));
-    // A band pinned at one end (the lander's edge, a crater) swings about it, sliding the
-    // short stretches of wall at its other end along themselves: turned about either end
-    // by the angle that moves the other end `probe_m`.
-    let [e0, e1] = evidence.overlap_ends;
-    let end_turn_rad = (probe_m / e0.distance_m(e1).max(1.0)).min(0.1);
-    for pivot in [e0, e1] {
-        probes.push(turned_about(a_from_b, pivot, end_turn_rad));
-        probes.push(turned_about(a_from_b, pivot, -end_turn_rad));
-    }
-    let here = a_from_b.transform_point(c);
-    for probe in probes {
-        let p = refine_fine(a, b, probe);
-        let moved = p.transform_point(c).distance_m(here);
-        let turned = realms_core::geometry::normalize_angle_rad(p.yaw_rad - a_from_b.yaw_rad).abs();
-        if moved <= apart_m && turned <= apart_rad {
-            continue;
-        }
-        let e = verify(a, b, &p, params.conflict_weight, On::Refine);
-        if fits_as_well(
-            a,
-            b,
-            (&p, &e),
-            (a_from_b, evidence, pose_closeness),
-            (params.precision_score_share, share),
-        ) {
-            return Some((p, e));
-        }
-    }
-    None
-}
-
 /// Distance (fine cells) from a grid-local point to `level`'s nearest structure,
 /// interpolated; `None` outside the grid.
 fn dist_interp(level: &Level, p: Point2) -> Option<f32> {
@@ -515,28 +447,6 @@ fn polish_on_common_points(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, 
     pose
 }
 
-/// Whether `other` (a pose and its evidence) explains the maps about as well as `best`
-/// (its pose, evidence and [`closeness`]): at least `score_share` of its verified score, and
-/// `share` of its closeness, summed or on the points both poses share
-/// ([`paired_closeness`]). Verification tolerates a cell and a half, so a pose a cell or two
-/// off that overlaps more ground can count as many agreeing cells as the true one; its
-/// surfaces do not lie as close. And across a band, a pose slid sideways outscores the true
-/// one on every sum; on the points they share, the true pose fits as closely.
-pub fn fits_as_well(
-    a: &Prepared,
-    b: &Prepared,
-    (pose, evidence): (&Pose2, &Evidence),
-    (best_pose, best, best_closeness): (&Pose2, &Evidence, f64),
-    (score_share, share): (f64, f64),
-) -> bool {
-    evidence.score >= score_share * best.score
-        && (closeness(a, b, pose) >= share * best_closeness || {
-            let (at_best, at_pose) = paired_closeness(a, b, best_pose, pose);
-            // Sharing no points is no evidence of fitting as well.
-            at_best > 0.0 && at_pose >= share * at_best
-        })
-}
-
 /// Coordinate ascent on [`Relevant::smooth_score`] from half a cell and a quarter degree down.
 fn polish(a: &Prepared, b: &Prepared, start: Pose2, fine: f64, deg: f64) -> Pose2 {
     let c = b.centroid;
@@ -577,7 +487,7 @@ fn moves(pose: &Pose2, c: Point2, step_xy: f64, step_yaw: f64) -> [Pose2; 6] {
 }
 
 /// `p` turned by `dyaw` about the point `c` of the moving map (grid-local metres).
-fn turned_about(p: &Pose2, c: Point2, dyaw: f64) -> Pose2 {
+pub(crate) fn turned_about(p: &Pose2, c: Point2, dyaw: f64) -> Pose2 {
     let pc = p.transform_point(c);
     let q = Pose2::new(p.x_m, p.y_m, p.yaw_rad + dyaw);
     let qc = q.transform_point(c);
