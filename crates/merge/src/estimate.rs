@@ -629,8 +629,28 @@ fn run(
                 && !swung_out_of_view(a, b, &best_pose, &evidence, p, e, params)
         })
         .collect();
-    let runner_up_score = others.first().map_or(0.0, |(_, e)| e.score.max(0.0));
-    let rival = others.iter().find(|(_, e)| is_rival(e, &evidence, params));
+    // A rival the maps' own surfaces, aligned at both poses, fit clearly worse than the
+    // best is none (`Params::rival_worse_z`).
+    let fits_clearly_worse = |q: &Pose2| {
+        let best_overlap = fine::Overlap::at(&a.fine, &b.fine, &best_pose, FINE_MARGIN_M);
+        let best_fit = fine::align(&a.fine, &b.fine, &best_overlap, best_pose);
+        let q_overlap = fine::Overlap::at(&a.fine, &b.fine, q, FINE_MARGIN_M);
+        let q_fit = fine::align(&a.fine, &b.fine, &q_overlap, *q);
+        let both = best_overlap.union(&q_overlap);
+        fine::compare(&a.fine, &b.fine, &both, &best_fit.pose, &q_fit.pose).z
+            >= params.rival_worse_z
+    };
+    // The runner-up: the best scoring other pose, leaving out those that would refuse the
+    // merge on their score alone but fit the surfaces clearly worse.
+    let runner_up_score = others
+        .iter()
+        .find(|(p, e)| {
+            e.score < params.max_runner_up_ratio * evidence.score || !fits_clearly_worse(p)
+        })
+        .map_or(0.0, |(_, e)| e.score.max(0.0));
+    let rival = others
+        .iter()
+        .find(|(p, e)| is_rival(e, &evidence, params) && !fits_clearly_worse(p));
     let agreement = evidence.agreement();
     let ratio = if evidence.score > 0.0 {
         runner_up_score / evidence.score

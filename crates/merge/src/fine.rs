@@ -270,6 +270,20 @@ impl Overlap {
 }
 
 impl Overlap {
+    /// The points of either overlap.
+    pub fn union(&self, other: &Overlap) -> Overlap {
+        let merge = |x: &[usize], y: &[usize]| {
+            let mut all: Vec<usize> = x.iter().chain(y).copied().collect();
+            all.sort_unstable();
+            all.dedup();
+            all
+        };
+        Overlap {
+            a: merge(&self.a, &other.a),
+            b: merge(&self.b, &other.b),
+        }
+    }
+
     /// At most `max_points` of the overlap's points (evenly, from each map in proportion).
     pub fn thinned(&self, max_points: usize) -> Overlap {
         let total = self.a.len() + self.b.len();

@@ -129,6 +129,14 @@ pub struct Params {
     /// 20 %) that merged 9 more pairs, all right; at 1.0, on seeds 1-5, one wrong merge came
     /// in.
     pub rival_overlap_share: f64,
+    /// Nor is a pose that, both aligned on the maps' own surfaces ([`crate::fine`]), fits
+    /// worse than the best by at least this many standard errors
+    /// ([`crate::fine::Comparison::z`]); the same test lets a runner-up that scores
+    /// [`Params::max_runner_up_ratio`] of the best pass. On 10 cm cells a band swung a
+    /// degree or two about its landmarks keeps their agreement; on 5 cm surfaces it does
+    /// not. In `realms bench merge` (lunar, seeds 1-8, 10 and 20 %) that merged 14 more
+    /// pairs of 800, none wrong.
+    pub rival_worse_z: f64,
     /// A fixed map larger than this (metres, its larger side) is searched globally on a
     /// level twice as coarse, with heading steps twice as large: the search's cost grows
     /// with the area of translations, and refinement recovers the precision.
@@ -182,6 +190,7 @@ impl Default for Params {
             subset_share: 0.9,
             subset_tolerance_m: 0.5,
             rival_overlap_share: 0.6,
+            rival_worse_z: 3.0,
             large_map_m: 30.0,
         }
     }

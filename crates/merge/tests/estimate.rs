@@ -313,17 +313,29 @@ fn long_lunar_bands_pinned_by_their_rocks_are_merged() {
 /// it. The truth is found, but a pose turned about the crater until half the band has left
 /// the first map's known ground is as consistent, and counted as a rival it refused the
 /// merge. It keeps the best pose's own crater pairs and explains less over less than 60 %
-/// of the overlap, so it is no alternative; the merge is made, and right.
+/// of the overlap, so it is no alternative; the merge is made, and right. Since the
+/// thirty-second session the maps' own surfaces also fit the swung pose clearly worse
+/// (`Params::rival_worse_z`): either test alone makes the merge, neither refuses it.
 #[test]
 fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
     let pair = common::lunar_bench_pair("lunar-sparse", 5, 10, 4);
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert_merged_right(&est, &pair, "seed 5 pair 4");
+    let surfaces_only = estimate_maps(
+        &pair.a,
+        &pair.b,
+        &Params {
+            rival_overlap_share: 0.0,
+            ..Params::default()
+        },
+    );
+    assert_merged_right(&surfaces_only, &pair, "seed 5 pair 4, surfaces only");
     let strict = estimate_maps(
         &pair.a,
         &pair.b,
         &Params {
             rival_overlap_share: 0.0,
+            rival_worse_z: f64::INFINITY,
             ..Params::default()
         },
     );
@@ -410,4 +422,37 @@ fn a_pose_the_surfaces_pin_is_merged_to_a_fraction_of_a_cell() {
         "{off_m:.3} m and {:.3} deg off",
         off_rad.to_degrees()
     );
+}
+
+/// `realms bench merge --seed 4`, lunar sparse at 10 % overlap, pair 15: the best right to
+/// the centimetre with 65 landmark points agreeing, refused because a pose 1.0 m and 2
+/// degrees away, swung about the band's rocks, agreed as consistently on 10 cm cells.
+/// Both aligned on the maps' own 5 cm surfaces, the swung pose fits clearly worse, and the
+/// merge is made; with that test off (`rival_worse_z` infinite) it is refused as before.
+/// In the same cases pair 13, whose best pose is a quarter turn off with the truth as its
+/// rival, must not be merged.
+#[test]
+fn a_rival_the_surfaces_fit_clearly_worse_is_none() {
+    let pair = common::lunar_bench_pair("lunar-sparse", 4, 10, 15);
+    let est = estimate_maps(&pair.a, &pair.b, &Params::default());
+    assert_merged_right(&est, &pair, "seed 4 sparse 10 % pair 15");
+    let without = estimate_maps(
+        &pair.a,
+        &pair.b,
+        &Params {
+            rival_worse_z: f64::INFINITY,
+            ..Params::default()
+        },
+    );
+    assert!(
+        without
+            .refusal
+            .as_deref()
+            .is_some_and(|r| r.contains("ambiguous")),
+        "{:?}",
+        without.refusal
+    );
+    let quarter_turn = common::lunar_bench_pair("lunar-sparse", 4, 10, 13);
+    let est = estimate_maps(&quarter_turn.a, &quarter_turn.b, &Params::default());
+    common::accepted_and_right(&est, &quarter_turn, "seed 4 sparse 10 % pair 13");
 }
