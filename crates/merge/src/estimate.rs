@@ -16,9 +16,11 @@
 //! 6. it is accepted only if enough structure agrees, little conflicts, the maps overlap
 //!    enough and the runner-up (the best clearly different pose that is neither a lesser
 //!    explanation nor the same one slid along itself) scores clearly lower, no landmark
-//!    lands on open ground, more agrees than a corner of two walls (with no prior), and no
-//!    pose close by explains the maps as well. Refusing is always preferred to merging
-//!    wrong.
+//!    lands on open ground, and more agrees than a corner of two walls (with no prior); a
+//!    rival or runner-up the maps' own surfaces fit clearly worse is none;
+//! 7. the pose is settled on the maps' own surfaces at their resolution ([`crate::fine`]),
+//!    and refused as imprecise if a fit restarted nearby lays them on each other as
+//!    closely. Refusing is always preferred to merging wrong.
 
 use crate::fine;
 use crate::map::Map;
@@ -33,8 +35,10 @@ use std::f64::consts::PI;
 /// The answer for one pair of maps.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Estimate {
-    /// Pose of the second map's frame in the first map's frame, by the best hypothesis
-    /// (`None` if there was none at all). Use [`Estimate::accepted`] for a merge.
+    /// Pose of the second map's frame in the first map's frame, by the best hypothesis,
+    /// settled on the maps' own surfaces where that fits them clearly more closely ([`fine`];
+    /// `evidence` is the verified hypothesis's) (`None` if there was none at all). Use
+    /// [`Estimate::accepted`] for a merge.
     pub a_from_b: Option<Pose2>,
     /// Confidence in the best hypothesis, 0..1.
     pub confidence: f64,
@@ -368,7 +372,8 @@ const FINE_MIN_PAIRS: usize = 20;
 /// 10 %, pair 17); at 0.15 m the lunar pairs of seeds 1-8 at 10 and 20 % (800) make 487
 /// right merges and no wrong one, against 497 and that one ...
 const FINE_MAX_MOVE_M: f64 = 0.15;
-/// ... and turns at most this far (radians) from the verified best ...
+/// ... and turns at most this far (radians) from the verified best, or as much as moves
+/// the overlap's edge [`FINE_MAX_MOVE_M`] ...
 const FINE_MAX_TURN_RAD: f64 = 0.035;
 /// ... and fits more closely than it by at least this many standard errors (negative:
 /// better; [`fine::Comparison::z`]).
@@ -629,28 +634,35 @@ fn run(
                 && !swung_out_of_view(a, b, &best_pose, &evidence, p, e, params)
         })
         .collect();
+    let (overlap, settled_pose) = settle_on_surfaces(a, b, &best_pose, &evidence);
     // A rival the maps' own surfaces, aligned at both poses, fit clearly worse than the
     // best is none (`Params::rival_worse_z`).
-    let fits_clearly_worse = |q: &Pose2| {
-        let best_overlap = fine::Overlap::at(&a.fine, &b.fine, &best_pose, FINE_MARGIN_M);
-        let best_fit = fine::align(&a.fine, &b.fine, &best_overlap, best_pose);
-        let q_overlap = fine::Overlap::at(&a.fine, &b.fine, q, FINE_MARGIN_M);
-        let q_fit = fine::align(&a.fine, &b.fine, &q_overlap, *q);
-        let both = best_overlap.union(&q_overlap);
-        fine::compare(&a.fine, &b.fine, &both, &best_fit.pose, &q_fit.pose).z
-            >= params.rival_worse_z
+    // (Worked out once per pose, and only for those that would otherwise refuse the merge.)
+    let worse: Vec<std::cell::OnceCell<bool>> = others.iter().map(|_| Default::default()).collect();
+    let fits_clearly_worse = |k: usize| {
+        *worse[k].get_or_init(|| {
+            let q = others[k].0;
+            let q_overlap = fine::Overlap::at(&a.fine, &b.fine, &q, FINE_MARGIN_M);
+            let q_fit = fine::align(&a.fine, &b.fine, &q_overlap, q);
+            let both = overlap.union(&q_overlap);
+            fine::compare(&a.fine, &b.fine, &both, &settled_pose, &q_fit.pose).z
+                >= params.rival_worse_z
+        })
     };
     // The runner-up: the best scoring other pose, leaving out those that would refuse the
     // merge on their score alone but fit the surfaces clearly worse.
     let runner_up_score = others
         .iter()
-        .find(|(p, e)| {
-            e.score < params.max_runner_up_ratio * evidence.score || !fits_clearly_worse(p)
+        .enumerate()
+        .find(|(k, (_, e))| {
+            e.score < params.max_runner_up_ratio * evidence.score || !fits_clearly_worse(*k)
         })
-        .map_or(0.0, |(_, e)| e.score.max(0.0));
+        .map_or(0.0, |(_, (_, e))| e.score.max(0.0));
     let rival = others
         .iter()
-        .find(|(p, e)| is_rival(e, &evidence, params) && !fits_clearly_worse(p));
+        .enumerate()
+        .find(|(k, (_, e))| is_rival(e, &evidence, params) && !fits_clearly_worse(*k))
+        .map(|(_, r)| r);
     let agreement = evidence.agreement();
     let ratio = if evidence.score > 0.0 {
         runner_up_score / evidence.score
@@ -669,56 +681,11 @@ fn run(
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
-    // The best pose to within a fraction of a cell, on the maps' own surfaces; kept only
-    // where the fit pairs enough points, stays within the pose's basin, and lays the
-    // surfaces on each other clearly more closely: along a direction nothing pins, a fit
-    // drifts on noise.
-    let overlap = fine::Overlap::at(&a.fine, &b.fine, &best_pose, FINE_MARGIN_M);
-    let fit = fine::align(&a.fine, &b.fine, &overlap, best_pose);
-    let settled_pose = if fit.pairs >= FINE_MIN_PAIRS
-        && fit
-            .pose
-            .transform_point(evidence.overlap_centre)
-            .distance_m(best_pose.transform_point(evidence.overlap_centre))
-            <= FINE_MAX_MOVE_M
-        && normalize_angle_rad(fit.pose.yaw_rad - best_pose.yaw_rad).abs() <= FINE_MAX_TURN_RAD
-        && fine::compare(&a.fine, &b.fine, &overlap, &best_pose, &fit.pose).z <= FINE_BETTER_Z
-    {
-        fit.pose
-    } else {
-        best_pose
-    };
-    // Only worth looking for when the merge would otherwise be accepted: fits restarted
-    // around the pose; one clearly closer takes its place, one as close makes it imprecise.
+    // Only worth looking for when the merge would otherwise be accepted.
     let precise_cell = std::cell::OnceCell::new();
     let precise = || {
         *precise_cell.get_or_init(|| {
-            let within_reach = |p: &Pose2| {
-                p.transform_point(evidence.overlap_centre)
-                    .distance_m(best_pose.transform_point(evidence.overlap_centre))
-                    <= FINE_MAX_MOVE_M
-                    && normalize_angle_rad(p.yaw_rad - best_pose.yaw_rad).abs() <= FINE_MAX_TURN_RAD
-            };
-            let (mut pose, mut hops) = (settled_pose, 0);
-            loop {
-                match fine::nearby(
-                    &a.fine,
-                    &b.fine,
-                    &overlap,
-                    &pose,
-                    evidence.overlap_centre,
-                    evidence.overlap_ends,
-                    &params.precision,
-                ) {
-                    fine::Nearby::Alone => break (pose, None),
-                    fine::Nearby::Better(p, _) if hops < FINE_MAX_HOPS && within_reach(&p) => {
-                        (pose, hops) = (p, hops + 1);
-                    }
-                    fine::Nearby::Better(p, c) | fine::Nearby::Rival(p, c) => {
-                        break (pose, Some((p, c)));
-                    }
-                }
-            }
+            precision_on_surfaces(a, b, &overlap, settled_pose, &best_pose, &evidence, params)
         })
     };
     // Worked out only for a pose every cheaper check has let through, and only with no
@@ -787,12 +754,20 @@ fn run(
             100.0 * off_walls(),
             100.0 * params.min_off_two_walls
         ))
-    } else if let (settled_pose, Some((pose, c))) = precise() {
+    } else if let (current, Some(imprecision)) = precise() {
+        let (pose, c, how) = match imprecision {
+            Imprecision::AsClose(pose, c) => (pose, c, "about as closely"),
+            Imprecision::CloserOutOfReach(pose, c) => (
+                pose,
+                c,
+                "more closely, too far from the verified best to take",
+            ),
+        };
         Some(format!(
-            "imprecise: a pose {:.2} m and {:.1} deg away lays the surfaces on each other about as closely ({:.1} standard errors worse over {} points)",
+            "imprecise: a pose {:.2} m and {:.1} deg away lays the surfaces on each other {how} ({:.1} standard errors worse over {} points)",
             pose.transform_point(evidence.overlap_centre)
-                .distance_m(settled_pose.transform_point(evidence.overlap_centre)),
-            normalize_angle_rad(pose.yaw_rad - settled_pose.yaw_rad)
+                .distance_m(current.transform_point(evidence.overlap_centre)),
+            normalize_angle_rad(pose.yaw_rad - current.yaw_rad)
                 .to_degrees()
                 .abs(),
             c.z,
@@ -814,6 +789,82 @@ fn run(
         stats,
         hypotheses,
         verified: verified.iter().map(|(p, e)| (to_frames(p), *e)).collect(),
+    }
+}
+
+/// Whether grid-local `p` lies within the sub-cell steps' reach of the verified best: the
+/// overlap's centre moved at most [`FINE_MAX_MOVE_M`], and turned at most
+/// [`FINE_MAX_TURN_RAD`] or as much as moves the overlap's edge that far.
+fn within_reach(p: &Pose2, best: &Pose2, evidence: &Evidence) -> bool {
+    let c = evidence.overlap_centre;
+    let max_turn_rad =
+        (FINE_MAX_MOVE_M / evidence.overlap_radius_m.max(1.0)).min(FINE_MAX_TURN_RAD);
+    p.transform_point(c).distance_m(best.transform_point(c)) <= FINE_MAX_MOVE_M
+        && normalize_angle_rad(p.yaw_rad - best.yaw_rad).abs() <= max_turn_rad
+}
+
+/// The verified best (grid-local) settled on the maps' own surfaces ([`fine::align`]), with
+/// the overlap the fit used: the fit is kept only where it pairs enough points, stays within
+/// reach ([`within_reach`]) and lays the surfaces on each other clearly more closely; along a
+/// direction nothing pins, a fit drifts on noise.
+fn settle_on_surfaces(
+    a: &Prepared,
+    b: &Prepared,
+    best: &Pose2,
+    evidence: &Evidence,
+) -> (fine::Overlap, Pose2) {
+    let overlap = fine::Overlap::at(&a.fine, &b.fine, best, FINE_MARGIN_M);
+    let fit = fine::align(&a.fine, &b.fine, &overlap, *best);
+    let settled = fit.pairs >= FINE_MIN_PAIRS
+        && within_reach(&fit.pose, best, evidence)
+        && fine::compare(&a.fine, &b.fine, &overlap, best, &fit.pose).z <= FINE_BETTER_Z;
+    (overlap, if settled { fit.pose } else { *best })
+}
+
+/// Why a pose is not precise on the surfaces.
+#[derive(Clone, Copy, Debug)]
+enum Imprecision {
+    /// Another pose fits about as closely.
+    AsClose(Pose2, fine::Comparison),
+    /// Another pose fits clearly more closely, but lies beyond reach of the verified best
+    /// (or the pose has already been replaced [`FINE_MAX_HOPS`] times).
+    CloserOutOfReach(Pose2, fine::Comparison),
+}
+
+/// The precision check on the surfaces ([`fine::nearby`]) from the settled pose: a restart
+/// that fits clearly more closely, within reach, takes its place (at most
+/// [`FINE_MAX_HOPS`] times); the pose it ends at, and why it is imprecise if it is.
+fn precision_on_surfaces(
+    a: &Prepared,
+    b: &Prepared,
+    overlap: &fine::Overlap,
+    settled: Pose2,
+    best: &Pose2,
+    evidence: &Evidence,
+    params: &Params,
+) -> (Pose2, Option<Imprecision>) {
+    let (mut pose, mut hops) = (settled, 0);
+    loop {
+        match fine::nearby(
+            &a.fine,
+            &b.fine,
+            overlap,
+            &pose,
+            evidence.overlap_centre,
+            evidence.overlap_ends,
+            &params.precision,
+        ) {
+            fine::Nearby::Alone => return (pose, None),
+            fine::Nearby::Better(p, _)
+                if hops < FINE_MAX_HOPS && within_reach(&p, best, evidence) =>
+            {
+                (pose, hops) = (p, hops + 1);
+            }
+            fine::Nearby::Better(p, c) => {
+                return (pose, Some(Imprecision::CloserOutOfReach(p, c)));
+            }
+            fine::Nearby::Rival(p, c) => return (pose, Some(Imprecision::AsClose(p, c))),
+        }
     }
 }
 

@@ -17,7 +17,7 @@
 //! on the other map's known ground at both ([`compare`]); one that is not clearly worse
 //! makes the merge imprecise.
 
-use crate::level::{Class, Outline, floor_i64};
+use crate::level::{Class, Outline, floor_i64, local_shape};
 use realms_core::{Point2, Pose2};
 
 /// The surface cells of a level, with a normal fitted to their neighbours, indexed by
@@ -77,40 +77,25 @@ impl Surfaces {
         let points = raw
             .iter()
             .map(|&(cx, cy, free_rad)| {
-                let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
-                let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-                let r = NORMAL_RADIUS_CELLS;
-                for y in (cy - r).max(0)..(cy + r + 1).min(height as i64) {
-                    for x in (cx - r).max(0)..(cx + r + 1).min(width as i64) {
-                        if index[y as usize * width + x as usize] == u32::MAX {
-                            continue;
-                        }
-                        let (dx, dy) = ((x - cx) as f64, (y - cy) as f64);
-                        n += 1.0;
-                        sx += dx;
-                        sy += dy;
-                        sxx += dx * dx;
-                        sxy += dx * dy;
-                        syy += dy * dy;
-                    }
-                }
+                let surface = |x: i64, y: i64| {
+                    (0..width as i64).contains(&x)
+                        && (0..height as i64).contains(&y)
+                        && index[y as usize * width + x as usize] != u32::MAX
+                };
                 let free_side = [free_rad.cos(), free_rad.sin()];
-                let normal = if n >= 3.0 {
-                    let (mx, my) = (sx / n, sy / n);
-                    let (a, b, c) = (sxx / n - mx * mx, sxy / n - mx * my, syy / n - my * my);
-                    // Eigenvector of the smaller eigenvalue of [[a, b], [b, c]].
-                    let theta = 0.5 * (2.0 * b).atan2(a - c) + std::f64::consts::FRAC_PI_2;
-                    let v = [theta.cos(), theta.sin()];
-                    let along_free = v[0] * free_side[0] + v[1] * free_side[1];
-                    if along_free.abs() < MIN_NORMAL_COS {
-                        free_side
-                    } else if along_free < 0.0 {
-                        [-v[0], -v[1]]
-                    } else {
-                        v
+                let normal = match local_shape(surface, cx, cy, NORMAL_RADIUS_CELLS) {
+                    Some((n, _, axis_rad)) if n >= 3.0 => {
+                        let v = [-axis_rad.sin(), axis_rad.cos()];
+                        let along_free = v[0] * free_side[0] + v[1] * free_side[1];
+                        if along_free.abs() < MIN_NORMAL_COS {
+                            free_side
+                        } else if along_free < 0.0 {
+                            [-v[0], -v[1]]
+                        } else {
+                            v
+                        }
                     }
-                } else {
-                    free_side
+                    _ => free_side,
                 };
                 let p = Point2::new(
                     (cx as f64 + 0.5) * outline.cell_m,
@@ -122,11 +107,7 @@ impl Surfaces {
         Surfaces {
             points,
             index,
-            known: outline
-                .class
-                .iter()
-                .map(|c| *c != crate::level::Class::Unknown)
-                .collect(),
+            known: outline.class.iter().map(|c| *c != Class::Unknown).collect(),
             width,
             height,
             cell_m: outline.cell_m,
@@ -164,6 +145,10 @@ impl Surfaces {
             floor_i64(q.y_m / self.cell_m),
         );
         let (w, h) = (self.width as i64, self.height as i64);
+        // Off the grid by more than the radius (or not a number): nothing within reach.
+        if !(-radius..w + radius).contains(&cx) || !(-radius..h + radius).contains(&cy) {
+            return None;
+        }
         let mut best: Option<(f64, usize)> = None;
         let visit = |x: i64, y: i64, best: &mut Option<(f64, usize)>| {
             if x < 0 || y < 0 || x >= w || y >= h {
@@ -239,8 +224,8 @@ impl Rigid {
     }
 }
 
-/// The points of both maps that land on (or within `margin_m` of) the other map's known
-/// ground at a pose: all a fit near that pose can pair.
+/// The points of both maps that land on the other map's known ground at a pose, or `margin_m`
+/// from it along an axis: all a fit near that pose can pair.
 #[derive(Clone, Debug)]
 pub struct Overlap {
     a: Vec<usize>,
@@ -267,9 +252,7 @@ impl Overlap {
                 .collect(),
         }
     }
-}
 
-impl Overlap {
     /// The points of either overlap.
     pub fn union(&self, other: &Overlap) -> Overlap {
         let merge = |x: &[usize], y: &[usize]| {
@@ -363,13 +346,22 @@ const SETTLED_STEP_CELLS: f64 = 0.01;
 const SETTLED_TURN_RAD: f64 = 1e-4;
 
 /// Point-to-line ICP between the surfaces of two maps over `overlap`, from grid-local
-/// `start`: Gauss-Newton on the distances along the first map's normals, Huber-weighted
-/// beyond half a cell.
+/// `start`: Gauss-Newton on the distances along the normal of the point each is paired
+/// with, Huber-weighted beyond half a cell.
 pub fn align(a: &Surfaces, b: &Surfaces, overlap: &Overlap, start: Pose2) -> FineFit {
-    let huber = 0.5 * a.cell_m;
-    // Turns are taken about the overlap's centre (the first map's points in it) and
-    // measured as the arc at its spread, so that the three directions weigh alike.
-    let (pivot, lever) = spread(overlap.a.iter().map(|&i| a.points[i].0));
+    let cell_m = a.cell_m.max(b.cell_m);
+    let huber = 0.5 * cell_m;
+    // Turns are taken about the overlap's centre (both maps' points in it, in the first
+    // map's frame) and measured as the arc at its spread, so that the three directions
+    // weigh alike.
+    let there = Rigid::new(&start);
+    let (pivot, lever) = spread(
+        overlap
+            .a
+            .iter()
+            .map(|&i| a.points[i].0)
+            .chain(overlap.b.iter().map(|&i| there.apply(b.points[i].0))),
+    );
     let mut fit = FineFit {
         pose: start,
         pairs: 0,
@@ -425,7 +417,7 @@ pub fn align(a: &Surfaces, b: &Surfaces, overlap: &Overlap, start: Pose2) -> Fin
             p.yaw_rad + dyaw,
         );
         if iteration >= WIDE_ITERATIONS
-            && step[0].hypot(step[1]) < SETTLED_STEP_CELLS * a.cell_m
+            && step[0].hypot(step[1]) < SETTLED_STEP_CELLS * cell_m
             && dyaw.abs() < SETTLED_TURN_RAD
         {
             break;
@@ -467,7 +459,6 @@ fn eigen_symmetric3(m: &[[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
             }
             let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
             let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
             // a <- J^T a J with J the rotation in the (p, q) plane.
@@ -491,13 +482,19 @@ fn eigen_symmetric3(m: &[[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
     (values, vectors)
 }
 
+/// [`compare`] finds no difference between poses that share fewer points than this.
+const MIN_COMMON_POINTS: usize = 30;
+
 /// Two poses compared point by point.
 #[derive(Clone, Copy, Debug)]
 pub struct Comparison {
     /// Points counted at both poses.
     pub common: usize,
     /// How much worse the second pose fits, in standard errors of the mean difference of
-    /// the points' costs (negative: it fits better).
+    /// the points' costs (negative: it fits better; 0 with fewer than 30 points in common).
+    /// Each pair of surface points is counted from both maps and neighbouring points' costs
+    /// are correlated, so this overstates the evidence; the thresholds were chosen on it as
+    /// it is.
     pub z: f64,
     /// Root mean square of the points' capped distances at the first pose, metres ...
     pub rms_p_m: f64,
@@ -506,12 +503,13 @@ pub struct Comparison {
 }
 
 /// Compares how closely grid-local poses `p` and `q` lay the maps' surfaces on each other,
-/// over the points of `overlap` that land on the other map's known ground at both: each
-/// costs its squared distance along the normal to its pair, at most a cell squared (also
-/// the cost of a point with no pair). A sum over the points that fit would reward a pose
+/// over the points of `overlap` counted at both: each costs its squared distance along the
+/// normal to its pair, at most a cell squared; a point with no pair costs that cap where it
+/// lands on the other map's known ground and is not counted where it does not. A sum over the points that fit would reward a pose
 /// that widens a thin overlap; the same points at both poses do not.
 pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pose2) -> Comparison {
-    let cap = a.cell_m * a.cell_m;
+    let cell_m = a.cell_m.max(b.cell_m);
+    let cap = cell_m * cell_m;
     let costs = |pose: &Pose2| {
         let mut out = Vec::with_capacity(overlap.a.len() + overlap.b.len());
         for_points(a, b, overlap, pose, SETTLE_RADIUS, |pair, on_known| {
@@ -535,11 +533,17 @@ pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pos
     }
     let nf = n.max(1) as f64;
     let mean = sum / nf;
-    // Differences below a thousandth of a cell squared are rounding, not evidence.
-    let se2 = (sum2 / nf - mean * mean).max(0.0) / nf + (1e-3 * cap).powi(2);
+    // Too few points in common is no evidence either way; and differences below a
+    // thousandth of a cell squared are rounding.
+    let z = if n < MIN_COMMON_POINTS {
+        0.0
+    } else {
+        let var = (sum2 - nf * mean * mean).max(0.0) / (nf - 1.0);
+        mean / (var / nf + (1e-3 * cap).powi(2)).sqrt()
+    };
     Comparison {
         common: n,
-        z: mean / se2.sqrt(),
+        z,
         rms_p_m: (sum_p / nf).sqrt(),
         rms_q_m: ((sum_p + sum) / nf).max(0.0).sqrt(),
     }
@@ -758,5 +762,50 @@ mod tests {
         let fit = align(&pinned.0, &pinned.1, &overlap, truth);
         let found = nearby(&pinned.0, &pinned.1, &overlap, &fit.pose, c, ends, &rule);
         assert!(matches!(found, Nearby::Alone), "{found:?}");
+    }
+
+    #[test]
+    fn the_eigen_decomposition_rebuilds_its_matrix() {
+        let m = [[4.0, 1.0, -2.0], [1.0, 3.0, 0.5], [-2.0, 0.5, 1e-3]];
+        let (values, vectors) = eigen_symmetric3(&m);
+        for r in 0..3 {
+            for c in 0..3 {
+                let rebuilt: f64 = (0..3)
+                    .map(|k| values[k] * vectors[k][r] * vectors[k][c])
+                    .sum();
+                assert!(
+                    (rebuilt - m[r][c]).abs() < 1e-9,
+                    "({r}, {c}): {rebuilt} against {}",
+                    m[r][c]
+                );
+            }
+        }
+        // A direction nothing pins has a zero eigenvalue along it.
+        let wall = [[0.0, 0.0, 0.0], [0.0, 50.0, 5.0], [0.0, 5.0, 20.0]];
+        let (values, vectors) = eigen_symmetric3(&wall);
+        let k = (0..3)
+            .min_by(|&i, &j| values[i].total_cmp(&values[j]))
+            .expect("three");
+        assert!(
+            values[k].abs() < 1e-12 && vectors[k][0].abs() > 1.0 - 1e-12,
+            "{values:?} {vectors:?}"
+        );
+    }
+
+    #[test]
+    fn poses_sharing_too_few_points_are_not_told_apart() {
+        let room_from_a = Pose2::new(0.0, 0.0, 0.0);
+        let a = room(&room_from_a, true, &[(3.0, 2.5)]);
+        let b = room(&room_from_a, true, &[(3.0, 2.5)]);
+        let truth = grid_pose(&room_from_a, &room_from_a);
+        let overlap = Overlap::at(&a, &b, &truth, 0.5);
+        let off = Pose2::new(truth.x_m + 0.04, truth.y_m, truth.yaw_rad);
+        // On all the points, 4 cm off is clearly worse ...
+        let all = compare(&a, &b, &overlap, &truth, &off);
+        assert!(all.common > 500 && all.z > 3.0, "{all:?}");
+        // ... on a handful of them, no evidence either way.
+        let few = overlap.thinned(20);
+        let some = compare(&a, &b, &few, &truth, &off);
+        assert!(some.common < 30 && some.z == 0.0, "{some:?}");
     }
 }

@@ -91,8 +91,8 @@ pub struct Params {
     /// The precision check: a fit on the surfaces at the maps' own resolution
     /// ([`crate::fine::nearby`]), restarted around the best, that settles apart from it and
     /// fits about as closely refuses the merge as imprecise; one that fits clearly more
-    /// closely takes the best's place (at most three times, and within 0.3 m and 2 degrees
-    /// of the verified best).
+    /// closely takes the best's place (a few times, and only near the verified best; see
+    /// `FINE_MAX_MOVE_M` and `FINE_MAX_HOPS` in [`crate::estimate`]).
     pub precision: crate::fine::RivalRule,
     /// Refuse below this overlap of known cells, square metres.
     pub min_overlap_m2: f64,

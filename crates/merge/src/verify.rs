@@ -10,7 +10,7 @@
 //! overlap; a wrong one that lays walls over walls must also put the rest of its structure
 //! on the other map's free space. Two more checks judge how well the pose is pinned down:
 //! [`sharpness`] (does the score fall when the pose moves?) here, and
-//! [`crate::fine::rival`] (is there a second optimum close by that lays the surfaces on each
+//! [`crate::fine::nearby`] (is there a second optimum close by that lays the surfaces on each
 //! other as closely?).
 
 use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};

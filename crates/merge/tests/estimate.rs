@@ -354,7 +354,7 @@ fn a_pose_swung_about_the_same_crater_out_of_view_is_no_rival() {
 /// settles 0.14 m and 0.5 degrees from it and explains the maps as well, but the precision
 /// check looked only for restarts farther than 0.15 m. It now looks from 0.13 m, and
 /// counts a restart only if its surfaces also lie nearly as close as the best's (since the
-/// thirty-second session, fits on the maps' own surfaces: [`realms_merge::fine::rival`]).
+/// thirty-second session, fits on the maps' own surfaces: [`realms_merge::fine::nearby`]).
 /// The pair must not be merged wrong (it is now refused as imprecise).
 #[test]
 fn a_merge_a_restart_a_cell_away_explains_as_well_is_not_made() {
