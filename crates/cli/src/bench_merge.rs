@@ -47,6 +47,10 @@ struct Row {
     with_landmark: usize,
     /// Success among those, percent.
     success_with_landmark_pct: f64,
+    /// Median error of the successful merges at the overlap's centre, metres, and of their
+    /// heading, degrees (NaN, `null` in JSON, with none).
+    success_median_error_m: f64,
+    success_median_error_deg: f64,
     median_ms: f64,
     max_ms: f64,
 }
@@ -222,6 +226,7 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
             let (mut ok, mut wrong, mut gross, mut refused) = (0usize, 0usize, 0usize, 0usize);
             let (mut with_landmark, mut ok_with_landmark) = (0usize, 0usize);
             let mut times_ms = Vec::new();
+            let (mut success_err_m, mut success_err_deg) = (Vec::new(), Vec::new());
             for i in 0..args.pairs {
                 let source = &sources[i % sources.len()];
                 let Some(pair) = synth::make_pair(source, &spec, &mut rng) else {
@@ -288,6 +293,8 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 let verdict = match (est.accepted().is_some(), correct) {
                     (true, true) => {
                         ok += 1;
+                        success_err_m.push(err_m);
+                        success_err_deg.push(err_rad.to_degrees());
                         ok_with_landmark += usize::from(has_landmark);
                         "ok"
                     }
@@ -408,6 +415,8 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 with_landmark,
                 success_with_landmark_pct: 100.0 * ok_with_landmark as f64
                     / with_landmark.max(1) as f64,
+                success_median_error_m: median(success_err_m),
+                success_median_error_deg: median(success_err_deg),
                 max_ms: times_ms.iter().copied().fold(0.0, f64::max),
                 median_ms: median(times_ms),
             });
@@ -435,12 +444,20 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
     );
     println!();
     println!(
-        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | pairs with a landmark in the overlap | success on those | median ms | max ms |"
+        "| source | overlap | success | wrong merge | of which gross (> {GROSS_M} m or {GROSS_DEG} deg) | refused | pairs with a landmark in the overlap | success on those | median error of a success | median ms | max ms |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for r in &rows {
+        let error = if r.success_median_error_m.is_nan() {
+            "-".to_string()
+        } else {
+            format!(
+                "{:.3} m, {:.2} deg",
+                r.success_median_error_m, r.success_median_error_deg
+            )
+        };
         println!(
-            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {} of {} | {:.0} % | {:.0} | {:.0} |",
+            "| {} | {} % | {:.0} % | {:.1} % | {:.1} % | {:.0} % | {} of {} | {:.0} % | {error} | {:.0} | {:.0} |",
             r.kind,
             r.overlap_pct,
             r.success_pct,
