@@ -653,10 +653,20 @@ mod tests {
     /// `room_from_grid`: walls 10 cm thick along `walls` (y = 0 and y = 8 m; and x = 0 if
     /// `corner`), round rocks of 20 cm radius at `rocks` (room metres), free inside.
     fn room(room_from_grid: &Pose2, corner: bool, rocks: &[(f64, f64)]) -> Surfaces {
+        room_at(room_from_grid, corner, rocks, 0.05)
+    }
+
+    /// [`room`] on cells of `cell_m`.
+    fn room_at(
+        room_from_grid: &Pose2,
+        corner: bool,
+        rocks: &[(f64, f64)],
+        cell_m: f64,
+    ) -> Surfaces {
         let g = GridGeometry {
-            width: 240,
-            height: 200,
-            resolution_m: 0.05,
+            width: (12.0 / cell_m).round() as usize,
+            height: (10.0 / cell_m).round() as usize,
+            resolution_m: cell_m,
             origin: Point2::new(-1.0, -1.0),
         };
         let mut grid = Grid::new(g, MapCell::Unknown);
@@ -679,7 +689,7 @@ mod tests {
             }
         }
         let map = Map::new(grid);
-        Surfaces::of(&Outline::of(&Despeckled::of(&map), 0.05))
+        Surfaces::of(&Outline::of(&Despeckled::of(&map), cell_m))
     }
 
     /// Grid-local pose of the second room drawing in the first (both drawn with the room's
@@ -722,6 +732,26 @@ mod tests {
         let ends = [Point2::new(1.0, 4.0), Point2::new(9.0, 4.0)];
         let found = nearby(&a, &b, &overlap, &fit.pose, c, ends, &rule);
         assert!(matches!(found, Nearby::Alone), "{found:?}");
+    }
+
+    #[test]
+    fn maps_of_different_resolutions_are_fitted_alike() {
+        let rocks = [(3.0, 2.5), (6.2, 5.1), (7.5, 1.7)];
+        let room_from_a = Pose2::new(0.0, 0.0, 0.0);
+        let room_from_b = Pose2::new(-0.031, 0.012, -0.6f64.to_radians());
+        let a = room(&room_from_a, true, &rocks);
+        let b = room_at(&room_from_b, true, &rocks, 0.1);
+        let truth = grid_pose(&room_from_a, &room_from_b);
+        let start = Pose2::new(truth.x_m - 0.07, truth.y_m + 0.05, truth.yaw_rad - 0.008);
+        let overlap = Overlap::at(&a, &b, &start, 0.5);
+        let fit = align(&a, &b, &overlap, start);
+        let c = Point2::new(5.0, 4.0);
+        let off = fit
+            .pose
+            .transform_point(c)
+            .distance_m(truth.transform_point(c));
+        let turn = (fit.pose.yaw_rad - truth.yaw_rad).abs().to_degrees();
+        assert!(off < 0.02 && turn < 0.2, "{off} m, {turn} deg off; {fit:?}");
     }
 
     #[test]
