@@ -378,6 +378,12 @@ const FINE_MAX_TURN_RAD: f64 = 0.035;
 /// ... and fits more closely than it by at least this many standard errors (negative:
 /// better; [`fine::Comparison::z`]).
 const FINE_BETTER_Z: f64 = -2.0;
+/// A restart that fits more closely by at least this many standard errors ...
+const FINE_MUCH_BETTER_Z: f64 = -5.0;
+/// ... may replace the pose this many times as far from the verified best as the reach
+/// ([`within_reach`]): seed 7, lunar sparse, 10 %, pair 9, once merged 0.17 m off, is
+/// merged right by a restart 1.2 degrees away that fits better by 10 standard errors.
+const FINE_MUCH_BETTER_REACH: f64 = 2.0;
 /// Restarts that fit clearly more closely replace the pose at most this many times.
 const FINE_MAX_HOPS: usize = 3;
 
@@ -792,14 +798,24 @@ fn run(
     }
 }
 
-/// Whether grid-local `p` lies within the sub-cell steps' reach of the verified best: the
-/// overlap's centre moved at most [`FINE_MAX_MOVE_M`], and turned at most
-/// [`FINE_MAX_TURN_RAD`] or as much as moves the overlap's edge that far.
-fn within_reach(p: &Pose2, best: &Pose2, evidence: &Evidence) -> bool {
+/// How far (as a multiple of the reach, [`within_reach`]) a restart that fits more closely
+/// by `c` may take the pose.
+fn reach_for(c: &fine::Comparison) -> f64 {
+    if c.z <= FINE_MUCH_BETTER_Z {
+        FINE_MUCH_BETTER_REACH
+    } else {
+        1.0
+    }
+}
+
+/// Whether grid-local `p` lies within `scale` times the sub-cell steps' reach of the
+/// verified best: the overlap's centre moved at most [`FINE_MAX_MOVE_M`], and turned at
+/// most [`FINE_MAX_TURN_RAD`] or as much as moves the overlap's edge that far.
+fn within_reach(p: &Pose2, best: &Pose2, evidence: &Evidence, scale: f64) -> bool {
     let c = evidence.overlap_centre;
     let max_turn_rad =
-        (FINE_MAX_MOVE_M / evidence.overlap_radius_m.max(1.0)).min(FINE_MAX_TURN_RAD);
-    p.transform_point(c).distance_m(best.transform_point(c)) <= FINE_MAX_MOVE_M
+        scale * (FINE_MAX_MOVE_M / evidence.overlap_radius_m.max(1.0)).min(FINE_MAX_TURN_RAD);
+    p.transform_point(c).distance_m(best.transform_point(c)) <= scale * FINE_MAX_MOVE_M
         && normalize_angle_rad(p.yaw_rad - best.yaw_rad).abs() <= max_turn_rad
 }
 
@@ -816,7 +832,7 @@ fn settle_on_surfaces(
     let overlap = fine::Overlap::at(&a.fine, &b.fine, best, FINE_MARGIN_M);
     let fit = fine::align(&a.fine, &b.fine, &overlap, *best);
     let settled = fit.pairs >= FINE_MIN_PAIRS
-        && within_reach(&fit.pose, best, evidence)
+        && within_reach(&fit.pose, best, evidence, 1.0)
         && fine::compare(&a.fine, &b.fine, &overlap, best, &fit.pose).z <= FINE_BETTER_Z;
     (overlap, if settled { fit.pose } else { *best })
 }
@@ -855,8 +871,8 @@ fn precision_on_surfaces(
             &params.precision,
         ) {
             fine::Nearby::Alone => return (pose, None),
-            fine::Nearby::Better(p, _)
-                if hops < FINE_MAX_HOPS && within_reach(&p, best, evidence) =>
+            fine::Nearby::Better(p, c)
+                if hops < FINE_MAX_HOPS && within_reach(&p, best, evidence, reach_for(&c)) =>
             {
                 (pose, hops) = (p, hops + 1);
             }
