@@ -18,6 +18,7 @@
 //! makes the merge imprecise.
 
 use crate::level::{Class, Outline, floor_i64, local_shape};
+use crate::verify::Rigid;
 use realms_core::{Point2, Pose2};
 
 /// The surface cells of a level, with a normal fitted to their neighbours, indexed by
@@ -114,16 +115,6 @@ impl Surfaces {
         }
     }
 
-    /// How many surface points there are.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
     /// Whether the cell under `q` is known.
     fn knows(&self, q: Point2) -> bool {
         let (x, y) = (
@@ -188,39 +179,6 @@ impl Surfaces {
             }
         }
         best.map(|(_, i)| self.points[i])
-    }
-}
-
-/// A pose as the rotation's cosine and sine and the translation: applied to many points
-/// without a sine and cosine each.
-#[derive(Clone, Copy, Debug)]
-struct Rigid {
-    c: f64,
-    s: f64,
-    x: f64,
-    y: f64,
-}
-
-impl Rigid {
-    fn new(p: &Pose2) -> Rigid {
-        let (s, c) = p.yaw_rad.sin_cos();
-        Rigid {
-            c,
-            s,
-            x: p.x_m,
-            y: p.y_m,
-        }
-    }
-
-    fn apply(&self, p: Point2) -> Point2 {
-        Point2::new(
-            self.c * p.x_m - self.s * p.y_m + self.x,
-            self.s * p.x_m + self.c * p.y_m + self.y,
-        )
-    }
-
-    fn turn(&self, v: [f64; 2]) -> [f64; 2] {
-        [self.c * v[0] - self.s * v[1], self.s * v[0] + self.c * v[1]]
     }
 }
 
@@ -568,7 +526,8 @@ pub struct RivalRule {
 const PROBE_FIT_POINTS: usize = 1500;
 /// Distances (metres) of the restarts [`nearby`] fits from, in eight directions each.
 const PROBE_SHIFTS_M: [f64; 3] = [0.1, 0.2, 0.35];
-/// Turns (radians) about the overlap's centre it fits from, either way.
+/// Turns (radians: half a degree, one and three) about the overlap's centre it fits from,
+/// either way.
 const PROBE_TURNS_RAD: [f64; 3] = [0.0087, 0.0175, 0.052];
 /// Turns about either end of the overlap, by the angle that moves the other end this far
 /// (metres): a band pinned at one end swings about it.

@@ -69,8 +69,8 @@ impl Evidence {
 }
 
 /// A pose with its sine and cosine worked out once, for transforming many points.
-#[derive(Clone, Copy)]
-struct Rigid {
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rigid {
     x_m: f64,
     y_m: f64,
     sin: f64,
@@ -78,7 +78,7 @@ struct Rigid {
 }
 
 impl Rigid {
-    fn new(p: &Pose2) -> Rigid {
+    pub(crate) fn new(p: &Pose2) -> Rigid {
         let (sin, cos) = p.yaw_rad.sin_cos();
         Rigid {
             x_m: p.x_m,
@@ -89,11 +89,20 @@ impl Rigid {
     }
 
     #[inline]
-    fn apply(&self, p: Point2) -> Point2 {
+    pub(crate) fn apply(&self, p: Point2) -> Point2 {
         Point2::new(
             self.x_m + self.cos * p.x_m - self.sin * p.y_m,
             self.y_m + self.sin * p.x_m + self.cos * p.y_m,
         )
+    }
+
+    /// A direction turned by the pose's rotation alone.
+    #[inline]
+    pub(crate) fn turn(&self, v: [f64; 2]) -> [f64; 2] {
+        [
+            self.cos * v[0] - self.sin * v[1],
+            self.sin * v[0] + self.cos * v[1],
+        ]
     }
 }
 
