@@ -288,7 +288,9 @@ pub struct BenchMergeArgs {
     /// Overlaps to test, percent, comma-separated.
     #[arg(long, default_value = "5,10,20,40")]
     pub overlaps: String,
-    /// Source kinds, comma-separated: real, sim-building, lunar-sparse, lunar-very-sparse.
+    /// Source kinds, comma-separated: real, sim-building, lunar-sparse, lunar-very-sparse,
+    /// and lunar-rovers, lunar-rovers-known-start (the rovers' own maps from three default
+    /// missions, binned by overlap; not run unless asked for: the missions take minutes).
     #[arg(
         long,
         default_value = "real,sim-building,lunar-sparse,lunar-very-sparse"

@@ -10,6 +10,7 @@
 mod bench;
 mod bench_logs;
 mod bench_merge;
+mod bench_merge_rovers;
 mod bench_nav;
 mod bench_net;
 mod bench_slam;

@@ -365,15 +365,11 @@ const SETTLE_SCORE_SHARE: f64 = 0.9;
 const FINE_MARGIN_M: f64 = 0.5;
 /// The sub-cell fit is kept when it pairs at least this many points ...
 const FINE_MIN_PAIRS: usize = 20;
-/// ... and moves the overlap's centre at most this far (metres) from the verified best
-/// (so may a better restart, [`Params::precision`]; one farther off makes the merge
-/// imprecise: the verified best and the surfaces disagree). At 0.3 m a pose that hopped
-/// from 0.54 to 0.21 m off was merged wrong (`realms bench merge --seed 4`, lunar sparse,
-/// 10 %, pair 17); at 0.15 m the lunar pairs of seeds 1-8 at 10 and 20 % (800) make 487
-/// right merges and no wrong one, against 497 and that one ...
-const FINE_MAX_MOVE_M: f64 = 0.15;
+/// ... and moves the overlap's centre at most [`Params::fine_reach_m`] from the verified
+/// best (so may a better restart, [`Params::precision`]; one farther off makes the merge
+/// imprecise: the verified best and the surfaces disagree) ...
 /// ... and turns at most this far (radians) from the verified best, or as much as moves
-/// the overlap's edge [`FINE_MAX_MOVE_M`] ...
+/// the overlap's edge that far ...
 const FINE_MAX_TURN_RAD: f64 = 0.035;
 /// ... and fits more closely than it by at least this many standard errors (negative:
 /// better; [`fine::Comparison::z`]).
@@ -640,7 +636,7 @@ fn run(
                 && !swung_out_of_view(a, b, &best_pose, &evidence, p, e, params)
         })
         .collect();
-    let (overlap, settled_pose) = settle_on_surfaces(a, b, &best_pose, &evidence);
+    let (overlap, settled_pose) = settle_on_surfaces(a, b, &best_pose, &evidence, params);
     // A rival the maps' own surfaces, aligned at both poses, fit clearly worse than the
     // best is none (`Params::rival_worse_z`).
     // (Worked out once per pose, and only for those that would otherwise refuse the merge.)
@@ -809,13 +805,13 @@ fn reach_for(c: &fine::Comparison) -> f64 {
 }
 
 /// Whether grid-local `p` lies within `scale` times the sub-cell steps' reach of the
-/// verified best: the overlap's centre moved at most [`FINE_MAX_MOVE_M`], and turned at
-/// most [`FINE_MAX_TURN_RAD`] or as much as moves the overlap's edge that far.
-fn within_reach(p: &Pose2, best: &Pose2, evidence: &Evidence, scale: f64) -> bool {
+/// verified best: the overlap's centre moved at most `reach_m` ([`Params::fine_reach_m`]),
+/// and turned at most [`FINE_MAX_TURN_RAD`] or as much as moves the overlap's edge that far.
+fn within_reach(p: &Pose2, best: &Pose2, evidence: &Evidence, reach_m: f64, scale: f64) -> bool {
     let c = evidence.overlap_centre;
     let max_turn_rad =
-        scale * (FINE_MAX_MOVE_M / evidence.overlap_radius_m.max(1.0)).min(FINE_MAX_TURN_RAD);
-    p.transform_point(c).distance_m(best.transform_point(c)) <= scale * FINE_MAX_MOVE_M
+        scale * (reach_m / evidence.overlap_radius_m.max(1.0)).min(FINE_MAX_TURN_RAD);
+    p.transform_point(c).distance_m(best.transform_point(c)) <= scale * reach_m
         && normalize_angle_rad(p.yaw_rad - best.yaw_rad).abs() <= max_turn_rad
 }
 
@@ -828,11 +824,12 @@ fn settle_on_surfaces(
     b: &Prepared,
     best: &Pose2,
     evidence: &Evidence,
+    params: &Params,
 ) -> (fine::Overlap, Pose2) {
     let overlap = fine::Overlap::at(&a.fine, &b.fine, best, FINE_MARGIN_M);
     let fit = fine::align(&a.fine, &b.fine, &overlap, *best);
     let settled = fit.pairs >= FINE_MIN_PAIRS
-        && within_reach(&fit.pose, best, evidence, 1.0)
+        && within_reach(&fit.pose, best, evidence, params.fine_reach_m, 1.0)
         && fine::compare(&a.fine, &b.fine, &overlap, best, &fit.pose).z <= FINE_BETTER_Z;
     (overlap, if settled { fit.pose } else { *best })
 }
@@ -872,7 +869,8 @@ fn precision_on_surfaces(
         ) {
             fine::Nearby::Alone => return (pose, None),
             fine::Nearby::Better(p, c)
-                if hops < FINE_MAX_HOPS && within_reach(&p, best, evidence, reach_for(&c)) =>
+                if hops < FINE_MAX_HOPS
+                    && within_reach(&p, best, evidence, params.fine_reach_m, reach_for(&c)) =>
             {
                 (pose, hops) = (p, hops + 1);
             }

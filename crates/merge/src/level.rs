@@ -56,6 +56,8 @@ pub struct Level {
     /// For feature cells: whether their blob (8-connected feature cells) is a landmark,
     /// compact and not a straight line (see [`landmarks`]).
     pub landmark: Vec<bool>,
+    /// Whether the map's free cells were judged for hazards ([`Map::free_judged_for_hazards`]).
+    pub free_judged_for_hazards: bool,
     /// Summed-area table of the known cells, `(width + 1) x (height + 1)`: entry
     /// `(x, y)` counts the known cells below and left of it (see [`Level::known_near`]).
     known_sum: Vec<u32>,
@@ -265,6 +267,7 @@ impl Level {
             normal,
             bin,
             landmark,
+            free_judged_for_hazards: despeckled.free_judged_for_hazards,
             known_sum,
         }
     }
@@ -489,6 +492,7 @@ fn thin<T: Copy>(pts: Vec<T>, max_points: usize) -> Vec<T> {
 pub struct Despeckled {
     geometry: realms_core::GridGeometry,
     cells: Vec<MapCell>,
+    free_judged_for_hazards: bool,
 }
 
 impl Despeckled {
@@ -520,6 +524,7 @@ impl Despeckled {
         Despeckled {
             geometry: *g,
             cells: out,
+            free_judged_for_hazards: map.free_judged_for_hazards,
         }
     }
 }

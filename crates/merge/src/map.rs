@@ -80,6 +80,12 @@ pub struct Map {
     pub cells: Grid<MapCell>,
     /// Rotation of the grid in the map frame (map_server origin yaw), radians.
     pub origin_yaw_rad: f64,
+    /// Whether every free cell was also judged for hazards, so that a hazard the other map
+    /// puts on one contradicts it. True for a survey of the whole ground (the synthetic
+    /// maps); false for a rover's map, whose lidar clears ground metres beyond where its
+    /// depth camera judged it: there a crater one rover walked round may lie on ground the
+    /// other saw free from afar, and that is no evidence against a pose.
+    pub free_judged_for_hazards: bool,
 }
 
 impl Map {
@@ -88,7 +94,15 @@ impl Map {
         Map {
             cells,
             origin_yaw_rad: 0.0,
+            free_judged_for_hazards: true,
         }
+    }
+
+    /// This map with its free cells marked as not judged for hazards (see
+    /// [`Map::free_judged_for_hazards`]): a rover's map.
+    pub fn with_free_unjudged_for_hazards(mut self) -> Self {
+        self.free_judged_for_hazards = false;
+        self
     }
 
     /// The grid's geometry.

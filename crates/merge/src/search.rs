@@ -46,6 +46,15 @@ pub fn bins_face_alike(m: usize, n: usize) -> bool {
 pub struct Fields {
     /// Pyramid of bin `k`.
     pub bins: Vec<Pyramid>,
+    /// Where the map's free cells were not judged for hazards
+    /// ([`crate::Map::free_judged_for_hazards`]): the same fields without the free-space
+    /// penalty, for the other map's hazard points.
+    pub hazard_bins: Option<Vec<Pyramid>>,
+}
+
+/// A point's field code: its direction bin, plus [`DIRECTION_BINS`] for a hazard point.
+pub fn field_code(bin: usize, hazard: bool) -> usize {
+    bin + if hazard { DIRECTION_BINS } else { 0 }
 }
 
 impl Fields {
@@ -74,26 +83,39 @@ impl Fields {
                 near[y * w + x] = m;
             }
         }
+        let field = |k: usize, penalty: i8| {
+            let bit = 1u8 << k;
+            let base = (0..w * h)
+                .map(|i| {
+                    if hit[i] & bit != 0 {
+                        HIT
+                    } else if near[i] & bit != 0 {
+                        NEAR
+                    } else if level.class[i] == Class::Free && level.dist[i] > 15 {
+                        -penalty
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            Pyramid::new(w, h, base, depth)
+        };
         let bins = (0..DIRECTION_BINS)
-            .map(|k| {
-                let bit = 1u8 << k;
-                let base = (0..w * h)
-                    .map(|i| {
-                        if hit[i] & bit != 0 {
-                            HIT
-                        } else if near[i] & bit != 0 {
-                            NEAR
-                        } else if level.class[i] == Class::Free && level.dist[i] > 15 {
-                            -free_penalty
-                        } else {
-                            0
-                        }
-                    })
-                    .collect();
-                Pyramid::new(w, h, base, depth)
-            })
+            .map(|k| field(k, free_penalty))
             .collect();
-        Fields { bins }
+        let hazard_bins = (!level.free_judged_for_hazards)
+            .then(|| (0..DIRECTION_BINS).map(|k| field(k, 0)).collect());
+        Fields { bins, hazard_bins }
+    }
+
+    /// The field for points of code `code` ([`field_code`]).
+    #[inline]
+    pub fn pyramid(&self, code: usize) -> &Pyramid {
+        match (&self.hazard_bins, code.checked_sub(DIRECTION_BINS)) {
+            (Some(hazard), Some(k)) => &hazard[k],
+            (None, Some(k)) => &self.bins[k],
+            (_, None) => &self.bins[code],
+        }
     }
 }
 
@@ -307,7 +329,7 @@ pub fn search(
                         (
                             ((c * p.x_m - s * p.y_m) / cell_m).floor() as i32,
                             ((s * p.x_m + c * p.y_m) / cell_m).floor() as i32,
-                            direction_bin(sf.normal_rad + yaw) as u8,
+                            field_code(direction_bin(sf.normal_rad + yaw), sf.hazard) as u8,
                         ),
                         sf.weight as i32,
                     )
@@ -378,7 +400,7 @@ pub fn search(
             h.runs
                 .iter()
                 .map(|&(k, a, b)| {
-                    let cells = &fields.bins[k].levels[d];
+                    let cells = &fields.pyramid(k).levels[d];
                     offs[a..b]
                         .iter()
                         .zip(&h.weights[a..b])
@@ -391,7 +413,10 @@ pub fn search(
                 .iter()
                 .zip(&h.weights)
                 .map(|((x, y, k), w)| {
-                    fields.bins[*k as usize].at(d, *x as i64 + tx, *y as i64 + ty) as i32 * w
+                    fields
+                        .pyramid(*k as usize)
+                        .at(d, *x as i64 + tx, *y as i64 + ty) as i32
+                        * w
                 })
                 .sum()
         }

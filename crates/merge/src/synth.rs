@@ -190,7 +190,10 @@ pub fn reframe(map: &Map, old_from_new: &Pose2) -> Map {
     )
     .unwrap_or_else(|| map.cells.clone());
     let grid_from_new = map.frame_from_grid().inverse().compose(old_from_new);
-    Map::new(resample(&local, &keep, &grid_from_new))
+    Map {
+        free_judged_for_hazards: map.free_judged_for_hazards,
+        ..Map::new(resample(&local, &keep, &grid_from_new))
+    }
 }
 
 /// Unknown discs, speckle and missed obstacle cells.

@@ -15,7 +15,7 @@
 
 use crate::level::{Class, Level, SHAPE_WEIGHT, Surface, floor_i64};
 use crate::prepare::{Params, Prepared};
-use crate::search::{Fields, bins_face_alike, direction_bin};
+use crate::search::{Fields, bins_face_alike, direction_bin, field_code};
 use realms_core::{Point2, Pose2};
 
 /// Agreeing: the other map has structure within this many fine cells.
@@ -118,8 +118,13 @@ fn field_score(
         .iter()
         .map(|s| {
             let q = t.apply(s.p);
-            let k = direction_bin(s.normal_rad + target_from_source.yaw_rad);
-            let v = fields.bins[k].value(floor_i64(q.x_m / cell_m), floor_i64(q.y_m / cell_m));
+            let k = field_code(
+                direction_bin(s.normal_rad + target_from_source.yaw_rad),
+                s.hazard,
+            );
+            let v = fields
+                .pyramid(k)
+                .value(floor_i64(q.x_m / cell_m), floor_i64(q.y_m / cell_m));
             v as i64 * s.weight as i64
         })
         .sum()
@@ -586,7 +591,10 @@ fn judge(s: &Surface, target: &Level, t: &Rigid, yaw_rad: f64) -> (Point2, Verdi
             Verdict::Neither
         };
         (q, verdict)
-    } else if d > CONFLICT_CELLS && target.class_at(x, y) == Class::Free {
+    } else if d > CONFLICT_CELLS
+        && target.class_at(x, y) == Class::Free
+        && (target.free_judged_for_hazards || !s.hazard)
+    {
         (q, Verdict::Conflict)
     } else {
         (q, Verdict::Neither)
@@ -837,9 +845,17 @@ pub fn verify(
 /// How sharply verification singles out `a_from_b`: one less the best share of its score
 /// kept by the pose moved `shift_m` in any of eight directions, or turned either way, about
 /// the overlap's centre and about either end of its long axis, by the angle that moves the
-/// overlap `shift_m` on average about its centre, but at least `min_turn_rad`. Near 0 when the maps could slide (walls and nothing else in the
-/// overlap) or turn; near 1 when any move loses most of the agreement. The same idea as
-/// judging a correlative match by the spread of its score (Olson 2009).
+/// overlap `shift_m` on average about its centre, but at least `min_turn_rad`. Near 0 when
+/// the maps could slide (walls and nothing else in the overlap) or turn; near 1 when any
+/// move loses most of the agreement. The same idea as judging a correlative match by the
+/// spread of its score (Olson 2009).
+///
+/// Maps that two rovers built disagree by their drift, a few decimetres, and that broadens
+/// the peak: moved `shift_m`, such a pose can keep 80-100 % of its score, and lose it all
+/// moved twice as far, where a slide along bare walls keeps 70 % or more (BENCHMARKS.md,
+/// "The rovers' own maps"). So the shifts count as sharp as well when the moves twice as
+/// far keep at most half the score: the shifts' sharpness is the better of one less what
+/// the near moves keep, and three quarters less what the far ones keep.
 pub fn sharpness(
     a: &Prepared,
     b: &Prepared,
@@ -852,32 +868,43 @@ pub fn sharpness(
     if evidence.score <= 0.0 {
         return 0.0;
     }
-    let turn_rad = (shift_m / evidence.overlap_radius_m.max(1.0))
-        .min(0.1)
-        .max(min_turn_rad);
-    let c = evidence.overlap_centre;
-    let turned = |pivot: Point2, dyaw: f64| turned_about(a_from_b, pivot, dyaw);
-    let mut moved: Vec<Pose2> = (0..8)
-        .map(|k| {
+    let kept = |poses: &mut dyn Iterator<Item = Pose2>| {
+        poses
+            .map(|p| verify(a, b, &p, conflict_weight, On::Refine).score / evidence.score)
+            .fold(0.0, f64::max)
+    };
+    let shifted = |d: f64| {
+        (0..8).map(move |k| {
             let (s, co) = (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos();
             Pose2::new(
-                a_from_b.x_m + shift_m * co,
-                a_from_b.y_m + shift_m * s,
+                a_from_b.x_m + d * co,
+                a_from_b.y_m + d * s,
                 a_from_b.yaw_rad,
             )
         })
-        .collect();
+    };
+    let turn_rad = (shift_m / evidence.overlap_radius_m.max(1.0))
+        .min(0.1)
+        .max(min_turn_rad);
     // About the ends of a long overlap too: a square or a crater at one end of a band can
     // pin the position there and leave the band free to swing about it.
-    for pivot in [c, evidence.overlap_ends[0], evidence.overlap_ends[1]] {
-        moved.push(turned(pivot, turn_rad));
-        moved.push(turned(pivot, -turn_rad));
-    }
-    let kept = moved
-        .iter()
-        .map(|p| verify(a, b, p, conflict_weight, On::Refine).score / evidence.score)
-        .fold(0.0, f64::max);
-    (1.0 - kept).clamp(0.0, 1.0)
+    let pivots = [
+        evidence.overlap_centre,
+        evidence.overlap_ends[0],
+        evidence.overlap_ends[1],
+    ];
+    let turned_kept = kept(
+        &mut pivots
+            .into_iter()
+            .flat_map(|c| [turn_rad, -turn_rad].map(|t| turned_about(a_from_b, c, t))),
+    );
+    let near = 1.0 - kept(&mut shifted(shift_m));
+    let shift_sharpness = if near >= 0.5 {
+        near
+    } else {
+        near.max(0.75 - kept(&mut shifted(2.0 * shift_m)))
+    };
+    shift_sharpness.min(1.0 - turned_kept).clamp(0.0, 1.0)
 }
 
 /// Share (by weight, both maps) of the structure agreeing at pose `other` that also agrees

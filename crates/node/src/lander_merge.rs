@@ -48,9 +48,10 @@ pub struct MergedMap {
     pub rovers: Vec<RoverId>,
 }
 
-/// A rover's published map as the merger's cells.
+/// A rover's published map as the merger's cells. Its lidar clears ground well beyond where
+/// its depth camera judged hazards, so its free cells do not rule out another rover's.
 pub fn to_merge_map(grid: &Grid<i8>) -> Map {
-    Map::new(grid.map(|v| MapCell::from_occupancy(*v)))
+    Map::new(grid.map(|v| MapCell::from_occupancy(*v))).with_free_unjudged_for_hazards()
 }
 
 /// Merges `maps` (rover and rebuilt map, reference first) from the known start: every map's
@@ -58,7 +59,12 @@ pub fn to_merge_map(grid: &Grid<i8>) -> Map {
 pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap> {
     let (reference, _) = maps.first()?;
     let converted: Vec<Map> = maps.iter().map(|(_, g)| to_merge_map(g)).collect();
-    let merged = merge_known_start(&converted, &Params::default(), &PriorWindow::default()).ok()?;
+    let merged = merge_known_start(
+        &converted,
+        &Params::for_rover_maps(),
+        &PriorWindow::default(),
+    )
+    .ok()?;
     let links = maps[1..]
         .iter()
         .zip(&merged.checks)
@@ -125,6 +131,59 @@ mod tests {
             }
         }
         g
+    }
+
+    /// `map` with a crater of `radius_m` at `centre` (hall metres) drawn as `value` over its
+    /// known ground: hazard where a rover's depth camera judged it, free where its lidar
+    /// only swept over it from afar.
+    fn with_crater(map: &Grid<i8>, centre: Point2, radius_m: f64, value: i8) -> Grid<i8> {
+        let geo = *map.geometry();
+        let cells = map
+            .iter()
+            .map(|(cell, v)| {
+                let inside = geo.cell_center(cell).distance_m(centre) < radius_m;
+                if inside && *v != OccupancyGrid::UNKNOWN {
+                    value
+                } else {
+                    *v
+                }
+            })
+            .collect();
+        Grid::from_cells(geo, cells).expect("one value per cell")
+    }
+
+    #[test]
+    fn a_crater_only_one_rover_judged_does_not_stop_the_maps_confirming_each_other() {
+        // Rover 1 drove round two craters and its camera marked them; rover 2 saw the same
+        // ground free from across the hall, its camera never pointed there. Its map has
+        // also drifted 0.15 m.
+        let craters = [(Point2::new(6.0, 7.5), 1.5), (Point2::new(15.0, 11.0), 1.2)];
+        let mut judged = hall(0.0);
+        let mut swept = hall(0.15);
+        for (centre, r) in craters {
+            judged = with_crater(&judged, centre, r, OccupancyGrid::HAZARD);
+            swept = with_crater(&swept, centre, r, OccupancyGrid::FREE);
+        }
+        let merged = merge_from_known_start(&[(RoverId(1), &judged), (RoverId(2), &swept)])
+            .expect("two maps");
+        let link = &merged.links[0];
+        assert!(link.confirmed, "{link:?}");
+        let pose = link.reference_from_map.expect("placed");
+        assert!(
+            (pose.x_m + 0.15).abs() < 0.1 && pose.y_m.abs() < 0.1,
+            "{pose:?}"
+        );
+        // Taken as surveys, whose free ground rules a hazard out, the craters' rims land
+        // on open ground and the maps contradict each other.
+        let as_surveys = |g: &Grid<i8>| Map::new(g.map(|v| MapCell::from_occupancy(*v)));
+        let check = realms_merge::estimate_with_prior(
+            &realms_merge::Prepared::new(&as_surveys(&judged), &Params::for_rover_maps()),
+            &realms_merge::Prepared::new(&as_surveys(&swept), &Params::for_rover_maps()),
+            Pose2::IDENTITY,
+            &PriorWindow::default(),
+            &Params::for_rover_maps(),
+        );
+        assert!(!check.confirmed, "{:?}", check.estimate.refusal);
     }
 
     #[test]

@@ -304,6 +304,7 @@ pub fn read(yaml_path: &Path) -> Result<Map, MapFileError> {
     Ok(Map {
         cells: grid,
         origin_yaw_rad: meta.origin[2],
+        free_judged_for_hazards: true,
     })
 }
 
