@@ -232,6 +232,10 @@ pub fn run(args: MissionArgs) -> Result<()> {
                         .unwrap_or("no pose confirmed"),
                     100.0 * l.agreement_at_start.unwrap_or(0.0),
                 ),
+                (Some(_), _) if !l.drifted => println!(
+                    "  merge: {} confirmed at its known start (the maps agree {:.2} m from it), confidence {:.2}",
+                    l.rover, l.drift_m, l.confidence,
+                ),
                 (Some(p), _) => println!(
                     "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}{}",
                     l.rover,
@@ -253,6 +257,11 @@ pub fn run(args: MissionArgs) -> Result<()> {
                 ),
             }
         }
+        println!(
+            "  merged map: {:.1} % of occupied cells right ({:.1} % with every map at its known start)",
+            100.0 * m.occupied_correct,
+            100.0 * m.occupied_correct_at_known_starts
+        );
     }
     Ok(())
 }

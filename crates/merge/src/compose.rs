@@ -389,6 +389,7 @@ mod tests {
             stats: Default::default(),
             hypotheses: Vec::new(),
             verified: Vec::new(),
+            imprecise_rival: None,
         }
     }
 

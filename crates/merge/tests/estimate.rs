@@ -142,6 +142,8 @@ fn a_known_start_is_confirmed_or_found_drifted() {
     let found = same.estimate.accepted().expect("the prior is confirmed");
     assert!(common::close(&found, &pair.a_from_b, &pair.b));
     assert!(!same.drifted, "{same:?}");
+    // Confirmed within the drift tolerances, the map goes where the prior puts it.
+    assert_eq!(same.placed, Some(pair.a_from_b));
     // The map has drifted 1 m and 4 degrees from the prior: found, and reported.
     let prior = pair
         .a_from_b
@@ -153,6 +155,8 @@ fn a_known_start_is_confirmed_or_found_drifted() {
         .expect("the drifted pose is found");
     assert!(common::close(&found, &pair.a_from_b, &pair.b), "{found:?}");
     assert!(drifted.drifted && drifted.drift_m > 0.5, "{drifted:?}");
+    // Drifted, it goes where the maps put it.
+    assert_eq!(drifted.placed, Some(found));
 }
 
 /// Two opposite corners of a 30 x 20 m arena that share no ground: the second map is a bare

@@ -259,6 +259,13 @@ pub struct MergeSummary {
     pub reference: String,
     /// How each other rover's map joined.
     pub maps: Vec<MergeLinkSummary>,
+    /// Of the merged map's occupied cells, the fraction within one cell of a true
+    /// lidar-visible obstacle (as each rover's map is graded; the reference's frame is the
+    /// arena's).
+    pub occupied_correct: f64,
+    /// The same with every map the merge placed put at its known start instead: what the
+    /// merge's own poses gain or lose.
+    pub occupied_correct_at_known_starts: f64,
 }
 
 /// One rover's map in the merge.
@@ -288,7 +295,36 @@ pub struct MergeLinkSummary {
 
 fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
     let m = merged(mission)?;
+    let truth = mission.world().truth();
+    let occupied_correct = |cells: &realms_core::Grid<MapCell>| {
+        let values = cells.map(|c| match c {
+            MapCell::Unknown => realms_core::msgs::OccupancyGrid::UNKNOWN,
+            MapCell::Free => realms_core::msgs::OccupancyGrid::FREE,
+            MapCell::Occupied => realms_core::msgs::OccupancyGrid::OCCUPIED,
+            MapCell::Hazard => realms_core::msgs::OccupancyGrid::HAZARD,
+        });
+        crate::slam_record::grade_grid(&values, truth, &[]).occupied_correct
+    };
+    // The maps the merge placed, each at its known start.
+    let lander = mission.station(realms_net::NodeAddr::Lander)?;
+    let placed: Vec<realms_merge::Map> = std::iter::once(m.reference)
+        .chain(
+            m.links
+                .iter()
+                .filter(|l| l.reference_from_map.is_some())
+                .map(|l| l.rover),
+        )
+        .filter_map(|r| lander.map(r))
+        .map(realms_node::lander_merge::to_merge_map)
+        .collect();
+    let at_starts = realms_merge::compose::compose(
+        &placed,
+        &vec![Some(realms_core::Pose2::IDENTITY); placed.len()],
+    )
+    .0;
     Some(MergeSummary {
+        occupied_correct: occupied_correct(&m.cells),
+        occupied_correct_at_known_starts: occupied_correct(&at_starts),
         reference: m.reference.to_string(),
         maps: m
             .links

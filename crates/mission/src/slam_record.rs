@@ -263,10 +263,16 @@ fn any_within<T>(grid: &Grid<T>, p: Point2, reach_m: f64, pred: impl Fn(&T) -> b
 
 /// Grades `map` (in the arena frame) against `truth`; `path` is where the rover truly was.
 pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> MapGrade {
-    let Some(grid) = map_grid(map) else {
+    match map_grid(map) {
+        Some(grid) => grade_grid(&grid, truth, path),
         // A map whose size does not match its data grades as empty.
-        return MapGrade::default();
-    };
+        None => MapGrade::default(),
+    }
+}
+
+/// [`grade_map`] on a map's cells (the published values: -1 unknown, 0 free, 100
+/// occupied, [`OccupancyGrid::HAZARD`]).
+pub fn grade_grid(grid: &Grid<i8>, truth: &GroundTruth, path: &[Point2]) -> MapGrade {
     let res = grid.resolution_m();
     let obstacle_near = |p: Point2| any_within(&truth.lidar_obstacles, p, res, |v| *v);
     let untraversable_near =
@@ -331,7 +337,7 @@ pub fn grade_map(map: &OccupancyGrid, truth: &GroundTruth, path: &[Point2]) -> M
             path_nearby += usize::from(
                 marked == 1
                     || any_within(
-                        &grid,
+                        grid,
                         truth.traversability.geometry().cell_center(c),
                         NEAR_FLAG_M,
                         |v| *v == OccupancyGrid::HAZARD || *v == OccupancyGrid::OCCUPIED,
