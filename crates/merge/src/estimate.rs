@@ -892,6 +892,9 @@ fn precision_on_surfaces(
     evidence: &Evidence,
     params: &Params,
 ) -> (Pose2, Option<Imprecision>) {
+    if !params.check_precision {
+        return (settled, None);
+    }
     let (mut pose, mut hops) = (settled, 0);
     loop {
         match fine::nearby(
