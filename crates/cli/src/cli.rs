@@ -48,6 +48,12 @@ pub struct MergeArgs {
     /// placed as given, marked unconfirmed; one that contradicts it is refused.
     #[arg(long)]
     pub known_start: bool,
+    /// The maps were built by different robots, each with its own SLAM drift (a few
+    /// decimetres): merge them as precisely as they agree, not to a few centimetres. The
+    /// maps `realms mission` writes carry their hazards, and a hazard one rover saw on
+    /// ground another only swept with its lidar is no disagreement.
+    #[arg(long)]
+    pub rover_maps: bool,
 }
 
 /// `realms slam`.
@@ -290,7 +296,9 @@ pub struct BenchMergeArgs {
     pub overlaps: String,
     /// Source kinds, comma-separated: real, sim-building, lunar-sparse, lunar-very-sparse,
     /// and lunar-rovers, lunar-rovers-known-start (the rovers' own maps from three default
-    /// missions, binned by overlap; not run unless asked for: the missions take minutes).
+    /// missions, binned by overlap: a row covers its overlap up to the next one asked for,
+    /// the last up to 100 %, and pairs under the first are left out; not run unless asked
+    /// for: the missions take minutes).
     #[arg(
         long,
         default_value = "real,sim-building,lunar-sparse,lunar-very-sparse"

@@ -27,12 +27,16 @@ pub fn run(args: MergeArgs) -> Result<()> {
         .iter()
         .map(|p| realms_merge::io::read(p).with_context(|| format!("reading {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
+    let params = if args.rover_maps {
+        Params::for_rover_maps()
+    } else {
+        Params::default()
+    };
     if args.known_start {
-        let merged =
-            compose::merge_known_start(&maps, &Params::default(), &PriorWindow::default())?;
+        let merged = compose::merge_known_start(&maps, &params, &PriorWindow::default())?;
         return report_known_start(&args, &merged);
     }
-    let merged = compose::merge(&maps, &Params::default())?;
+    let merged = compose::merge(&maps, &params)?;
     let yaml = write_merged(&args, &merged.grid, &merged.contribution)?;
     let png = args.out.with_extension("contributions.png");
     if args.json {

@@ -237,18 +237,13 @@ pub fn run(args: MissionArgs) -> Result<()> {
                     l.rover, l.drift_m, l.confidence,
                 ),
                 (Some(p), _) => println!(
-                    "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}{}",
+                    "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}, drifted from the known start",
                     l.rover,
                     m.reference,
                     p[0],
                     p[1],
                     p[2].to_degrees(),
                     l.confidence,
-                    if l.drifted {
-                        ", drifted from the known start"
-                    } else {
-                        ""
-                    }
                 ),
                 (None, why) => println!(
                     "  merge: {} refused: {}",

@@ -1,6 +1,11 @@
 //! ROS map_server maps: a PGM image plus a YAML file giving its resolution and origin, the
 //! format every ROS user's maps are in. Pixel values follow map_server's trinary convention:
 //! occupied 0, free 254, unknown 205 (`negate: 0`).
+//!
+//! A rover's map also has hazards (ground it must not enter that the lidar sees free).
+//! [`write_with_hazards`] writes them as [`HAZARD_PIXEL`], which map_server reads as occupied,
+//! and names that value in the YAML as `hazard_value`, a key ROS's map servers do not read,
+//! so that realms' own reader gets the hazards back.
 
 use crate::grid::{Grid, GridExportError};
 use std::path::Path;
@@ -16,21 +21,55 @@ pub enum Trinary {
     Occupied,
 }
 
+/// The pixel value of a hazard in [`write_with_hazards`]: occupied to map_server
+/// (`p = 254 / 255`), and no other cell is written with it.
+pub const HAZARD_PIXEL: u8 = 1;
+
 /// Writes `stem.pgm` and `stem.yaml` into `dir`; returns the YAML path.
 pub fn write(
     grid: &Grid<Trinary>,
     dir: &Path,
     stem: &str,
 ) -> Result<std::path::PathBuf, GridExportError> {
-    let pgm = dir.join(format!("{stem}.pgm"));
-    grid.write_pgm(&pgm, |c| match c {
+    write_pixels(grid, dir, stem, |c| pixel(*c), "")
+}
+
+/// [`write`] with the cells `hazard` says are hazards (occupied to map_server) written as
+/// [`HAZARD_PIXEL`], and `hazard_value: 1` in the YAML.
+pub fn write_with_hazards<T>(
+    grid: &Grid<T>,
+    dir: &Path,
+    stem: &str,
+    cell: impl Fn(&T) -> (Trinary, bool),
+) -> Result<std::path::PathBuf, GridExportError> {
+    let value = |c: &T| match cell(c) {
+        (_, true) => HAZARD_PIXEL,
+        (t, false) => pixel(t),
+    };
+    let extra = format!("hazard_value: {HAZARD_PIXEL}\n");
+    write_pixels(grid, dir, stem, value, &extra)
+}
+
+fn pixel(t: Trinary) -> u8 {
+    match t {
         Trinary::Occupied => 0,
         Trinary::Free => 254,
         Trinary::Unknown => 205,
-    })?;
+    }
+}
+
+fn write_pixels<T>(
+    grid: &Grid<T>,
+    dir: &Path,
+    stem: &str,
+    value: impl Fn(&T) -> u8,
+    extra_yaml: &str,
+) -> Result<std::path::PathBuf, GridExportError> {
+    let pgm = dir.join(format!("{stem}.pgm"));
+    grid.write_pgm(&pgm, value)?;
     let g = grid.geometry();
     let yaml = format!(
-        "image: {stem}.pgm\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
+        "image: {stem}.pgm\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n{extra_yaml}",
         g.resolution_m, g.origin.x_m, g.origin.y_m
     );
     let path = dir.join(format!("{stem}.yaml"));

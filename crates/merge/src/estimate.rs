@@ -755,7 +755,7 @@ fn run(
         ))
     } else if sharpness < params.min_sharpness {
         Some(format!(
-            "poorly constrained: moved {:.1} m (or turned as much, at least {:.0} deg) the maps still agree {:.0} % as well (walls with nothing else to pin them?)",
+            "poorly constrained: moved {:.1} m (or turned as much, at least {:.0} deg) the maps still agree {:.0} % as well, and moved twice as far more than half as well (walls with nothing else to pin them?)",
             params.sharpness_shift_m,
             params.sharpness_min_turn_rad.to_degrees(),
             100.0 * (1.0 - sharpness)

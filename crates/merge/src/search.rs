@@ -281,8 +281,8 @@ impl PartialOrd for Node {
     }
 }
 
-/// One heading: the moving points in field cells (floored) with their direction bins, and
-/// the translation range.
+/// One heading: the moving points in field cells (floored) with their field codes
+/// ([`field_code`]: direction bin, hazard or not), and the translation range.
 struct Heading {
     yaw_rad: f64,
     cells: Vec<(i32, i32, u8)>,
@@ -290,7 +290,7 @@ struct Heading {
     weights: Vec<i32>,
     /// Bounding box of `cells`: x0, y0, x1, y1.
     bbox: (i64, i64, i64, i64),
-    /// Runs of equal bin in `cells`: (bin, start, end).
+    /// Runs of equal field code in `cells`: (code, start, end).
     runs: Vec<(usize, usize, usize)>,
     /// Per pyramid level, each cell's row-major offset in that level's padded array.
     offsets: Vec<Vec<i64>>,
@@ -335,7 +335,7 @@ pub fn search(
                     )
                 })
                 .collect();
-            // By bin, so that scoring walks one field at a time.
+            // By field code, so that scoring walks one field at a time.
             weighted.sort_by_key(|(c, _)| c.2);
             let (cells, weights): (Vec<(i32, i32, u8)>, Vec<i32>) = weighted.into_iter().unzip();
             let (mut x0, mut y0, mut x1, mut y1) = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);

@@ -842,6 +842,10 @@ pub fn verify(
     }
 }
 
+/// What [`sharpness`] takes off the share lost by moves twice the shift: losing all of it
+/// there counts as three quarters here.
+const FAR_SHIFT_DISCOUNT: f64 = 0.25;
+
 /// How sharply verification singles out `a_from_b`: one less the best share of its score
 /// kept by the pose moved `shift_m` in any of eight directions, or turned either way, about
 /// the overlap's centre and about either end of its long axis, by the angle that moves the
@@ -853,9 +857,11 @@ pub fn verify(
 /// Maps that two rovers built disagree by their drift, a few decimetres, and that broadens
 /// the peak: moved `shift_m`, such a pose can keep 80-100 % of its score, and lose it all
 /// moved twice as far, where a slide along bare walls keeps 70 % or more (BENCHMARKS.md,
-/// "The rovers' own maps"). So the shifts count as sharp as well when the moves twice as
-/// far keep at most half the score: the shifts' sharpness is the better of one less what
-/// the near moves keep, and three quarters less what the far ones keep.
+/// "The rovers' own maps"). So where the near moves keep more than half the score, the
+/// moves twice as far are probed too, and the shifts' sharpness is the better of one less
+/// what the near moves keep and [`FAR_SHIFT_DISCOUNT`] less what the far ones keep: with
+/// the merge's 0.25 threshold, a pose whose far moves keep at most half its score is
+/// pinned.
 pub fn sharpness(
     a: &Prepared,
     b: &Prepared,
@@ -899,10 +905,11 @@ pub fn sharpness(
             .flat_map(|c| [turn_rad, -turn_rad].map(|t| turned_about(a_from_b, c, t))),
     );
     let near = 1.0 - kept(&mut shifted(shift_m));
+    // Already sharp enough for any threshold up to a half: the far moves cannot matter.
     let shift_sharpness = if near >= 0.5 {
         near
     } else {
-        near.max(0.75 - kept(&mut shifted(2.0 * shift_m)))
+        near.max(1.0 - FAR_SHIFT_DISCOUNT - kept(&mut shifted(2.0 * shift_m)))
     };
     shift_sharpness.min(1.0 - turned_kept).clamp(0.0, 1.0)
 }

@@ -68,8 +68,44 @@ fn the_recorded_maps_load() {
 }
 
 #[test]
+fn a_rovers_map_keeps_its_hazards_through_a_file() {
+    use realms_core::{Grid, GridGeometry, Point2};
+    let dir = temp_dir("hazards");
+    let geometry = GridGeometry {
+        width: 4,
+        height: 1,
+        resolution_m: 0.05,
+        origin: Point2::new(0.0, 0.0),
+    };
+    let cells = vec![
+        MapCell::Free,
+        MapCell::Hazard,
+        MapCell::Occupied,
+        MapCell::Unknown,
+    ];
+    let grid = Grid::from_cells(geometry, cells).expect("four cells");
+    let path = realms_merge::io::write(&grid, &dir.join("rover.yaml")).expect("write");
+    let yaml = std::fs::read_to_string(&path).expect("yaml");
+    assert!(yaml.contains("hazard_value: 1"), "{yaml}");
+    let map = realms_merge::io::read(&path).expect("read back");
+    assert_eq!(map.cells, grid);
+    // A rover's hazards come from a camera that looked only nearby: its free ground does
+    // not rule out another rover's hazard.
+    assert!(!map.free_judged_for_hazards);
+    // To map_server, the hazard pixel is an obstacle: p = 254 / 255 over 0.65.
+    let pgm = std::fs::read(dir.join("rover.pgm")).expect("pgm");
+    assert_eq!(pgm[pgm.len() - 3], realms_core::map_server::HAZARD_PIXEL);
+    // A map with no hazards is written and read as before.
+    let plain = Grid::from_cells(geometry, vec![MapCell::Free; 4]).expect("four cells");
+    let path = realms_merge::io::write(&plain, &dir.join("plain.yaml")).expect("write");
+    let map = realms_merge::io::read(&path).expect("read back");
+    assert!(map.free_judged_for_hazards);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn bad_yaml_names_file_field_and_expectation() {
-    let cases: [(&str, &str, &[&str]); 9] = [
+    let cases: [(&str, &str, &[&str]); 10] = [
         (
             "resolution: 0.05\norigin: [0, 0, 0]\n",
             "no-image",
@@ -114,6 +150,11 @@ fn bad_yaml_names_file_field_and_expectation() {
             "image: m.pgm\n  resolution: 0.05\n",
             "indented",
             &["m.yaml", "line 2", "indentation"],
+        ),
+        (
+            "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nhazard_value: orange\n",
+            "bad-hazard-value",
+            &["`hazard_value`", "line 4", "pixel value", "orange"],
         ),
     ];
     for (yaml, name, wanted) in cases {

@@ -372,12 +372,9 @@ fn write_merged(m: &MergedMap, dir: &Path) -> Result<(), ReportError> {
     if let Some(img) = realms_core::Grid::from_cells(geo, pixels) {
         img.write_png(&dir.join("merged_map.png"), |c| *c)?;
     }
-    let trinary = m.cells.map(|c| match c {
-        MapCell::Unknown => Trinary::Unknown,
-        MapCell::Free => Trinary::Free,
-        _ => Trinary::Occupied,
-    });
-    map_server::write(&trinary, dir, "merged_map")?;
+    map_server::write_with_hazards(&m.cells, dir, "merged_map", |c| {
+        (Trinary::from(*c), *c == MapCell::Hazard)
+    })?;
     Ok(())
 }
 
@@ -387,7 +384,8 @@ fn map_stem(rover: &str) -> String {
 }
 
 /// Writes `<rover>_map.png` (unknown grey, free white, occupied black, hazard orange) and
-/// the ROS map_server pair `<rover>_map.pgm` + `.yaml` (hazards as occupied).
+/// the ROS map_server pair `<rover>_map.pgm` + `.yaml` (hazards occupied to map_server, and
+/// kept for `realms merge`: [`map_server::write_with_hazards`]).
 fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportError> {
     let Some(grid) = map_grid(map) else {
         // A map whose size does not match its data is not drawn; the grade still says so.
@@ -400,12 +398,12 @@ fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportE
         OccupancyGrid::HAZARD => [240, 140, 20],
         _ => [205, 205, 205],
     })?;
-    let trinary = grid.map(|v| match *v {
-        OccupancyGrid::FREE => Trinary::Free,
-        OccupancyGrid::UNKNOWN => Trinary::Unknown,
-        _ => Trinary::Occupied,
-    });
-    map_server::write(&trinary, dir, &stem)?;
+    map_server::write_with_hazards(&grid, dir, &stem, |v| match *v {
+        OccupancyGrid::FREE => (Trinary::Free, false),
+        OccupancyGrid::UNKNOWN => (Trinary::Unknown, false),
+        OccupancyGrid::HAZARD => (Trinary::Occupied, true),
+        _ => (Trinary::Occupied, false),
+    })?;
     Ok(())
 }
 

@@ -171,7 +171,8 @@ mod tests {
         assert_eq!(link.reference_from_map, Some(Pose2::IDENTITY), "{link:?}");
         assert!(!link.drifted && link.drift_m > 0.05, "{link:?}");
         // Taken as surveys, whose free ground rules a hazard out, the craters' rims land
-        // on open ground and the maps contradict each other.
+        // on open ground and no pose is confirmed: the map goes in at its known start only
+        // because its obstacles (hazards aside) do not contradict it.
         let as_surveys = |g: &Grid<i8>| Map::new(g.map(|v| MapCell::from_occupancy(*v)));
         let check = realms_merge::estimate_with_prior(
             &realms_merge::Prepared::new(&as_surveys(&judged), &Params::for_rover_maps()),
@@ -181,6 +182,16 @@ mod tests {
             &Params::for_rover_maps(),
         );
         assert!(!check.confirmed, "{:?}", check.estimate.refusal);
+        assert_eq!(check.placed, Some(Pose2::IDENTITY), "{check:?}");
+        assert!(
+            check
+                .estimate
+                .refusal
+                .as_deref()
+                .is_some_and(|r| r.contains("conflict")),
+            "{:?}",
+            check.estimate.refusal
+        );
     }
 
     #[test]

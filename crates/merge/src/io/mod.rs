@@ -3,7 +3,9 @@
 //!
 //! Cells are classified as map_server does: with `p = (max - v) / max` (or `v / max` when
 //! `negate: 1`), `p > occupied_thresh` is occupied, `p < free_thresh` free, anything between
-//! unknown. Every problem is an error naming the file, the field (or image) and what was
+//! unknown. A map realms wrote from a rover may also name a `hazard_value`
+//! ([`realms_core::map_server::write_with_hazards`]): pixels of that value are hazards, and
+//! its free cells count as not judged for hazards ([`Map::free_judged_for_hazards`]). Every problem is an error naming the file, the field (or image) and what was
 //! expected; external input never panics.
 
 pub mod pgm;
@@ -60,8 +62,8 @@ pub enum MapFileError {
     Write(#[from] GridExportError),
 }
 
-/// The fields a map file may have.
-const KNOWN_FIELDS: [&str; 7] = [
+/// The fields a map file may have: map_server's, and realms' `hazard_value`.
+const KNOWN_FIELDS: [&str; 8] = [
     "image",
     "resolution",
     "origin",
@@ -69,6 +71,7 @@ const KNOWN_FIELDS: [&str; 7] = [
     "occupied_thresh",
     "free_thresh",
     "mode",
+    "hazard_value",
 ];
 
 /// A map file's settings, as read from its YAML.
@@ -86,6 +89,8 @@ pub struct MapMetadata {
     pub occupied_thresh: f64,
     /// Occupancy probability below which a pixel is free.
     pub free_thresh: f64,
+    /// The pixel value of hazards, in a map realms wrote from a rover.
+    pub hazard_value: Option<u16>,
 }
 
 struct Fields<'a> {
@@ -247,6 +252,15 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
             ));
         }
     }
+    let hazard_value = match f.scalar("hazard_value", "a pixel value")? {
+        None => None,
+        Some((line, s)) => Some(s.parse::<u16>().map_err(|_| {
+            f.error(
+                "hazard_value",
+                format!("(line {line}): expected a pixel value (a whole number from 0 to 65535), found `{s}`"),
+            )
+        })?),
+    };
     let dir = yaml_path.parent().unwrap_or(Path::new(""));
     Ok(MapMetadata {
         image: dir.join(image),
@@ -255,6 +269,7 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
         negate,
         occupied_thresh,
         free_thresh,
+        hazard_value,
     })
 }
 
@@ -272,6 +287,9 @@ pub fn read(yaml_path: &Path) -> Result<Map, MapFileError> {
     })?;
     let max = img.max_value as f64;
     let classify = |v: u16| {
+        if Some(v) == meta.hazard_value {
+            return MapCell::Hazard;
+        }
         let v = v as f64;
         let p = if meta.negate {
             v / max
@@ -304,12 +322,13 @@ pub fn read(yaml_path: &Path) -> Result<Map, MapFileError> {
     Ok(Map {
         cells: grid,
         origin_yaw_rad: meta.origin[2],
-        free_judged_for_hazards: true,
+        free_judged_for_hazards: meta.hazard_value.is_none(),
     })
 }
 
 /// Writes `grid` (axis-aligned in its frame) as `yaml_path` plus a PGM of the same stem
-/// beside it; hazards are written as obstacles. Returns the YAML path.
+/// beside it; hazards, where there are any, as obstacles to map_server and hazards to
+/// [`read`] ([`realms_core::map_server::write_with_hazards`]). Returns the YAML path.
 pub fn write(grid: &Grid<MapCell>, yaml_path: &Path) -> Result<PathBuf, MapFileError> {
     let dir = yaml_path
         .parent()
@@ -319,6 +338,14 @@ pub fn write(grid: &Grid<MapCell>, yaml_path: &Path) -> Result<PathBuf, MapFileE
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "merged".into());
+    if grid.cells().contains(&MapCell::Hazard) {
+        return Ok(realms_core::map_server::write_with_hazards(
+            grid,
+            dir,
+            &stem,
+            |c| (Trinary::from(*c), *c == MapCell::Hazard),
+        )?);
+    }
     let trinary = grid.map(|c| Trinary::from(*c));
     Ok(realms_core::map_server::write(&trinary, dir, &stem)?)
 }
