@@ -993,6 +993,74 @@ mod tests {
         Map::new(grid)
     }
 
+    /// A rover's map of a 12 m x 8 m patch of ground at 5 cm between two walls along x
+    /// (y = 0 and y = 8 m), open at both ends, with round hazards (rocks in their rings) of
+    /// `radius_m` at `rocks` (metres), drawn `grow_m` wider (as another rover's map draws
+    /// them: a camera that looked from elsewhere).
+    fn corridor(rocks: &[(f64, f64)], radius_m: f64, grow_m: f64) -> Map {
+        let g = GridGeometry {
+            width: 240,
+            height: 161,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let cells = (0..g.len())
+            .map(|i| {
+                let cell = realms_core::Cell {
+                    x: i % g.width,
+                    y: i / g.width,
+                };
+                let p = g.cell_center(cell);
+                let rock = rocks
+                    .iter()
+                    .any(|(x, y)| p.distance_m(Point2::new(*x, *y)) < radius_m + grow_m);
+                if cell.y == 0 || cell.y == g.height - 1 {
+                    MapCell::Occupied
+                } else if rock {
+                    MapCell::Hazard
+                } else {
+                    MapCell::Free
+                }
+            })
+            .collect();
+        Map::new(Grid::from_cells(g, cells).expect("one cell each"))
+            .with_free_unjudged_for_hazards()
+    }
+
+    fn sharpness_of(a: &Map, b: &Map) -> f64 {
+        let params = Params::default();
+        let (a, b) = (Prepared::new(a, &params), Prepared::new(b, &params));
+        let here = Pose2::new(0.0, 0.0, 0.0);
+        let e = verify(&a, &b, &here, params.conflict_weight, On::Refine);
+        sharpness(
+            &a,
+            &b,
+            &here,
+            &e,
+            params.conflict_weight,
+            params.sharpness_shift_m,
+            params.sharpness_min_turn_rad,
+        )
+    }
+
+    #[test]
+    fn walls_alone_slide_but_hazards_drawn_wider_in_one_map_still_pin_the_pose() {
+        // Bare walls: the maps slide along them, 0.3 m or 0.6 m alike.
+        let bare = corridor(&[], 0.0, 0.0);
+        let s = sharpness_of(&bare, &bare);
+        assert!(s < 0.25, "{s}");
+        // Hazards drawn 0.15 m wider in the second map: moved 0.3 m along the walls, the
+        // pose keeps most of its score (0.16 sharp on those moves alone); moved 0.6 m, little
+        // of it, so the pose is pinned (0.38).
+        let rocks = [(2.5, 2.0), (5.0, 6.0), (7.5, 3.0), (10.0, 5.5)];
+        let thin = corridor(&rocks, 0.3, 0.0);
+        let fat = corridor(&rocks, 0.3, 0.15);
+        let s = sharpness_of(&thin, &fat);
+        assert!(s >= 0.3, "{s}");
+        // The same maps, drawn alike, are sharper still.
+        assert!(sharpness_of(&thin, &thin) >= s, "{s}");
+    }
+
     #[test]
     fn a_rock_on_open_ground_is_a_landmark_conflict() {
         let params = Params::default();
