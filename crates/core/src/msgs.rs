@@ -323,6 +323,33 @@ impl OccupancyGrid {
     pub const OCCUPIED: i8 = 100;
 }
 
+/// Where the lander placed each rover's map in the merged map (`lander/map/transforms`; no
+/// ROS counterpart, the role of a tf2 static transform per map with its confidence). The
+/// ground holds every rover's map already, so the transforms are all it needs to draw the
+/// merged map itself: a few dozen bytes on the ground link instead of a whole grid.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapTransforms {
+    /// When the lander merged, and the reference map's frame (the first rover's).
+    pub header: Header,
+    /// One per other rover's map the lander merged or refused.
+    pub maps: Vec<MapTransform>,
+}
+
+/// One rover's map in [`MapTransforms`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapTransform {
+    /// The rover's map frame (`rover2/map`).
+    pub child_frame_id: String,
+    /// Pose of that frame in the reference's, `None` where the map was left out.
+    pub pose: Option<Point2>,
+    /// Its heading, radians.
+    pub yaw_rad: f64,
+    /// 0..1 (0 for a map placed at its known start unconfirmed).
+    pub confidence: f64,
+    /// Whether the maps confirmed the pose.
+    pub confirmed: bool,
+}
+
 /// One map update on the wire.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MapUpdate {
@@ -436,6 +463,8 @@ pub enum Message {
     MapRequest(Header),
     /// The network's traffic so far (`lander/network/stats`).
     NetworkStats(Box<NetworkStats>),
+    /// Where the lander placed each rover's map (`lander/map/transforms`).
+    MapTransforms(MapTransforms),
 }
 
 impl Message {
@@ -457,6 +486,7 @@ impl Message {
             Message::MapDelta(m) => m.header.stamp,
             Message::MapRequest(h) => h.stamp,
             Message::NetworkStats(m) => m.header.stamp,
+            Message::MapTransforms(m) => m.header.stamp,
         }
     }
 }

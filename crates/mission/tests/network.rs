@@ -106,6 +106,18 @@ fn map_updates_cross_after_a_blackout_and_the_ground_rebuilds_every_map() {
     let names: Vec<&str> = report.nodes.iter().map(|n| n.node.as_str()).collect();
     assert_eq!(names, ["rover1", "rover2", "lander", "ground"]);
     assert!(report.nodes[0].sent_bytes > 0 && report.nodes[3].received_bytes > 0);
+    // The lander's transforms reached the ground, which draws the merged map from them and
+    // its own copies of the rovers' maps.
+    let transforms = ground
+        .transforms()
+        .expect("the lander's transforms reached the ground");
+    assert_eq!(transforms.header.frame_id, "rover1/map");
+    assert_eq!(transforms.maps.len(), 1);
+    let drawn = ground
+        .merged_from_transforms()
+        .expect("the ground draws the merge");
+    assert!(drawn.cells().contains(&realms_merge::MapCell::Occupied));
+    assert!(lander.merges_run() >= 1);
 }
 
 #[test]

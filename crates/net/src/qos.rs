@@ -77,7 +77,7 @@ impl Qos {
                     (Reliability::Reliable, Priority::Safety, None)
                 }
                 "pose" | "odom" => (Reliability::BestEffort, Priority::Pose, secs(5)),
-                "map" | "delta" | "snapshot" | "explored" | "hazards" => {
+                "map" | "delta" | "snapshot" | "explored" | "hazards" | "transforms" => {
                     (Reliability::Reliable, Priority::Map, None)
                 }
                 _ => (Reliability::BestEffort, Priority::Image, secs(30)),

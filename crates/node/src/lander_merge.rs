@@ -89,6 +89,37 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
     })
 }
 
+/// The merged map drawn from `maps` (rover and map, the reference first) where `transforms`
+/// (the lander's) place them: what the ground station shows without the grid crossing the
+/// ground link. Maps the transforms leave out, or do not name, are left out; `None` without
+/// the reference's map.
+pub fn compose_with_transforms(
+    maps: &[(RoverId, &Grid<i8>)],
+    transforms: &realms_core::msgs::MapTransforms,
+) -> Option<Grid<MapCell>> {
+    let frame_of = |r: RoverId| format!("{r}/map");
+    let (reference, _) = maps.first()?;
+    if transforms.header.frame_id != frame_of(*reference) {
+        return None;
+    }
+    let poses: Vec<Option<Pose2>> = maps
+        .iter()
+        .enumerate()
+        .map(|(k, (rover, _))| {
+            if k == 0 {
+                return Some(Pose2::IDENTITY);
+            }
+            let t = transforms
+                .maps
+                .iter()
+                .find(|t| t.child_frame_id == frame_of(*rover))?;
+            t.pose.map(|p| Pose2::new(p.x_m, p.y_m, t.yaw_rad))
+        })
+        .collect();
+    let converted: Vec<Map> = maps.iter().map(|(_, g)| to_merge_map(g)).collect();
+    Some(realms_merge::compose::compose(&converted, &poses).0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

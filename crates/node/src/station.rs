@@ -1,18 +1,26 @@
 //! The lander and the ground station, as far as they are built: each keeps every rover's
 //! map, rebuilt from its `map/delta` updates, with the rover's latest pose, localisation
 //! state and navigation status, and asks a rover for a snapshot when it missed an update.
-//! The lander is where rover data is stored for the mission (its merging comes with the
-//! map-merging issue); the ground station is what the operator sees.
+//! The lander is where rover data is stored for the mission; every two minutes it merges
+//! the maps (only when one has changed) and publishes where it placed each
+//! (`lander/map/transforms`). The ground station is what the operator sees: it keeps the
+//! latest transforms and draws the merged map from its own copies of the rovers' maps.
 
 use crate::lander_merge::{MergedMap, merge_from_known_start};
 use crate::{Node, Outgoing};
-use realms_core::msgs::{Header, LocalisationState, MapDelta, Message, NavStatus, NetworkStats};
+use realms_core::msgs::{
+    Header, LocalisationState, MapDelta, MapTransform, MapTransforms, Message, NavStatus,
+    NetworkStats,
+};
 use realms_core::{Duration, Grid, Pose2, RoverId, Time, Topic};
 use realms_net::mapdelta::Decoder;
 use std::collections::BTreeMap;
 
 /// Where the lander publishes the network's traffic statistics.
 pub const NETWORK_STATS_TOPIC: &str = "lander/network/stats";
+
+/// Where the lander publishes where it placed each rover's map ([`MapTransforms`]).
+pub const MAP_TRANSFORMS_TOPIC: &str = "lander/map/transforms";
 
 /// The lander merges the rovers' maps this often.
 const MERGE_PERIOD: Duration = Duration::from_secs(120);
@@ -36,6 +44,9 @@ pub struct RoverRecord {
     pub map: Decoder,
     /// The time of the rover's map the rebuilt one matches.
     pub map_stamp: Option<Time>,
+    /// Goes up by one with every update that changed the rebuilt map (a rover sends
+    /// updates on a clock, changed or not).
+    pub map_version: u64,
     /// Updates applied, and updates that could not be (a gap or a malformed update).
     pub updates_applied: u64,
     /// Updates refused.
@@ -60,6 +71,13 @@ pub struct StationNode {
     merge_period: Option<Duration>,
     next_merge: Time,
     merged: Option<MergedMap>,
+    /// The version of each rover's map the last merge used: nothing changed, nothing to
+    /// redo.
+    merged_versions: Vec<u64>,
+    /// Merges actually run (not skipped because no map had changed).
+    merges_run: usize,
+    /// The lander's latest transforms, as heard (the ground station).
+    transforms: Option<MapTransforms>,
     outbox: Vec<Outgoing>,
 }
 
@@ -77,6 +95,9 @@ impl StationNode {
             merge_period: (role == StationRole::Lander).then_some(MERGE_PERIOD),
             next_merge: Time::ZERO,
             merged: None,
+            merged_versions: Vec::new(),
+            merges_run: 0,
+            transforms: None,
             outbox: Vec::new(),
         }
     }
@@ -91,8 +112,40 @@ impl StationNode {
         self.merged.as_ref()
     }
 
-    /// Merges every rover's rebuilt map now (the lander's job).
-    pub fn merge_now(&mut self) {
+    /// Merges run so far (a merge is skipped when no rover's map changed since the last).
+    pub fn merges_run(&self) -> usize {
+        self.merges_run
+    }
+
+    /// The lander's latest transforms, as this station heard them.
+    pub fn transforms(&self) -> Option<&MapTransforms> {
+        self.transforms.as_ref()
+    }
+
+    /// The merged map from this station's own copies of the rovers' maps, placed where the
+    /// lander's latest transforms say (the ground station's view of the merge).
+    pub fn merged_from_transforms(&self) -> Option<Grid<realms_merge::MapCell>> {
+        let transforms = self.transforms.as_ref()?;
+        let maps: Vec<(RoverId, &Grid<i8>)> = self
+            .fleet
+            .iter()
+            .filter_map(|r| self.map(*r).map(|m| (*r, m)))
+            .collect();
+        crate::lander_merge::compose_with_transforms(&maps, transforms)
+    }
+
+    /// Merges every rover's rebuilt map now (the lander's job), unless none has changed
+    /// since the last merge, and publishes where each went. Returns whether there were two
+    /// maps to merge.
+    pub fn merge_now(&mut self, now: Time) -> bool {
+        let versions: Vec<u64> = self
+            .fleet
+            .iter()
+            .map(|r| self.rovers.get(r).map_or(0, |rec| rec.map_version))
+            .collect();
+        if self.merged.is_some() && versions == self.merged_versions {
+            return true;
+        }
         let maps: Vec<(RoverId, &Grid<i8>)> = self
             .fleet
             .iter()
@@ -103,9 +156,19 @@ impl StationNode {
                     .map(|m| (*r, m))
             })
             .collect();
-        if maps.len() >= 2 {
-            self.merged = merge_from_known_start(&maps);
+        if maps.len() < 2 {
+            return false;
         }
+        self.merged = merge_from_known_start(&maps);
+        self.merged_versions = versions;
+        self.merges_run += 1;
+        if let Some(m) = &self.merged {
+            self.outbox.push(Outgoing {
+                topic: Topic::new(MAP_TRANSFORMS_TOPIC),
+                message: Message::MapTransforms(transforms_of(m, now)),
+            });
+        }
+        true
     }
 
     /// The latest network statistics heard.
@@ -120,8 +183,16 @@ impl StationNode {
 
     fn on_delta(&mut self, now: Time, rover: RoverId, delta: &MapDelta) {
         let record = self.rovers.entry(rover).or_default();
+        let geometry_before = record.map.map().map(|m| *m.geometry());
         match record.map.apply(&delta.update) {
             Ok(()) => {
+                let u = &delta.update;
+                if u.base.is_none()
+                    || !u.runs.is_empty()
+                    || record.map.map().map(|m| *m.geometry()) != geometry_before
+                {
+                    record.map_version += 1;
+                }
                 record.updates_applied += 1;
                 record.map_stamp = Some(delta.header.stamp);
                 if delta.update.is_snapshot() {
@@ -166,23 +237,32 @@ impl Node for StationNode {
                 .map(|leaf| r.topic(leaf))
             })
             .chain(std::iter::once(Topic::new(NETWORK_STATS_TOPIC)))
+            .chain((self.merge_period.is_none()).then(|| Topic::new(MAP_TRANSFORMS_TOPIC)))
             .collect()
     }
 
     fn on_message(&mut self, now: Time, topic: &Topic, message: &Message) {
-        if let Message::NetworkStats(stats) = message {
-            self.network = Some((**stats).clone());
-            return;
+        match message {
+            Message::NetworkStats(stats) => {
+                self.network = Some((**stats).clone());
+                return;
+            }
+            Message::MapTransforms(t) => {
+                self.transforms = Some(t.clone());
+                return;
+            }
+            _ => {}
         }
         let Some(rover) = topic.rover() else { return };
         match message {
             Message::MapDelta(delta) => {
                 self.on_delta(now, rover, delta);
+                // The period starts once there are two maps to merge.
                 if let Some(period) = self.merge_period
                     && now >= self.next_merge
+                    && self.merge_now(now)
                 {
                     self.next_merge = now + period;
-                    self.merge_now();
                 }
             }
             Message::Pose(p) => {
@@ -203,9 +283,9 @@ impl Node for StationNode {
 
     fn on_tick(&mut self, _now: Time) {}
 
-    fn on_shutdown(&mut self, _now: Time) {
+    fn on_shutdown(&mut self, now: Time) {
         if self.merge_period.is_some() {
-            self.merge_now();
+            self.merge_now(now);
         }
     }
 
@@ -219,6 +299,29 @@ impl Node for StationNode {
 
     fn as_station(&self) -> Option<&StationNode> {
         Some(self)
+    }
+}
+
+/// The message saying where `merged` placed each rover's map.
+fn transforms_of(merged: &MergedMap, now: Time) -> MapTransforms {
+    MapTransforms {
+        header: Header {
+            stamp: now,
+            frame_id: format!("{}/map", merged.reference),
+        },
+        maps: merged
+            .links
+            .iter()
+            .map(|l| MapTransform {
+                child_frame_id: format!("{}/map", l.rover),
+                pose: l
+                    .reference_from_map
+                    .map(|p| realms_core::Point2::new(p.x_m, p.y_m)),
+                yaw_rad: l.reference_from_map.map_or(0.0, |p| p.yaw_rad),
+                confidence: l.confidence,
+                confirmed: l.confirmed,
+            })
+            .collect(),
     }
 }
 
@@ -276,5 +379,74 @@ mod tests {
         station.on_message(t, &topic, &delta(t, enc.update(&map, true)));
         assert_eq!(station.map(rover), Some(&map));
         assert_eq!(station.rover(rover).and_then(|r| r.map_stamp), Some(t));
+    }
+
+    /// A 6 m x 4 m room at 5 cm, walls all round and a post at (2, 2), seen by `rover`.
+    fn room() -> Grid<i8> {
+        let geo = GridGeometry {
+            width: 120,
+            height: 80,
+            resolution_m: 0.05,
+            origin: realms_core::Point2::new(0.0, 0.0),
+        };
+        let cells = (0..geo.len())
+            .map(|i| {
+                let (x, y) = (i % geo.width, i / geo.width);
+                let p = geo.cell_center(realms_core::Cell { x, y });
+                let wall = x == 0 || y == 0 || x == geo.width - 1 || y == geo.height - 1;
+                let post = p.distance_m(realms_core::Point2::new(2.0, 2.0)) < 0.2
+                    || p.distance_m(realms_core::Point2::new(4.5, 1.0)) < 0.15;
+                if wall || post { 100 } else { 0 }
+            })
+            .collect();
+        Grid::from_cells(geo, cells).expect("one value per cell")
+    }
+
+    #[test]
+    fn the_lander_merges_when_a_map_changed_and_the_ground_draws_the_merge_from_its_transforms() {
+        let rovers = [RoverId(1), RoverId(2)];
+        let mut lander = StationNode::new(StationRole::Lander, rovers.to_vec());
+        let mut ground = StationNode::new(StationRole::Ground, rovers.to_vec());
+        assert!(
+            ground
+                .subscriptions()
+                .contains(&Topic::new(MAP_TRANSFORMS_TOPIC))
+        );
+        let map = room();
+        let mut encoders = [Encoder::new(), Encoder::new()];
+        let mut send = |station: &mut StationNode, t: f64, snapshot: bool| {
+            let t = Time::from_secs_f64(t);
+            for (k, r) in rovers.iter().enumerate() {
+                let update = encoders[k].update(&map, snapshot);
+                station.on_message(t, &r.topic("map/delta"), &delta(t, update));
+            }
+        };
+        send(&mut lander, 0.0, true);
+        let published = lander.drain_outbox();
+        assert_eq!(lander.merges_run(), 1);
+        assert_eq!(published.len(), 1, "{published:?}");
+        assert_eq!(published[0].topic, Topic::new(MAP_TRANSFORMS_TOPIC));
+        // The same maps two minutes later, sent again unchanged: nothing to redo.
+        send(&mut lander, 130.0, false);
+        assert_eq!(lander.merges_run(), 1);
+        assert!(lander.drain_outbox().is_empty());
+        // The ground has the maps and the transforms: its merged map is the lander's.
+        let mut encoders2 = [Encoder::new(), Encoder::new()];
+        for (k, r) in rovers.iter().enumerate() {
+            let update = encoders2[k].update(&map, true);
+            ground.on_message(
+                Time::ZERO,
+                &r.topic("map/delta"),
+                &delta(Time::ZERO, update),
+            );
+        }
+        assert_eq!(
+            ground.merged_from_transforms(),
+            None,
+            "no transforms heard yet"
+        );
+        ground.on_message(Time::ZERO, &published[0].topic, &published[0].message);
+        let drawn = ground.merged_from_transforms().expect("drawn");
+        assert_eq!(Some(&drawn), lander.merged().map(|m| &m.cells));
     }
 }
