@@ -266,6 +266,9 @@ pub struct MergeSummary {
     /// The same with every map the merge placed put at its known start instead: what the
     /// merge's own poses gain or lose.
     pub occupied_correct_at_known_starts: f64,
+    /// Merges the lander ran (every 120 s once two maps were in, and at the end, skipping
+    /// those when no map had changed).
+    pub merges_run: usize,
 }
 
 /// One rover's map in the merge.
@@ -323,6 +326,7 @@ fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
     )
     .0;
     Some(MergeSummary {
+        merges_run: lander.merges_run(),
         occupied_correct: occupied_correct(&m.cells),
         occupied_correct_at_known_starts: occupied_correct(&at_starts),
         reference: m.reference.to_string(),
