@@ -102,6 +102,34 @@ mod tests {
         assert!(cmd.len() < 60, "{} bytes", cmd.len());
     }
 
+    #[test]
+    fn the_landers_transforms_round_trip_in_a_few_dozen_bytes() {
+        use crate::msgs::{MapTransform, MapTransforms};
+        let msg = Message::MapTransforms(MapTransforms {
+            header: Header {
+                stamp: Time::from_ns(120_000_000_000),
+                frame_id: "rover1/map".into(),
+            },
+            maps: vec![
+                MapTransform {
+                    child_frame_id: "rover2/map".into(),
+                    pose: Some(crate::geometry::Point2::new(0.12, -0.36)),
+                    yaw_rad: 0.012,
+                    confidence: 0.98,
+                    confirmed: true,
+                },
+                MapTransform {
+                    child_frame_id: "rover3/map".into(),
+                    pose: None,
+                    ..Default::default()
+                },
+            ],
+        });
+        let bytes = encode(&msg);
+        assert_eq!(decode(&bytes), Ok(msg));
+        assert!(bytes.len() < 120, "{} bytes", bytes.len());
+    }
+
     proptest! {
         #[test]
         fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {

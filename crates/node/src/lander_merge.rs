@@ -89,34 +89,30 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
     })
 }
 
-/// The merged map drawn from `maps` (rover and map, the reference first) where `transforms`
-/// (the lander's) place them: what the ground station shows without the grid crossing the
-/// ground link. Maps the transforms leave out, or do not name, are left out; `None` without
-/// the reference's map.
+/// The merged map drawn from `maps` (rover and map, in fleet order) where `transforms` (the
+/// lander's) place them: what the ground station shows without the grid crossing the
+/// ground link. The reference is the map the transforms are in; maps the transforms leave
+/// out, or do not name, are left out. `None` without the reference's map.
 pub fn compose_with_transforms(
     maps: &[(RoverId, &Grid<i8>)],
     transforms: &realms_core::msgs::MapTransforms,
 ) -> Option<Grid<MapCell>> {
     let frame_of = |r: RoverId| format!("{r}/map");
-    let (reference, _) = maps.first()?;
-    if transforms.header.frame_id != frame_of(*reference) {
-        return None;
-    }
-    let poses: Vec<Option<Pose2>> = maps
+    let reference = maps
         .iter()
-        .enumerate()
-        .map(|(k, (rover, _))| {
-            if k == 0 {
-                return Some(Pose2::IDENTITY);
-            }
+        .find(|(r, _)| frame_of(*r) == transforms.header.frame_id)?;
+    let placed: Vec<(Map, Pose2)> = std::iter::once((to_merge_map(reference.1), Pose2::IDENTITY))
+        .chain(maps.iter().filter_map(|(rover, g)| {
             let t = transforms
                 .maps
                 .iter()
                 .find(|t| t.child_frame_id == frame_of(*rover))?;
-            t.pose.map(|p| Pose2::new(p.x_m, p.y_m, t.yaw_rad))
-        })
+            let p = t.pose?;
+            Some((to_merge_map(g), Pose2::new(p.x_m, p.y_m, t.yaw_rad)))
+        }))
         .collect();
-    let converted: Vec<Map> = maps.iter().map(|(_, g)| to_merge_map(g)).collect();
+    let (converted, poses): (Vec<Map>, Vec<Option<Pose2>>) =
+        placed.into_iter().map(|(m, p)| (m, Some(p))).unzip();
     Some(realms_merge::compose::compose(&converted, &poses).0)
 }
 

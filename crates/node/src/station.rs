@@ -160,9 +160,9 @@ impl StationNode {
             return false;
         }
         self.merged = merge_from_known_start(&maps);
-        self.merged_versions = versions;
-        self.merges_run += 1;
         if let Some(m) = &self.merged {
+            self.merged_versions = versions;
+            self.merges_run += 1;
             self.outbox.push(Outgoing {
                 topic: Topic::new(MAP_TRANSFORMS_TOPIC),
                 message: Message::MapTransforms(transforms_of(m, now)),
