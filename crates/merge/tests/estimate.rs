@@ -475,3 +475,27 @@ fn a_much_closer_fit_on_the_surfaces_moves_the_pose_farther() {
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert_merged_right(&est, &pair, "seed 7 sparse 10 % pair 9");
 }
+
+/// The band of `a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong`, checked from
+/// its true pose as a known start: the surfaces fit a pose 0.19 m and 0.6 degrees away as
+/// closely, so the estimate is refused as imprecise, but both fits lie within the drift
+/// tolerances of the start, so either confirms it, and the map stays there.
+#[test]
+fn two_fits_the_surfaces_cannot_tell_apart_both_near_the_known_start_confirm_it() {
+    use realms_merge::{PriorWindow, estimate_with_prior};
+    let params = Params::default();
+    let pair = common::lunar_bench_pair("lunar-very-sparse", 1, 10, 9);
+    let (a, b) = (
+        Prepared::new(&pair.a, &params),
+        Prepared::new(&pair.b, &params),
+    );
+    let check = estimate_with_prior(&a, &b, pair.a_from_b, &PriorWindow::default(), &params);
+    assert_refused_as_imprecise(&check.estimate);
+    assert!(
+        check.estimate.imprecise_rival.is_some(),
+        "{:?}",
+        check.estimate
+    );
+    assert!(check.confirmed && !check.drifted, "{check:?}");
+    assert_eq!(check.placed, Some(pair.a_from_b));
+}
