@@ -113,7 +113,6 @@ fn real_sources(dir: &std::path::Path, names: &[&str]) -> Result<Vec<Grid<MapCel
 /// maps constrain the pose where they overlap; a heading error moves points away from
 /// there, and that is judged by the heading criterion.
 fn overlap_centre(pair: &synth::Pair) -> realms_core::Point2 {
-    let (ga, gb) = (pair.a.geometry(), pair.b.geometry());
     let frame_b_from_grid = pair.b.frame_from_grid();
     let a_grid_from_b_grid = pair
         .a
@@ -126,19 +125,10 @@ fn overlap_centre(pair: &synth::Pair) -> realms_core::Point2 {
         if !v.is_known() {
             continue;
         }
-        let local = realms_core::Point2::new(
-            (cell.x as f64 + 0.5) * gb.resolution_m,
-            (cell.y as f64 + 0.5) * gb.resolution_m,
-        );
-        let q = a_grid_from_b_grid.transform_point(local);
-        let (x, y) = (q.x_m / ga.resolution_m, q.y_m / ga.resolution_m);
-        if x >= 0.0
-            && y >= 0.0
-            && pair
-                .a
-                .cells
-                .get(x as usize, y as usize)
-                .is_some_and(|c| c.is_known())
+        let local = pair.b.cell_centre_in_grid(cell);
+        if pair
+            .a
+            .knows_in_grid(a_grid_from_b_grid.transform_point(local))
         {
             sx += local.x_m;
             sy += local.y_m;
@@ -493,6 +483,23 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
             let seeds: Vec<u64> = (0..3).map(|s| args.seed + s).collect();
             rover_pairs = Some(bench_merge_rovers::rover_pairs(&seeds));
         }
+        let known_start = kind == "lunar-rovers-known-start";
+        let (judging, params) = if rovers {
+            let (success_m, success_deg) = rover_success();
+            let judging = Judging {
+                success_m,
+                success_deg,
+                known_start,
+            };
+            (judging, Params::for_rover_maps())
+        } else {
+            let judging = Judging {
+                success_m: SUCCESS_CELLS * sources[0].geometry().resolution_m,
+                success_deg: SUCCESS_DEG,
+                known_start,
+            };
+            (judging, Params::default())
+        };
         for (o, &overlap_pct) in overlaps.iter().enumerate() {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
                 args.seed ^ (u64::from(overlap_pct) << 32) ^ kind.len() as u64,
@@ -501,7 +508,6 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 overlap: f64::from(overlap_pct) / 100.0,
                 ..PairSpec::default()
             };
-            let known_start = kind == "lunar-rovers-known-start";
             let cases: Vec<(synth::Pair, String)> = if let Some(pairs) = &rover_pairs
                 && rovers
             {
@@ -523,24 +529,6 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                     cases.push((pair, format!("{kind} {overlap_pct}% #{i}")));
                 }
                 cases
-            };
-            let judging = if rovers {
-                Judging {
-                    success_m: rover_success().0,
-                    success_deg: rover_success().1,
-                    known_start,
-                }
-            } else {
-                Judging {
-                    success_m: SUCCESS_CELLS * sources[0].geometry().resolution_m,
-                    success_deg: SUCCESS_DEG,
-                    known_start,
-                }
-            };
-            let params = if rovers {
-                Params::for_rover_maps()
-            } else {
-                Params::default()
             };
             let mut tally = Tally::default();
             for (i, (pair, label)) in cases.iter().enumerate() {

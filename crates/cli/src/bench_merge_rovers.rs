@@ -90,26 +90,12 @@ pub fn overlap_share(a: &Map, b: &Map) -> f64 {
         .frame_from_grid()
         .inverse()
         .compose(&small.frame_from_grid());
-    let (g, lg) = (small.geometry(), large.geometry());
     let (mut known, mut shared) = (0usize, 0usize);
     for (cell, v) in small.cells.iter() {
-        if !v.is_known() {
-            continue;
-        }
-        known += 1;
-        let p = to_large.transform_point(realms_core::Point2::new(
-            (cell.x as f64 + 0.5) * g.resolution_m,
-            (cell.y as f64 + 0.5) * g.resolution_m,
-        ));
-        let (x, y) = (p.x_m / lg.resolution_m, p.y_m / lg.resolution_m);
-        if x >= 0.0
-            && y >= 0.0
-            && large
-                .cells
-                .get(x as usize, y as usize)
-                .is_some_and(|c| c.is_known())
-        {
-            shared += 1;
+        if v.is_known() {
+            known += 1;
+            let p = to_large.transform_point(small.cell_centre_in_grid(cell));
+            shared += usize::from(large.knows_in_grid(p));
         }
     }
     shared as f64 / known.max(1) as f64

@@ -662,6 +662,25 @@ mod tests {
             .compose(&grid_from_local)
     }
 
+    /// The fit of `b` onto `a` from `start`, its overlap, and how far it lands from `truth`
+    /// at the room's middle (metres) and in heading (degrees).
+    fn fit_from(
+        a: &Surfaces,
+        b: &Surfaces,
+        truth: &Pose2,
+        start: Pose2,
+    ) -> (FineFit, Overlap, f64, f64) {
+        let overlap = Overlap::at(a, b, &start, 0.5);
+        let fit = align(a, b, &overlap, start);
+        let c = Point2::new(5.0, 4.0);
+        let off = fit
+            .pose
+            .transform_point(c)
+            .distance_m(truth.transform_point(c));
+        let turn = (fit.pose.yaw_rad - truth.yaw_rad).abs().to_degrees();
+        (fit, overlap, off, turn)
+    }
+
     #[test]
     fn a_fit_recovers_a_pose_to_a_fraction_of_a_cell() {
         let rocks = [(3.0, 2.5), (6.2, 5.1), (7.5, 1.7)];
@@ -671,14 +690,7 @@ mod tests {
         let b = room(&room_from_b, true, &rocks);
         let truth = grid_pose(&room_from_a, &room_from_b);
         let start = Pose2::new(truth.x_m + 0.08, truth.y_m - 0.06, truth.yaw_rad + 0.01);
-        let overlap = Overlap::at(&a, &b, &start, 0.5);
-        let fit = align(&a, &b, &overlap, start);
-        let c = Point2::new(5.0, 4.0);
-        let off = fit
-            .pose
-            .transform_point(c)
-            .distance_m(truth.transform_point(c));
-        let turn = (fit.pose.yaw_rad - truth.yaw_rad).abs().to_degrees();
+        let (fit, overlap, off, turn) = fit_from(&a, &b, &truth, start);
         assert!(off < 0.01 && turn < 0.1, "{off} m, {turn} deg off; {fit:?}");
         assert!(fit.pairs > 500, "{fit:?}");
         // Nothing else fits as closely.
@@ -689,6 +701,7 @@ mod tests {
             better_z: -2.0,
         };
         let ends = [Point2::new(1.0, 4.0), Point2::new(9.0, 4.0)];
+        let c = Point2::new(5.0, 4.0);
         let found = nearby(&a, &b, &overlap, &fit.pose, c, ends, &rule);
         assert!(matches!(found, Nearby::Alone), "{found:?}");
     }
@@ -702,14 +715,7 @@ mod tests {
         let b = room_at(&room_from_b, true, &rocks, 0.1);
         let truth = grid_pose(&room_from_a, &room_from_b);
         let start = Pose2::new(truth.x_m - 0.07, truth.y_m + 0.05, truth.yaw_rad - 0.008);
-        let overlap = Overlap::at(&a, &b, &start, 0.5);
-        let fit = align(&a, &b, &overlap, start);
-        let c = Point2::new(5.0, 4.0);
-        let off = fit
-            .pose
-            .transform_point(c)
-            .distance_m(truth.transform_point(c));
-        let turn = (fit.pose.yaw_rad - truth.yaw_rad).abs().to_degrees();
+        let (fit, _, off, turn) = fit_from(&a, &b, &truth, start);
         assert!(off < 0.02 && turn < 0.2, "{off} m, {turn} deg off; {fit:?}");
     }
 

@@ -44,6 +44,22 @@ impl MapCell {
             _ => MapCell::Unknown,
         }
     }
+
+    /// The cell as a realms occupancy map's value ([`MapCell::from_occupancy`] undone).
+    pub fn to_occupancy(self) -> i8 {
+        match self {
+            MapCell::Unknown => OccupancyGrid::UNKNOWN,
+            MapCell::Free => OccupancyGrid::FREE,
+            MapCell::Occupied => OccupancyGrid::OCCUPIED,
+            MapCell::Hazard => OccupancyGrid::HAZARD,
+        }
+    }
+
+    /// The cell as [`realms_core::map_server::write_with_hazards`] takes it: its map_server
+    /// class (a hazard is occupied) and whether it is a hazard.
+    pub fn with_hazard(self) -> (Trinary, bool) {
+        (Trinary::from(self), self == MapCell::Hazard)
+    }
 }
 
 impl From<Trinary> for MapCell {
@@ -114,6 +130,24 @@ impl Map {
     pub fn frame_from_grid(&self) -> Pose2 {
         let o = self.geometry().origin;
         Pose2::new(o.x_m, o.y_m, self.origin_yaw_rad)
+    }
+
+    /// The centre of `cell`, in grid-local metres.
+    pub fn cell_centre_in_grid(&self, cell: realms_core::Cell) -> Point2 {
+        let r = self.geometry().resolution_m;
+        Point2::new((cell.x as f64 + 0.5) * r, (cell.y as f64 + 0.5) * r)
+    }
+
+    /// Whether the cell under `p` (grid-local metres) is known; false off the grid.
+    pub fn knows_in_grid(&self, p: Point2) -> bool {
+        let r = self.geometry().resolution_m;
+        let (x, y) = (p.x_m / r, p.y_m / r);
+        x >= 0.0
+            && y >= 0.0
+            && self
+                .cells
+                .get(x as usize, y as usize)
+                .is_some_and(|c| c.is_known())
     }
 
     /// Number of known cells.

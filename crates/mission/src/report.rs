@@ -300,12 +300,7 @@ fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
     let m = merged(mission)?;
     let truth = mission.world().truth();
     let occupied_correct = |cells: &realms_core::Grid<MapCell>| {
-        let values = cells.map(|c| match c {
-            MapCell::Unknown => realms_core::msgs::OccupancyGrid::UNKNOWN,
-            MapCell::Free => realms_core::msgs::OccupancyGrid::FREE,
-            MapCell::Occupied => realms_core::msgs::OccupancyGrid::OCCUPIED,
-            MapCell::Hazard => realms_core::msgs::OccupancyGrid::HAZARD,
-        });
+        let values = cells.map(|c| c.to_occupancy());
         crate::slam_record::grade_grid(&values, truth, &[]).occupied_correct
     };
     // The maps the merge placed, each at its known start.
@@ -376,9 +371,7 @@ fn write_merged(m: &MergedMap, dir: &Path) -> Result<(), ReportError> {
     if let Some(img) = realms_core::Grid::from_cells(geo, pixels) {
         img.write_png(&dir.join("merged_map.png"), |c| *c)?;
     }
-    map_server::write_with_hazards(&m.cells, dir, "merged_map", |c| {
-        (Trinary::from(*c), *c == MapCell::Hazard)
-    })?;
+    map_server::write_with_hazards(&m.cells, dir, "merged_map", |c| c.with_hazard())?;
     Ok(())
 }
 

@@ -38,15 +38,17 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
     // Asked for the precision of maps cut from one survey, the estimate itself is refused:
     // the surfaces fit as closely 0.2 m away, where the two rovers' drifts disagree. Both
     // fits lie within the drift tolerances, so they still confirm the known start.
-    let params = Params::default();
-    let prepare = |g: &realms_core::Grid<i8>| Prepared::new(&to_merge_map(g), &params);
-    let check = estimate_with_prior(
-        &prepare(two),
-        &prepare(three),
-        Pose2::IDENTITY,
-        &PriorWindow::default(),
-        &params,
-    );
+    let check_with = |params: &Params| {
+        let prepare = |g: &realms_core::Grid<i8>| Prepared::new(&to_merge_map(g), params);
+        estimate_with_prior(
+            &prepare(two),
+            &prepare(three),
+            Pose2::IDENTITY,
+            &PriorWindow::default(),
+            params,
+        )
+    };
+    let check = check_with(&Params::default());
     assert!(
         check
             .estimate
@@ -61,14 +63,6 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
         "{check:?}"
     );
     // With the settings for rovers' maps the estimate is accepted as it is.
-    let rover_params = Params::for_rover_maps();
-    let prepare = |g: &realms_core::Grid<i8>| Prepared::new(&to_merge_map(g), &rover_params);
-    let check = estimate_with_prior(
-        &prepare(two),
-        &prepare(three),
-        Pose2::IDENTITY,
-        &PriorWindow::default(),
-        &rover_params,
-    );
+    let check = check_with(&Params::for_rover_maps());
     assert!(check.estimate.accepted().is_some(), "{:?}", check.estimate);
 }

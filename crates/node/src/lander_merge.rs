@@ -5,7 +5,8 @@
 //! structure with to confirm any pose is placed at its known start, marked unconfirmed; one
 //! that contradicts its known start is left out rather than merged wrong.
 
-use realms_core::{Grid, Pose2, RoverId};
+use realms_core::msgs::{Header, MapTransform, MapTransforms};
+use realms_core::{Grid, Pose2, RoverId, Time};
 use realms_merge::compose::merge_known_start;
 use realms_merge::{Map, MapCell, Params, PriorWindow};
 
@@ -95,25 +96,53 @@ pub fn merge_from_known_start(maps: &[(RoverId, &Grid<i8>)]) -> Option<MergedMap
 /// out, or do not name, are left out. `None` without the reference's map.
 pub fn compose_with_transforms(
     maps: &[(RoverId, &Grid<i8>)],
-    transforms: &realms_core::msgs::MapTransforms,
+    transforms: &MapTransforms,
 ) -> Option<Grid<MapCell>> {
-    let frame_of = |r: RoverId| format!("{r}/map");
-    let reference = maps
+    let (_, reference) = maps
         .iter()
-        .find(|(r, _)| frame_of(*r) == transforms.header.frame_id)?;
-    let placed: Vec<(Map, Pose2)> = std::iter::once((to_merge_map(reference.1), Pose2::IDENTITY))
-        .chain(maps.iter().filter_map(|(rover, g)| {
-            let t = transforms
-                .maps
-                .iter()
-                .find(|t| t.child_frame_id == frame_of(*rover))?;
-            let p = t.pose?;
-            Some((to_merge_map(g), Pose2::new(p.x_m, p.y_m, t.yaw_rad)))
-        }))
-        .collect();
+        .find(|(r, _)| map_frame(*r) == transforms.header.frame_id)?;
     let (converted, poses): (Vec<Map>, Vec<Option<Pose2>>) =
-        placed.into_iter().map(|(m, p)| (m, Some(p))).unzip();
+        std::iter::once((to_merge_map(reference), Some(Pose2::IDENTITY)))
+            .chain(maps.iter().filter_map(|(rover, g)| {
+                let t = transforms
+                    .maps
+                    .iter()
+                    .find(|t| t.child_frame_id == map_frame(*rover))?;
+                let p = t.pose?;
+                Some((to_merge_map(g), Some(Pose2::new(p.x_m, p.y_m, t.yaw_rad))))
+            }))
+            .unzip();
     Some(realms_merge::compose::compose(&converted, &poses).0)
+}
+
+/// A rover's map frame in [`MapTransforms`] (`rover2/map`).
+fn map_frame(rover: RoverId) -> String {
+    format!("{rover}/map")
+}
+
+impl MergedMap {
+    /// The message saying where this merge placed each rover's map, made at `now`.
+    pub fn transforms(&self, now: Time) -> MapTransforms {
+        MapTransforms {
+            header: Header {
+                stamp: now,
+                frame_id: map_frame(self.reference),
+            },
+            maps: self
+                .links
+                .iter()
+                .map(|l| MapTransform {
+                    child_frame_id: map_frame(l.rover),
+                    pose: l
+                        .reference_from_map
+                        .map(|p| realms_core::Point2::new(p.x_m, p.y_m)),
+                    yaw_rad: l.reference_from_map.map_or(0.0, |p| p.yaw_rad),
+                    confidence: l.confidence,
+                    confirmed: l.confirmed,
+                })
+                .collect(),
+        }
+    }
 }
 
 #[cfg(test)]

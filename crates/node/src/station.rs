@@ -9,8 +9,7 @@
 use crate::lander_merge::{MergedMap, merge_from_known_start};
 use crate::{Node, Outgoing};
 use realms_core::msgs::{
-    Header, LocalisationState, MapDelta, MapTransform, MapTransforms, Message, NavStatus,
-    NetworkStats,
+    Header, LocalisationState, MapDelta, MapTransforms, Message, NavStatus, NetworkStats,
 };
 use realms_core::{Duration, Grid, Pose2, RoverId, Time, Topic};
 use realms_net::mapdelta::Decoder;
@@ -126,12 +125,15 @@ impl StationNode {
     /// lander's latest transforms say (the ground station's view of the merge).
     pub fn merged_from_transforms(&self) -> Option<Grid<realms_merge::MapCell>> {
         let transforms = self.transforms.as_ref()?;
-        let maps: Vec<(RoverId, &Grid<i8>)> = self
-            .fleet
+        crate::lander_merge::compose_with_transforms(&self.fleet_maps(), transforms)
+    }
+
+    /// Every rover's rebuilt map this station holds, in fleet order.
+    fn fleet_maps(&self) -> Vec<(RoverId, &Grid<i8>)> {
+        self.fleet
             .iter()
             .filter_map(|r| self.map(*r).map(|m| (*r, m)))
-            .collect();
-        crate::lander_merge::compose_with_transforms(&maps, transforms)
+            .collect()
     }
 
     /// Merges every rover's rebuilt map now (the lander's job), unless none has changed
@@ -146,16 +148,7 @@ impl StationNode {
         if self.merged.is_some() && versions == self.merged_versions {
             return true;
         }
-        let maps: Vec<(RoverId, &Grid<i8>)> = self
-            .fleet
-            .iter()
-            .filter_map(|r| {
-                self.rovers
-                    .get(r)
-                    .and_then(|rec| rec.map.map())
-                    .map(|m| (*r, m))
-            })
-            .collect();
+        let maps = self.fleet_maps();
         if maps.len() < 2 {
             return false;
         }
@@ -165,7 +158,7 @@ impl StationNode {
             self.merges_run += 1;
             self.outbox.push(Outgoing {
                 topic: Topic::new(MAP_TRANSFORMS_TOPIC),
-                message: Message::MapTransforms(transforms_of(m, now)),
+                message: Message::MapTransforms(m.transforms(now)),
             });
         }
         true
@@ -299,29 +292,6 @@ impl Node for StationNode {
 
     fn as_station(&self) -> Option<&StationNode> {
         Some(self)
-    }
-}
-
-/// The message saying where `merged` placed each rover's map.
-fn transforms_of(merged: &MergedMap, now: Time) -> MapTransforms {
-    MapTransforms {
-        header: Header {
-            stamp: now,
-            frame_id: format!("{}/map", merged.reference),
-        },
-        maps: merged
-            .links
-            .iter()
-            .map(|l| MapTransform {
-                child_frame_id: format!("{}/map", l.rover),
-                pose: l
-                    .reference_from_map
-                    .map(|p| realms_core::Point2::new(p.x_m, p.y_m)),
-                yaw_rad: l.reference_from_map.map_or(0.0, |p| p.yaw_rad),
-                confidence: l.confidence,
-                confirmed: l.confirmed,
-            })
-            .collect(),
     }
 }
 

@@ -343,7 +343,7 @@ pub fn write(grid: &Grid<MapCell>, yaml_path: &Path) -> Result<PathBuf, MapFileE
             grid,
             dir,
             &stem,
-            |c| (Trinary::from(*c), *c == MapCell::Hazard),
+            |c| c.with_hazard(),
         )?);
     }
     let trinary = grid.map(|c| Trinary::from(*c));
