@@ -15,10 +15,10 @@ use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LocalisationState, Message};
 use realms_core::{Pose2, RoverId, Time};
-use realms_mission::slam_record::{PoseErrors, aligned_rmse, pose_errors};
+use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
-use realms_sim::World;
+use realms_sim::{GroundTruth, World};
 use std::time::Instant;
 
 /// A named change to the rovers' SLAM setup, compared against the setup as it is.
@@ -193,6 +193,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
+        name: "gaps-to-4m",
+        what: "hidden ground ends only at points within 4 m, where frames are judged (not the camera's 6 m)",
+        apply: |c| c.traversability.gap_reach_m = c.traversability.max_range_m,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,
@@ -223,6 +228,8 @@ struct Replay {
     csv: Option<String>,
     /// Each relief fit (variant `relief`) with the true travel over it.
     relief: Vec<(ReliefHop, Pose2)>,
+    /// The final map graded against the truth, as the mission's report grades it.
+    map: MapGrade,
 }
 
 /// The columns of a `--trajectories` file.
@@ -235,6 +242,7 @@ fn replay(
     variant: &'static str,
     cfg: &MappingConfig,
     input: &[CapturedInput],
+    truth: &GroundTruth,
     with_csv: bool,
 ) -> Replay {
     let mut mapping = Mapping::new(rover, cfg.clone());
@@ -280,6 +288,9 @@ fn replay(
     });
     let wall_s = started.elapsed().as_secs_f64();
     let relief = relief_against_truth(mapping.relief_hops(), input);
+    let path: Vec<_> = scans.iter().map(|(_, truth, _)| truth.position()).collect();
+    let end = input.last().map_or(Time::ZERO, |c| c.t);
+    let map = grade_map(&mapping.map(end), truth, &path);
     // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
         let k = scans.partition_point(|s| s.0 < t);
@@ -335,6 +346,7 @@ fn replay(
         wall_s,
         csv,
         relief,
+        map,
     }
 }
 
@@ -510,6 +522,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             ..MissionOptions::default()
         };
         let world = World::new(&s);
+        let truth = world.truth().clone();
         let cfg = rover_mapping_config(&world, &options);
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let mut mission = Mission::with_options(world, options);
@@ -524,11 +537,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         }
         let mut replays = Vec::new();
         for (id, input) in ids.iter().zip(&capture) {
-            replays.push(replay(seed, *id, "baseline", &cfg, input, with_csv));
+            replays.push(replay(seed, *id, "baseline", &cfg, input, &truth, with_csv));
             for v in &variants {
                 let mut changed = cfg.clone();
                 (v.apply)(&mut changed);
-                replays.push(replay(seed, *id, v.name, &changed, input, with_csv));
+                replays.push(replay(seed, *id, v.name, &changed, input, &truth, with_csv));
             }
         }
         replays
@@ -546,12 +559,14 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         println!("poses scan by scan: {}", dir.display());
     }
     println!(
-        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures | SLAM speed |"
+        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures | SLAM speed | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     for r in &all {
         println!(
-            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} | {:.0}x |",
+            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} | {:.0}x | {:.1} % ({}) | {:.1} % | {:.1} % |",
             r.seed,
             r.rover,
             r.variant,
@@ -562,14 +577,18 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             r.last.heading_rmse_deg,
             r.lost,
             r.closures,
-            r.sim_s / r.wall_s.max(1e-9)
+            r.sim_s / r.wall_s.max(1e-9),
+            100.0 * r.map.path_hazards_flagged,
+            r.map.path_hazards,
+            100.0 * r.map.hazard_correct,
+            100.0 * r.map.occupied_correct
         );
     }
     println!();
     println!(
-        "| variant | final RMS, median rover | final RMS, worst rover per seed (median) | aligned RMS, median rover | tracked RMS, median rover | fleet SLAM speed, median seed (sim s / wall s of all rovers) |"
+        "| variant | final RMS, median rover | final RMS, worst rover per seed (median) | aligned RMS, median rover | tracked RMS, median rover | fleet SLAM speed, median seed (sim s / wall s of all rovers) | hazards near the paths marked, all rovers | hazard cells truly untraversable, all rovers |"
     );
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     let names: Vec<&str> = std::iter::once("baseline")
         .chain(variants.iter().map(|v| v.name))
         .collect();
@@ -592,13 +611,23 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                 sim / fleet.map(|r| r.wall_s).sum::<f64>().max(1e-9)
             })
             .collect();
+        // Pooled over the rovers: a rover whose path passed few hazards weighs little.
+        let share = |part: fn(&MapGrade) -> (f64, usize)| {
+            let (hit, all) = of.iter().fold((0.0, 0usize), |(h, a), r| {
+                let (share, n) = part(&r.map);
+                (h + share * n as f64, a + n)
+            });
+            100.0 * hit / all.max(1) as f64
+        };
         println!(
-            "| {name} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.0}x |",
+            "| {name} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.0}x | {:.1} % | {:.1} % |",
             median(of.iter().map(|r| r.last.rmse_m).collect()),
             median(worst),
             median(of.iter().map(|r| r.aligned_rms_m).collect()),
             median(of.iter().map(|r| r.tracked.rmse_m).collect()),
-            median(fleet_speed)
+            median(fleet_speed),
+            share(|m| (m.path_hazards_flagged, m.path_hazards)),
+            share(|m| (m.hazard_correct, m.hazard_cells)),
         );
     }
     if all.iter().any(|r| !r.relief.is_empty()) {

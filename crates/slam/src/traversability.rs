@@ -7,7 +7,8 @@
 //! like the occupancy map, so one noisy frame does not decide a cell.
 //!
 //! Crater bowls seen from outside are mostly hidden behind the rim; [`shadow_gaps`] marks
-//! the hidden ground as hazardous when the visible ground resumes lower beyond it.
+//! the hidden ground as hazardous when the visible ground resumes lower beyond it, even
+//! where that is farther off than frames are judged (a large crater's far wall).
 //!
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
@@ -31,6 +32,10 @@ pub struct TraversabilityConfig {
     pub max_range_m: f64,
     /// A cell needs at least this many points to be judged.
     pub min_points: usize,
+    /// Points up to this far may end a stretch of hidden ground in [`shadow_gaps`]: beyond a
+    /// large crater the ground resumes farther off than frames are judged, metres. The
+    /// stretch is still marked only within `max_range_m`.
+    pub gap_reach_m: f64,
 }
 
 impl Default for TraversabilityConfig {
@@ -42,6 +47,7 @@ impl Default for TraversabilityConfig {
             max_drop_m: 0.15,
             max_range_m: 4.0,
             min_points: 1,
+            gap_reach_m: 6.0,
         }
     }
 }
@@ -187,7 +193,8 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
 /// ground points are walked outwards; where they stop and resume more than `min_gap_m`
 /// farther out *and lower than the ground before the gap* (the lowest point within
 /// [`GROUND_BEFORE_GAP_M`] of its near end), the ground in between dropped out of sight, and
-/// every cell of the gap is judged hazardous. A rock hides the ground behind it too, but
+/// every cell of the gap within `cfg.max_range_m` is judged hazardous; the gap may end at a
+/// point as far as `cfg.gap_reach_m`. A rock hides the ground behind it too, but
 /// there the ground resumes at the height of the ground in front of it, only lower than the
 /// rock's top: that shadow is left to [`judge_frame`].
 pub fn shadow_gaps(
@@ -201,12 +208,12 @@ pub fn shadow_gaps(
             .iter()
             .filter(|p| p.iter().all(|v| v.is_finite()))
             .map(|p| (p[0].hypot(p[1]), *p))
-            .filter(|(d, _)| *d <= cfg.max_range_m)
+            .filter(|(d, _)| *d <= cfg.gap_reach_m.max(cfg.max_range_m))
             .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         for (k, w) in pts.windows(2).enumerate() {
             let ((d0, near), (d1, far)) = (w[0], w[1]);
-            if d1 - d0 < min_gap_m {
+            if d1 - d0 < min_gap_m || d0 >= cfg.max_range_m {
                 continue;
             }
             let ground_before = pts[..=k]
@@ -221,6 +228,9 @@ pub fn shadow_gaps(
             let steps = ((d1 - d0) / cfg.resolution_m).ceil() as usize;
             for k in 1..steps {
                 let t = k as f64 / steps as f64;
+                if d0 + t * (d1 - d0) > cfg.max_range_m {
+                    break;
+                }
                 out.push((
                     Point2::new(
                         near[0] + t * (far[0] - near[0]),
@@ -449,6 +459,30 @@ mod tests {
             p[2] = -0.12;
         }
         assert!(shadow_gaps(&[col], &cfg, 0.5).iter().any(|(_, h)| *h));
+    }
+
+    #[test]
+    fn ground_hidden_up_to_a_far_wall_beyond_the_judged_range_is_marked_within_it() {
+        let cfg = TraversabilityConfig::default();
+        // Floor to 2.0 m, then a large crater's bowl hidden until its far wall at 5.2 m,
+        // seen 0.3 m below the floor: past the 4 m frames are judged to.
+        let mut col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
+        col.extend((0..4).map(|k| [5.2 + k as f64 * 0.1, 0.0, -0.3]));
+        let v = shadow_gaps(&[col.clone()], &cfg, 0.5);
+        assert!(
+            v.iter().any(|(p, h)| *h && (p.x_m - 3.9).abs() < 0.1),
+            "{v:?}"
+        );
+        assert!(
+            v.iter()
+                .all(|(p, _)| p.x_m > 2.0 && p.x_m <= cfg.max_range_m)
+        );
+        // A gap may end only where frames are judged: the far wall ends none.
+        let near_only = TraversabilityConfig {
+            gap_reach_m: cfg.max_range_m,
+            ..cfg
+        };
+        assert!(shadow_gaps(&[col], &near_only, 0.5).is_empty());
     }
 
     #[test]
