@@ -159,6 +159,12 @@ pub struct MapperConfig {
     /// heading is redone with the heading held to the odometry's (`None`: trust the match;
     /// right for wheel-only headings such as the recorded logs'), radians.
     pub max_heading_step_rad: Option<f64>,
+    /// With a gyro ([`gyro_heading`](Self::gyro_heading)): a match whose heading has strayed
+    /// from the gyro's since the pose was last set (by an optimisation, a relocalisation or
+    /// the first scan) by more than this plus three standard deviations of the gyro's own
+    /// drift is redone with the heading held to the gyro's. Small steps that each pass
+    /// `max_heading_step_rad` can add up to degrees (`None`: no such check), radians.
+    pub heading_anchor_rad: Option<f64>,
     /// Where the wheels report no travel over a scan (a rover turning in place), the match
     /// is held to the position the wheels predict (see [`StillHold`]; `None`: the usual
     /// pull, right for odometry that stalls, as the recorded logs' does).
@@ -323,6 +329,13 @@ impl GyroHeading {
     }
 }
 
+/// The tracked heading less the odometry's (a gyro's) when the pose was last set.
+#[derive(Clone, Copy, Debug)]
+struct HeadingAnchor {
+    time_s: f64,
+    offset_rad: f64,
+}
+
 /// How far a loop closure may move a keyframe: `base_m + per_m * d`, where `d` is the length
 /// of the shortest path between the two ends through the pose graph (travel along its
 /// odometry edges, [`hop_m`](Self::hop_m) for each accepted closure).
@@ -382,6 +395,7 @@ impl Default for MapperConfig {
             trim_radius_m: None,
             motion_filter: None,
             max_heading_step_rad: None,
+            heading_anchor_rad: None,
             still_hold: None,
             weak_direction_floor: None,
             refine_only_where_pinned: None,
@@ -518,6 +532,11 @@ pub struct Mapper {
     /// Points (robot frame) from another sensor that go into the next scan's refinement and
     /// its keyframe's hits, beside the scan's own.
     features: Vec<Point2>,
+    /// The tracked heading less the odometry's when the pose was last set, and when.
+    heading_anchor: Option<HeadingAnchor>,
+    /// The pose after the last scan and the odometry's heading then: a pose found moved at
+    /// the next scan was set by something other than tracking.
+    after_last_scan: Option<(Pose2, f64)>,
     /// Relocalisation searches since the rover was declared lost.
     searches_since_lost: usize,
     last_information: [[f64; 3]; 3],
@@ -525,6 +544,9 @@ pub struct Mapper {
     pub closures: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
+    /// Of those, the ones whose heading had strayed from the gyro's since the pose was set
+    /// ([`MapperConfig::heading_anchor_rad`]).
+    pub heading_anchor_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
     /// Scans whose headings were searched for a fast turn ...
@@ -569,10 +591,13 @@ impl Mapper {
             lost_at: None,
             last_relocalise_odom: None,
             features: Vec::new(),
+            heading_anchor: None,
+            after_last_scan: None,
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
             heading_holds: 0,
+            heading_anchor_holds: 0,
             relocalise_searches: 0,
             fast_turn_searches: 0,
             fast_turn_taken: 0,
@@ -641,6 +666,15 @@ impl Mapper {
         });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
+        match self.after_last_scan {
+            Some((pose, odom_yaw)) if pose != before || self.heading_anchor.is_none() => {
+                self.heading_anchor = Some(HeadingAnchor {
+                    time_s,
+                    offset_rad: normalize_angle_rad(before.yaw_rad - odom_yaw),
+                });
+            }
+            _ => {}
+        }
         // A relocalisation puts the pose off the wheels' track.
         let mut relocalised = false;
         let mut score = None;
@@ -744,6 +778,25 @@ impl Mapper {
                         };
                         m = match_scan(map, &dense, prior, &held);
                         self.heading_holds += 1;
+                    }
+                    if let (Some(tolerance), Some(gyro), Some(anchor)) = (
+                        self.cfg.heading_anchor_rad,
+                        self.cfg.gyro_heading,
+                        self.heading_anchor,
+                    ) {
+                        let anchored_yaw = odom.yaw_rad + anchor.offset_rad;
+                        let strayed = normalize_angle_rad((origin * m.pose).yaw_rad - anchored_yaw);
+                        let gyro_sigma = gyro.information(time_s - anchor.time_s).recip().sqrt();
+                        if strayed.abs() > tolerance + 3.0 * gyro_sigma {
+                            let held = MatcherConfig {
+                                prior_rotation_weight: HELD_HEADING_WEIGHT,
+                                ..matcher
+                            };
+                            let anchored = origin.inverse()
+                                * Pose2::new(predicted.x_m, predicted.y_m, anchored_yaw);
+                            m = match_scan(map, &dense, anchored, &held);
+                            self.heading_anchor_holds += 1;
+                        }
                     }
                     if let Some(hits) = &self.submaps[i].hits {
                         let wheels = [(origin.inverse() * before).position(), prior.position()];
@@ -856,6 +909,12 @@ impl Mapper {
         });
         self.odometry
             .settle(odom, self.pose, &prediction, relocalised);
+        if lost {
+            self.heading_anchor = None;
+            self.after_last_scan = None;
+        } else {
+            self.after_last_scan = Some((self.pose, odom.yaw_rad));
+        }
         // They were seen for this scan, and are stale at the next.
         self.features.clear();
         Tracked {
@@ -1085,6 +1144,8 @@ impl Mapper {
             self.odometry
                 .shift(self.graph.nodes[node] * self.pose.inverse());
             self.pose = self.graph.nodes[node];
+            // The optimisation may turn the pose: the gyro's heading is anchored anew.
+            self.heading_anchor = None;
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();
             }
@@ -1735,6 +1796,41 @@ mod tests {
         // With the endpoints as they are, 0.66 degrees: the second keyframe's map holds the
         // turn the first match took.
         assert!(filled < 0.1, "mean heading error {filled:.3} deg");
+    }
+
+    /// The final heading error, degrees, of a mapper driving east through the sparse hall
+    /// whose scans turn 0.3 degrees a scan against the gyro's heading (as matches do that
+    /// each stray a little the same way), with the gyro's heading anchored or not.
+    fn heading_error_with_matches_straying(anchor_rad: Option<f64>) -> f64 {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        cfg.gyro_heading = Some(GyroHeading {
+            rad_per_sqrt_s: 1e-3,
+            bias_rad_s: 2e-4,
+        });
+        cfg.max_heading_step_rad = Some(1f64.to_radians());
+        cfg.heading_anchor_rad = anchor_rad;
+        let mut mapper = Mapper::new(cfg);
+        let mut last = 0.0;
+        for k in 0..40 {
+            let truth = Pose2::new(-6.0 + 0.05 * k as f64, -7.0, 0.0);
+            let seen_from = Pose2::new(truth.x_m, truth.y_m, (0.3 * k as f64).to_radians());
+            let tracked = mapper.add_points(0.1 * k as f64, truth, sparse_hall_scan(seen_from));
+            last = normalize_angle_rad(tracked.pose.yaw_rad - truth.yaw_rad).to_degrees();
+        }
+        last.abs()
+    }
+
+    #[test]
+    fn a_heading_straying_from_the_gyros_since_the_pose_was_set_is_held_to_it() {
+        // Each match strays 0.3 degrees, under the scan-to-scan gate of 1 degree: unchecked,
+        // the heading follows the scans 11.9 degrees off; anchored, it stays within 0.3.
+        let unchecked = heading_error_with_matches_straying(None);
+        assert!(unchecked > 8.0, "{unchecked:.2} deg");
+        let anchored = heading_error_with_matches_straying(Some(2f64.to_radians()));
+        assert!(anchored < 3.0, "{anchored:.2} deg");
     }
 
     /// Drives east 20 m through the sparse hall with exact odometry, a path 3 m off the

@@ -36,6 +36,9 @@ pub struct TraversabilityConfig {
     /// large crater the ground resumes farther off than frames are judged, metres. The
     /// stretch is still marked only within `max_range_m`.
     pub gap_reach_m: f64,
+    /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
+    /// much lower than the ground before it, metres.
+    pub gap_drop_m: f64,
 }
 
 impl Default for TraversabilityConfig {
@@ -48,6 +51,7 @@ impl Default for TraversabilityConfig {
             max_range_m: 4.0,
             min_points: 1,
             gap_reach_m: 6.0,
+            gap_drop_m: 0.08,
         }
     }
 }
@@ -221,7 +225,7 @@ pub fn shadow_gaps(
                 .rev()
                 .take_while(|(d, _)| *d >= d0 - GROUND_BEFORE_GAP_M)
                 .fold(near[2], |low, (_, p)| low.min(p[2]));
-            if far[2] > ground_before - cfg.max_step_m {
+            if far[2] > ground_before - cfg.gap_drop_m {
                 continue;
             }
             // Cells along the hidden stretch, at the resolution of the layer.
