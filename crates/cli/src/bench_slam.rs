@@ -193,29 +193,35 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
-        name: "no-heading-anchor",
-        what: "a match's heading not checked against the gyro's since the pose was last set (only scan to scan)",
-        apply: |c| c.mapper.heading_anchor_rad = None,
+        name: "heading-anchor-2deg",
+        what: "a match whose heading strays from the gyro's since the pose was last set (an optimisation, a relocalisation, the first scan) by more than 2 deg plus 3 sigma of the gyro's drift redone with the heading held to the gyro's",
+        apply: |c| c.mapper.heading_anchor_rad = Some(2f64.to_radians()),
     },
     Variant {
         name: "heading-anchor-1deg",
-        what: "a match whose heading strays from the gyro's since the pose was last set by more than 1 deg (not 2 deg) plus 3 sigma of the gyro's drift redone with the heading held to the gyro's",
+        what: "heading-anchor-2deg with 1 deg",
         apply: |c| c.mapper.heading_anchor_rad = Some(1f64.to_radians()),
     },
     Variant {
         name: "gap-drop-5cm",
-        what: "hidden ground a hazard when the ground beyond resumes 5 cm lower than before it (not 8 cm)",
-        apply: |c| c.traversability.gap_drop_m = 0.05,
+        what: "gaps-to-6m, and hidden ground a hazard when the ground beyond resumes 5 cm lower than before it (not 8 cm)",
+        apply: |c| {
+            c.traversability.gap_reach_m = 6.0;
+            c.traversability.gap_drop_m = 0.05;
+        },
     },
     Variant {
         name: "gap-drop-6cm",
-        what: "hidden ground a hazard when the ground beyond resumes 6 cm lower than before it (not 8 cm)",
-        apply: |c| c.traversability.gap_drop_m = 0.06,
+        what: "gaps-to-6m, and hidden ground a hazard when the ground beyond resumes 6 cm lower than before it (not 8 cm)",
+        apply: |c| {
+            c.traversability.gap_reach_m = 6.0;
+            c.traversability.gap_drop_m = 0.06;
+        },
     },
     Variant {
-        name: "gaps-to-4m",
-        what: "hidden ground ends only at points within 4 m, where frames are judged (not the camera's 6 m)",
-        apply: |c| c.traversability.gap_reach_m = c.traversability.max_range_m,
+        name: "gaps-to-6m",
+        what: "hidden ground may end at points up to 6 m off, the depth camera's range (not 4 m), still marked only within 4 m",
+        apply: |c| c.traversability.gap_reach_m = 6.0,
     },
     Variant {
         name: "three-levels",

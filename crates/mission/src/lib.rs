@@ -98,10 +98,6 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         traversability: TraversabilityConfig {
             max_step_m: spec.max_step_m,
             max_slope_rad: spec.max_slope_deg.to_radians(),
-            // Beyond a large crater the ground resumes farther off than frames are judged;
-            // seen that far, the hidden bowl is marked (BENCHMARKS.md, "Hidden ground ended
-            // as far as the camera sees").
-            gap_reach_m: spec.depth.range_max_m,
             ..TraversabilityConfig::default()
         },
         // The rovers' lidar is noisy at a centimetre or more; smoothed, the median rover's
