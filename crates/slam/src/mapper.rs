@@ -544,8 +544,8 @@ pub struct Mapper {
     pub closures: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
-    /// Of those, the ones whose heading had strayed from the gyro's since the pose was set
-    /// ([`MapperConfig::heading_anchor_rad`]).
+    /// Matches redone with the heading held to the gyro's because it had strayed from it
+    /// since the pose was set ([`MapperConfig::heading_anchor_rad`]).
     pub heading_anchor_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
