@@ -98,6 +98,8 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         traversability: TraversabilityConfig {
             max_step_m: spec.max_step_m,
             max_slope_rad: spec.max_slope_deg.to_radians(),
+            // Hidden ground counts as a bowl once it resumes a step lower than the floor.
+            gap_drop_m: spec.max_step_m,
             ..TraversabilityConfig::default()
         },
         // The rovers' lidar is noisy at a centimetre or more; smoothed, the median rover's

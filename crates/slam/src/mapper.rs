@@ -534,9 +534,10 @@ pub struct Mapper {
     features: Vec<Point2>,
     /// The tracked heading less the odometry's when the pose was last set, and when.
     heading_anchor: Option<HeadingAnchor>,
-    /// The pose after the last scan and the odometry's heading then: a pose found moved at
-    /// the next scan was set by something other than tracking.
-    after_last_scan: Option<(Pose2, f64)>,
+    /// The odometry's heading at the last scan, while not lost: where a new anchor starts
+    /// from. Whatever sets the pose other than tracking (an optimisation, a relocalisation
+    /// after being lost) drops the anchor.
+    last_odom_yaw: Option<f64>,
     /// Relocalisation searches since the rover was declared lost.
     searches_since_lost: usize,
     last_information: [[f64; 3]; 3],
@@ -592,7 +593,7 @@ impl Mapper {
             last_relocalise_odom: None,
             features: Vec::new(),
             heading_anchor: None,
-            after_last_scan: None,
+            last_odom_yaw: None,
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
@@ -666,14 +667,11 @@ impl Mapper {
         });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
-        match self.after_last_scan {
-            Some((pose, odom_yaw)) if pose != before || self.heading_anchor.is_none() => {
-                self.heading_anchor = Some(HeadingAnchor {
-                    time_s,
-                    offset_rad: normalize_angle_rad(before.yaw_rad - odom_yaw),
-                });
-            }
-            _ => {}
+        if let (None, Some(odom_yaw)) = (self.heading_anchor, self.last_odom_yaw) {
+            self.heading_anchor = Some(HeadingAnchor {
+                time_s,
+                offset_rad: normalize_angle_rad(before.yaw_rad - odom_yaw),
+            });
         }
         // A relocalisation puts the pose off the wheels' track.
         let mut relocalised = false;
@@ -911,9 +909,9 @@ impl Mapper {
             .settle(odom, self.pose, &prediction, relocalised);
         if lost {
             self.heading_anchor = None;
-            self.after_last_scan = None;
+            self.last_odom_yaw = None;
         } else {
-            self.after_last_scan = Some((self.pose, odom.yaw_rad));
+            self.last_odom_yaw = Some(odom.yaw_rad);
         }
         // They were seen for this scan, and are stale at the next.
         self.features.clear();

@@ -41,7 +41,7 @@ pub struct TraversabilityConfig {
     /// worse maps (BENCHMARKS.md, "Hidden ground ended as far as the camera sees").
     pub gap_reach_m: f64,
     /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
-    /// much lower than the ground before it, metres.
+    /// much lower than the ground before it (the rovers take their step limit), metres.
     pub gap_drop_m: f64,
 }
 
@@ -441,12 +441,19 @@ mod tests {
         assert_eq!(verdict_at(&v, 1.05, 0.05), Some(false));
     }
 
+    /// One image column's points along x: floor every 8 cm from 0.5 m to 2.0 m, nothing
+    /// until `far_from_m`, then four points 10 cm apart at height `far_z_m`.
+    fn floor_then_ground_beyond(far_from_m: f64, far_z_m: f64) -> Vec<[f64; 3]> {
+        let mut col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
+        col.extend((0..4).map(|k| [far_from_m + k as f64 * 0.1, 0.0, far_z_m]));
+        col
+    }
+
     #[test]
     fn ground_hidden_behind_a_rim_and_resuming_lower_is_a_hazard_but_a_rock_shadow_is_not() {
         let cfg = TraversabilityConfig::default();
         // One column: floor to 2.0 m, nothing seen until 3.6 m, then ground 12 cm lower.
-        let mut col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
-        col.extend((0..4).map(|k| [3.6 + k as f64 * 0.1, 0.0, -0.12]));
+        let mut col = floor_then_ground_beyond(3.6, -0.12);
         let v = shadow_gaps(&[col.clone()], &cfg, 0.5);
         assert!(
             v.iter().any(|(p, h)| *h && (p.x_m - 3.0).abs() < 0.1),
@@ -477,9 +484,8 @@ mod tests {
         };
         // Floor to 2.0 m, then a large crater's bowl hidden until its far wall at 5.2 m,
         // seen 0.3 m below the floor: past the 4 m frames are judged to.
-        let mut col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
-        col.extend((0..4).map(|k| [5.2 + k as f64 * 0.1, 0.0, -0.3]));
-        let v = shadow_gaps(&[col.clone()], &cfg, 0.5);
+        let col = floor_then_ground_beyond(5.2, -0.3);
+        let v = shadow_gaps(std::slice::from_ref(&col), &cfg, 0.5);
         assert!(
             v.iter().any(|(p, h)| *h && (p.x_m - 3.9).abs() < 0.1),
             "{v:?}"
