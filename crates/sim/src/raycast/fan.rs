@@ -208,9 +208,7 @@ impl FanCaster<'_> {
                     Err(near) => break world.finish(origin, *dir, near, t_max_m),
                 };
                 loop {
-                    let Some(near) = world.near_step(&mut walk) else {
-                        continue;
-                    };
+                    let near = world.near_run(&mut walk);
                     // Anything but reaching the strip's end short of the range is the answer.
                     if near != Near::Settled(None) || t_stop >= t_max_m {
                         break 'ray world.finish(origin, *dir, near, t_max_m);

@@ -20,6 +20,9 @@ use realms_core::{Grid, GridGeometry};
 use walk::ClearStep;
 
 const MAX_LEVEL: usize = 6;
+/// Cells walked exactly where the clearance field hands over, before the pyramid takes over
+/// (8 and 32 were slower in the lidar's trial, BENCHMARKS.md, thirty-fifth session).
+const HANDOVER_CELLS: usize = 16;
 
 /// One level of the pyramid: each cell holds the maximum of a 2^k x 2^k block of heights.
 /// Stored in 8 x 8 tiles (256 bytes) so a ray walking in y stays within a few cache lines
@@ -289,8 +292,35 @@ impl HeightPyramid {
     /// `[t_min_m, t_max_m]`; `None` if nothing is hit in range or the ray leaves the grid.
     /// A ray that starts below the surface hits at `t_min_m`.
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], t_min_m: f64, t_max_m: f64) -> Option<f64> {
+        if self.clearance.is_none() {
+            return self.cast_from_level(origin, dir, t_min_m, t_max_m, 1);
+        }
         let t = self.skip_clear_space(origin, dir, t_min_m, t_max_m)?;
-        self.cast_from_level(origin, dir, t, t_max_m, 1)
+        self.cast_near(origin, dir, t, t_max_m)
+    }
+
+    /// The rest of a cast from `t`, before which nothing is hit, where the clearance field can
+    /// prove no further: a few cells walked exactly, which find the hit of a ray stopped by a
+    /// wall or rock, then the pyramid's descent for a ray that walks on (one grazing the floor
+    /// or passing a rock). The pyramid alone costs more for the short cases: each of its
+    /// steps recomputes its exits, and it climbs and descends levels at every block boundary.
+    fn cast_near(&self, origin: [f64; 3], dir: [f64; 3], t: f64, t_max_m: f64) -> Option<f64> {
+        let near = match self.near_walk(origin, dir, t, t_max_m) {
+            Ok(mut walk) => {
+                walk.limit_cells(HANDOVER_CELLS);
+                self.near_run(&mut walk)
+            }
+            Err(near) => near,
+        };
+        match near {
+            walk::Near::Settled(hit) => hit,
+            // Nothing is hit before t, and the ray is at or below the surface there.
+            walk::Near::HitBehindStart => Some(t),
+            // Walked on, or off the grid (clipping finds whether and where it re-enters).
+            walk::Near::ContinueFrom(t_walked) => {
+                self.cast_from_level(origin, dir, t_walked, t_max_m, 1)
+            }
+        }
     }
 
     /// Advances along the ray through space the clearance field proves empty; returns where

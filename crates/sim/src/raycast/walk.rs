@@ -40,8 +40,8 @@ pub(super) enum ClearStep {
     Clear,
 }
 
-/// Level-0 cells walked for a short stretch from a proved start (see `fan.rs`), one cell per
-/// [`HeightPyramid::near_step`].
+/// Level-0 cells walked for a short stretch from a proved start (see `fan.rs`), walked by
+/// [`HeightPyramid::near_run`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct NearWalk {
     origin_z: f64,
@@ -64,6 +64,11 @@ impl NearWalk {
     /// cells it has left to walk are not renewed: past them it hands over to a full cast.
     pub(super) fn extend_to(&mut self, t_max: f64) {
         self.t_max = t_max;
+    }
+
+    /// Lets the walk take at most `cells` more cells before it hands over.
+    pub(super) fn limit_cells(&mut self, cells: usize) {
+        self.cells_left = cells;
     }
 }
 
@@ -195,7 +200,7 @@ impl HeightPyramid {
             }
         }
         std::array::from_fn(|i| {
-            exact_from[i].and_then(|t| self.cast_from_level(origin, dirs[i], t, t_max_m, 1))
+            exact_from[i].and_then(|t| self.cast_near(origin, dirs[i], t, t_max_m))
         })
     }
 
@@ -258,40 +263,55 @@ impl HeightPyramid {
         }
     }
 
-    /// One cell of a near walk: `Some` once it has settled.
+    /// Walks a near walk cell by cell until it settles or hands over. The axis each step
+    /// crosses is picked by selects rather than a branch: along a diagonal ray it alternates
+    /// unpredictably, and a mispredicted branch there cost more than the step itself.
     #[inline(always)]
-    pub(super) fn near_step(&self, w: &mut NearWalk) -> Option<Near> {
-        if w.cells_left == 0 {
-            return Some(Near::ContinueFrom(w.t));
-        }
-        w.cells_left -= 1;
-        let top = self.levels[0].at(w.cx as usize, w.cy as usize) as f64;
-        let t_exit = if w.tmx < w.tmy { w.tmx } else { w.tmy };
-        let t_exit = if t_exit < w.t_max { t_exit } else { w.t_max };
-        let z_in = w.origin_z + w.dz * w.t;
-        if z_in <= top {
-            return Some(Near::Settled(Some(w.t)));
-        }
-        let z_out = w.origin_z + w.dz * t_exit;
-        if z_out <= top {
-            return Some(Near::Settled(Some(w.t + (top - z_in) / w.dz)));
-        }
-        if t_exit >= w.t_max {
-            return Some(Near::Settled(None));
-        }
-        w.t = t_exit;
-        if w.tmx < w.tmy {
-            w.cx += w.step_x;
-            w.tmx += w.tdx;
-        } else {
-            w.cy += w.step_y;
-            w.tmy += w.tdy;
-        }
-        let g = &self.geometry;
-        if w.cx < 0 || w.cy < 0 || w.cx >= g.width as i64 || w.cy >= g.height as i64 {
-            return Some(Near::ContinueFrom(w.t));
-        }
-        None
+    pub(super) fn near_run(&self, w: &mut NearWalk) -> Near {
+        let level = &self.levels[0];
+        let (width, height) = (self.geometry.width as u64, self.geometry.height as u64);
+        let (oz, dz, t_max) = (w.origin_z, w.dz, w.t_max);
+        let (step_x, step_y, tdx, tdy) = (w.step_x, w.step_y, w.tdx, w.tdy);
+        let (mut cx, mut cy, mut tmx, mut tmy, mut t) = (w.cx, w.cy, w.tmx, w.tmy, w.t);
+        let mut left = w.cells_left;
+        let settled = loop {
+            if left == 0 {
+                break Near::ContinueFrom(t);
+            }
+            left -= 1;
+            let top = level.at(cx as usize, cy as usize) as f64;
+            let x_first = tmx < tmy;
+            let t_cross = if x_first { tmx } else { tmy };
+            let t_exit = if t_cross < t_max { t_cross } else { t_max };
+            let z_in = oz + dz * t;
+            let z_out = oz + dz * t_exit;
+            let z_low = if z_in < z_out { z_in } else { z_out };
+            if z_low <= top {
+                // Into the column's side, or down onto its top.
+                let hit = if z_in <= top {
+                    t
+                } else {
+                    t + (top - z_in) / dz
+                };
+                break Near::Settled(Some(hit));
+            }
+            if t_exit >= t_max {
+                break Near::Settled(None);
+            }
+            t = t_exit;
+            // tdx is infinite only for a ray that never crosses in x, which then never
+            // steps in x: the unpicked side adds nothing.
+            cx += if x_first { step_x } else { 0 };
+            cy += if x_first { 0 } else { step_y };
+            tmx += if x_first { tdx } else { 0.0 };
+            tmy += if x_first { 0.0 } else { tdy };
+            // Negative cells wrap to huge values: one test per axis.
+            if cx as u64 >= width || cy as u64 >= height {
+                break Near::ContinueFrom(t);
+            }
+        };
+        (w.cx, w.cy, w.tmx, w.tmy, w.t, w.cells_left) = (cx, cy, tmx, tmy, t, left);
+        settled
     }
 }
 
@@ -311,11 +331,7 @@ mod tests {
         t_max_m: f64,
     ) -> Option<f64> {
         let settled = match p.near_walk(origin, dir, t_start, t_max_m) {
-            Ok(mut w) => loop {
-                if let Some(n) = p.near_step(&mut w) {
-                    break n;
-                }
-            },
+            Ok(mut w) => p.near_run(&mut w),
             Err(n) => n,
         };
         p.finish(origin, dir, settled, t_max_m)
