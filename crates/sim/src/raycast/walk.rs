@@ -4,7 +4,7 @@
 //! see `fan.rs`).
 //!
 //! Each clearance step is a short chain of dependent arithmetic and one load, so the lidar's
-//! beams are walked four side by side ([`HeightPyramid::cast_side_by_side`]): the core
+//! beams are walked eight side by side ([`HeightPyramid::cast_side_by_side`]): the core
 //! overlaps their chains, and a scan takes about a quarter less time (BENCHMARKS.md,
 //! twenty-fifth session). The near walks of image pixels are a few cells each; stepping those
 //! side by side was slower than one after the other.

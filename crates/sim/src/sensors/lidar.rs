@@ -25,8 +25,9 @@ pub fn scan(
     // instead of two trig calls per beam (the drift over 360 steps is ~1e-13 rad).
     let (s_inc, c_inc) = increment.sin_cos();
     let (mut s_a, mut c_a) = angle_min.sin_cos();
-    // Beams are cast four side by side, then given their noise in order.
-    const SIDE_BY_SIDE: usize = 4;
+    // Beams are cast eight side by side, then given their noise in order (four were 2-4 %
+    // slower in the lidar-only trial, six and twelve no faster; BENCHMARKS.md).
+    const SIDE_BY_SIDE: usize = 8;
     let mut dirs = [[0.0; 3]; SIDE_BY_SIDE];
     let mut done = 0;
     while done < n {
