@@ -85,12 +85,16 @@ pub fn cast_image(
     let mut rays = Vec::with_capacity(height as usize);
     let mut dirs = Vec::with_capacity(height as usize);
     let mut hits = vec![None; height as usize];
+    // A pixel's ray is its column's x and its row's y (the divisions of `Intrinsics::ray`, done
+    // once per column and row instead of once per pixel).
+    let row_y: Vec<f64> = (0..height).map(|v| k.ray(0, v)[1]).collect();
     for u in 0..width {
         rays.clear();
         dirs.clear();
+        let x = k.ray(u, 0)[0];
         // Bottom row first: the fan's rays must climb in turn.
-        for v in (0..height).rev() {
-            let r = k.ray(u, v);
+        for &y in row_y.iter().rev() {
+            let r = [x, y, 1.0];
             rays.push(r);
             dirs.push(world_from_optical.rotate(r));
         }
