@@ -188,6 +188,25 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "tilt-spread-10mm",
+        what: "the refinement counts each hit as spread 1 cm in every direction per metre of range (a rock's outline moves as the lidar's plane tilts)",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.tilt_spread_per_m = 0.010;
+            }
+        },
+    },
+    Variant {
+        name: "tilt-beam-10mm",
+        what: "the refinement counts each hit as spread 1 cm along its beam (only) per metre of range (a rock's outline moves along the line of sight as the lidar's plane tilts)",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.tilt_spread_per_m = 0.010;
+                n.tilt_spread_along_beam = true;
+            }
+        },
+    },
+    Variant {
         name: "relief",
         what: "each depth frame fitted onto an earlier one's relief (measured only: the SLAM does not use it yet)",
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),

@@ -34,6 +34,15 @@ pub struct NdtConfig {
     pub rounds: usize,
     /// Gauss-Newton steps per round.
     pub steps: usize,
+    /// How far a hit may move along its beam per metre of range while the lidar's plane
+    /// tilts with the rover over rolling ground, metres per metre: a rock's outline at the
+    /// scan's height shrinks or grows as the plane rises or dips there, and the farther the
+    /// rock the more it does. Its square times the range squared is added to each hit's
+    /// variance (0: every hit counts as the noise alone).
+    pub tilt_spread_per_m: f64,
+    /// The tilt's spread lies along the beam alone (a hit moves along its line of sight), not
+    /// in every direction.
+    pub tilt_spread_along_beam: bool,
     /// A refinement moving the start more than this is not taken, metres ...
     pub max_shift_m: f64,
     /// ... nor one moving it back against the rover's travel by more than this, metres.
@@ -49,6 +58,8 @@ impl Default for NdtConfig {
             min_hits: 4,
             min_line_hits: 4,
             noise_var_m2: 1e-4,
+            tilt_spread_per_m: 0.0,
+            tilt_spread_along_beam: false,
             line_ratio: 0.1,
             max_distance_m: 0.25,
             rounds: 2,
@@ -323,6 +334,7 @@ impl NdtMap {
     ) -> Option<[f64; 3]> {
         // Cauchy's scale, in squared Mahalanobis units: three noise deviations.
         const CAUCHY2: f64 = 9.0;
+        let tilt2 = self.cfg.tilt_spread_per_m * self.cfg.tilt_spread_per_m;
         let (s, c) = pose.yaw_rad.sin_cos();
         let mut h = [[0.0; 3]; 3];
         let mut g = [0.0; 3];
@@ -330,7 +342,17 @@ impl NdtMap {
             let q = pose.transform_point(*p);
             let e = [q.x_m - pull.mean.x_m, q.y_m - pull.mean.y_m];
             let [a, b, d] = pull.information;
-            let w = 1.0 / (1.0 + pull.mahalanobis2(q) / CAUCHY2);
+            // The hit's own spread from the tilting plane, added to the cell's: exact for a
+            // line (information across it only), the trace's bound for a blob.
+            let f = if self.cfg.tilt_spread_along_beam {
+                // The beam in the map's frame, as long as the range: k^2 r^2 u' Omega u.
+                let (bx, by) = (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m);
+                1.0 / (1.0 + tilt2 * (a * bx * bx + 2.0 * b * bx * by + d * by * by))
+            } else {
+                let spread2 = tilt2 * (p.x_m * p.x_m + p.y_m * p.y_m);
+                1.0 / (1.0 + (a + d) * spread2)
+            };
+            let w = f / (1.0 + f * pull.mahalanobis2(q) / CAUCHY2);
             // d q / d theta.
             let (tx, ty) = (-s * p.x_m - c * p.y_m, c * p.x_m - s * p.y_m);
             // Columns of J (2 x 3): x, y, theta; Omega J column by column.
@@ -523,6 +545,42 @@ mod tests {
         assert!((diagonal - 0.05).abs() < 1e-12, "{diagonal}");
         // A rover standing still holds nothing back.
         assert_eq!(held_back_m(from, from, matched, at(0.9, 2.0)), 0.0);
+    }
+
+    /// A lone wall along x (no hold on x), and five hits on a rock's face across the beam
+    /// 11 m ahead whose outline the scan sees 3 cm farther than the map holds it, as when the
+    /// lidar's plane dips at the rock. Counted as the noise alone, those five hits drag the
+    /// rover the whole 3 cm back; spread by the tilt (11 cm at that range), they count about
+    /// as much as the prediction, and move it half as far.
+    #[test]
+    fn a_far_rocks_outline_seen_farther_moves_a_tilt_spread_refinement_less() {
+        let wall = (0..800).map(|i| Point2::new(i as f64 * 0.01, 1.513));
+        let face = (0..100).map(|i| Point2::new(15.013, -0.5 + i as f64 * 0.01));
+        let truth = Pose2::new(4.0, 0.0, 0.0);
+        let scan: Vec<Point2> = (0..100)
+            .map(|i| Point2::new(2.0 + i as f64 * 0.04, 1.513))
+            .chain((0..5).map(|i| Point2::new(15.043, -0.4 + i as f64 * 0.2)))
+            .map(|p| truth.inverse().transform_point(p))
+            .collect();
+        let shift = |cfg: NdtConfig| {
+            let mut map = NdtMap::new(cfg);
+            map.insert(wall.clone().chain(face.clone()));
+            let refined = map.refine(&scan, truth, STILL, 3.0, 3.0).expect("refined");
+            refined.x_m - truth.x_m
+        };
+        let plain = shift(NdtConfig::default());
+        assert!(plain < -0.025, "dragged back by the face: {plain}");
+        for along_beam in [false, true] {
+            let spread = shift(NdtConfig {
+                tilt_spread_per_m: 0.01,
+                tilt_spread_along_beam: along_beam,
+                ..NdtConfig::default()
+            });
+            assert!(
+                spread < 0.0 && spread > 0.7 * plain,
+                "along the beam {along_beam}: {spread} against {plain}"
+            );
+        }
     }
 
     #[test]
