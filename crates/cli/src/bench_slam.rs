@@ -207,6 +207,15 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "outline-shift-4",
+        what: "the refinement counts each hit as spread along its beam by 4 m per metre its levelled height differs from its cell's hits' (a rock cut higher by the tilting lidar is cut narrower)",
+        apply: |c| {
+            if let Some(n) = &mut c.mapper.ndt_refine {
+                n.outline_shift_per_height = 4.0;
+            }
+        },
+    },
+    Variant {
         name: "relief",
         what: "each depth frame fitted onto an earlier one's relief (measured only: the SLAM does not use it yet)",
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),

@@ -645,6 +645,7 @@ impl Mapping {
         let up = self.levelling()[2];
         let (lx, lh) = (self.cfg.lidar_x_m, self.cfg.lidar_height_m);
         let mut points = Vec::with_capacity(scan.ranges_m.len());
+        let mut heights = Vec::with_capacity(scan.ranges_m.len());
         let ranges = if self.cfg.smooth_ranges {
             std::borrow::Cow::Owned(smoothed(&scan.ranges_m))
         } else {
@@ -664,6 +665,7 @@ impl Mapping {
                 continue;
             }
             points.push(Point2::new(x, y));
+            heights.push(height);
         }
         let sample = OdomSample {
             pose: odom,
@@ -680,6 +682,7 @@ impl Mapping {
             _ => Vec::new(),
         };
         self.mapper.set_features(features);
+        self.mapper.set_point_heights(heights);
         let tracked = self
             .mapper
             .add_points_with(stamp.as_secs_f64(), sample, points);

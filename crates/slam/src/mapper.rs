@@ -532,6 +532,8 @@ pub struct Mapper {
     /// Points (robot frame) from another sensor that go into the next scan's refinement and
     /// its keyframe's hits, beside the scan's own.
     features: Vec<Point2>,
+    /// The next scan's points' heights (see [`Mapper::set_point_heights`]).
+    point_heights: Vec<f64>,
     /// The tracked heading less the odometry's when the pose was last set, and when.
     heading_anchor: Option<HeadingAnchor>,
     /// The odometry's heading at the last scan, while not lost: where a new anchor starts
@@ -592,6 +594,7 @@ impl Mapper {
             lost_at: None,
             last_relocalise_odom: None,
             features: Vec::new(),
+            point_heights: Vec::new(),
             heading_anchor: None,
             last_odom_yaw: None,
             searches_since_lost: 0,
@@ -627,11 +630,14 @@ impl Mapper {
         s.map.insert(local.position(), &world);
         s.keyframes += 1;
         if let Some(hits) = &mut s.hits {
-            hits.insert(
+            let heights = &self.point_heights;
+            hits.insert_with_heights(
                 self.keyframe_points[node]
                     .iter()
-                    .chain(&self.features)
-                    .map(|p| local.transform_point(*p)),
+                    .enumerate()
+                    .map(|(i, p)| (*p, heights.get(i).copied().unwrap_or(f64::NAN)))
+                    .chain(self.features.iter().map(|p| (*p, f64::NAN)))
+                    .map(|(p, h)| (local.transform_point(p), h)),
             );
         }
     }
@@ -640,6 +646,13 @@ impl Mapper {
     /// the hits pairs them too, and its keyframe, if it makes one, adds them to the hits.
     pub fn set_features(&mut self, features: Vec<Point2>) {
         self.features = features;
+    }
+
+    /// Each point of the next scan's height above the ground under the rover, levelled by
+    /// its tilt (in the order of the points given to [`add_points_with`](Self::add_points_with);
+    /// for [`NdtConfig::outline_shift_per_height`]). For the next scan only.
+    pub fn set_point_heights(&mut self, heights: Vec<f64>) {
+        self.point_heights = heights;
     }
 
     /// Adds a scan from a CARMEN log.
@@ -805,8 +818,9 @@ impl Mapper {
                             with_features = points.iter().chain(&self.features).copied().collect();
                             &with_features
                         };
-                        if let Some(refined) = hits.refine(
+                        if let Some(refined) = hits.refine_with_heights(
                             refined_on,
+                            &self.point_heights,
                             m.pose,
                             wheels,
                             matcher.prior_translation_weight,
@@ -915,6 +929,7 @@ impl Mapper {
         }
         // They were seen for this scan, and are stale at the next.
         self.features.clear();
+        self.point_heights.clear();
         Tracked {
             pose: self.pose,
             score,

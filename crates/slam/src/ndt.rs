@@ -43,6 +43,12 @@ pub struct NdtConfig {
     /// The tilt's spread lies along the beam alone (a hit moves along its line of sight), not
     /// in every direction.
     pub tilt_spread_along_beam: bool,
+    /// How far a hit's outline may move along its beam per metre the lidar's plane has risen
+    /// or fallen there since the cell's hits were taken (the hit's height above the ground
+    /// under the rover, levelled by the rover's tilt, against the cell's mean): a rock cut
+    /// higher is cut narrower. Its square times the height change squared is added to the
+    /// hit's variance along the beam (0: off; hits without heights are left alone).
+    pub outline_shift_per_height: f64,
     /// A refinement moving the start more than this is not taken, metres ...
     pub max_shift_m: f64,
     /// ... nor one moving it back against the rover's travel by more than this, metres.
@@ -60,6 +66,7 @@ impl Default for NdtConfig {
             noise_var_m2: 1e-4,
             tilt_spread_per_m: 0.0,
             tilt_spread_along_beam: false,
+            outline_shift_per_height: 0.0,
             line_ratio: 0.1,
             max_distance_m: 0.25,
             rounds: 2,
@@ -82,6 +89,9 @@ impl Default for NdtConfig {
 #[derive(Clone, Copy, Debug, Default)]
 struct Sums {
     n: u32,
+    /// Hits with a height, and the sum of their heights.
+    n_h: u32,
+    h: f64,
     x: f64,
     y: f64,
     xx: f64,
@@ -93,6 +103,8 @@ struct Sums {
 #[derive(Clone, Copy, Debug)]
 struct Pull {
     mean: Point2,
+    /// The mean height of the cell's hits above the ground under the rover (NaN: unknown).
+    height_m: f64,
     /// Symmetric 2 x 2: [xx, xy, yy].
     information: [f64; 3],
 }
@@ -199,8 +211,15 @@ impl NdtMap {
 
     /// Adds hits (in the map's frame).
     pub fn insert(&mut self, hits: impl IntoIterator<Item = Point2>) {
+        self.insert_with_heights(hits.into_iter().map(|p| (p, f64::NAN)));
+    }
+
+    /// Adds hits (in the map's frame), each with its height above the ground under the
+    /// rover (NaN where unknown).
+    pub fn insert_with_heights(&mut self, hits: impl IntoIterator<Item = (Point2, f64)>) {
         let c = self.cfg.cell_m;
-        let keyed: Vec<(Point2, (i64, i64))> = hits.into_iter().map(|p| (p, self.key(p))).collect();
+        let keyed: Vec<((Point2, f64), (i64, i64))> =
+            hits.into_iter().map(|p| (p, self.key(p.0))).collect();
         let Some(first) = keyed.first().map(|k| k.1) else {
             return;
         };
@@ -212,13 +231,17 @@ impl NdtMap {
         });
         self.cells.cover(lo, hi);
         let mut touched = Vec::with_capacity(keyed.len());
-        for (p, key) in keyed {
+        for ((p, height), key) in keyed {
             let (x, y) = (p.x_m - key.0 as f64 * c, p.y_m - key.1 as f64 * c);
             let Some(i) = self.cells.index(key) else {
                 continue;
             };
             let s = &mut self.cells.cells[i].sums;
             s.n += 1;
+            if height.is_finite() {
+                s.n_h += 1;
+                s.h += height;
+            }
             s.x += x;
             s.y += y;
             s.xx += x * x;
@@ -285,16 +308,38 @@ impl NdtMap {
         prior_translation: f64,
         prior_rotation: f64,
     ) -> Option<Pose2> {
+        self.refine_with_heights(
+            points,
+            &[],
+            start,
+            wheels,
+            prior_translation,
+            prior_rotation,
+        )
+    }
+
+    /// [`refine`](Self::refine) with each point's height above the ground under the rover
+    /// (`heights[i]` for `points[i]`; missing or NaN where unknown), for
+    /// [`NdtConfig::outline_shift_per_height`].
+    pub fn refine_with_heights(
+        &self,
+        points: &[Point2],
+        heights: &[f64],
+        start: Pose2,
+        wheels: [Point2; 2],
+        prior_translation: f64,
+        prior_rotation: f64,
+    ) -> Option<Pose2> {
         const MIN_PAIRED: usize = 20;
         let mut pose = start;
-        let mut pairs: Vec<(Point2, Pull)> = Vec::with_capacity(points.len());
+        let mut pairs: Vec<(Point2, Pull, f64)> = Vec::with_capacity(points.len());
         for _ in 0..self.cfg.rounds {
             pairs.clear();
-            pairs.extend(
-                points
-                    .iter()
-                    .filter_map(|p| self.associate(pose.transform_point(*p)).map(|c| (*p, c))),
-            );
+            pairs.extend(points.iter().enumerate().filter_map(|(i, p)| {
+                let height = heights.get(i).copied().unwrap_or(f64::NAN);
+                self.associate(pose.transform_point(*p))
+                    .map(|c| (*p, c, height))
+            }));
             if pairs.len() < MIN_PAIRED {
                 return None;
             }
@@ -327,7 +372,7 @@ impl NdtMap {
     /// prior towards `start`.
     fn gauss_newton_step(
         &self,
-        pairs: &[(Point2, Pull)],
+        pairs: &[(Point2, Pull, f64)],
         pose: &Pose2,
         start: &Pose2,
         [prior_translation, prior_rotation]: [f64; 2],
@@ -338,7 +383,8 @@ impl NdtMap {
         let (s, c) = pose.yaw_rad.sin_cos();
         let mut h = [[0.0; 3]; 3];
         let mut g = [0.0; 3];
-        for (p, pull) in pairs {
+        let shift2 = self.cfg.outline_shift_per_height * self.cfg.outline_shift_per_height;
+        for (p, pull, height) in pairs {
             let q = pose.transform_point(*p);
             let e = [q.x_m - pull.mean.x_m, q.y_m - pull.mean.y_m];
             let [a, b, d] = pull.information;
@@ -351,6 +397,16 @@ impl NdtMap {
             } else {
                 let spread2 = tilt2 * (p.x_m * p.x_m + p.y_m * p.y_m);
                 1.0 / (1.0 + (a + d) * spread2)
+            };
+            // The outline moved along the beam by as much as the plane's height there did.
+            let dh = height - pull.height_m;
+            let f = if shift2 > 0.0 && dh.is_finite() {
+                let (bx, by) = (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m);
+                let r2 = bx * bx + by * by;
+                let along = (a * bx * bx + 2.0 * b * bx * by + d * by * by) / r2.max(1e-12);
+                f / (1.0 + shift2 * dh * dh * along)
+            } else {
+                f
             };
             let w = f / (1.0 + f * pull.mahalanobis2(q) / CAUCHY2);
             // d q / d theta.
@@ -437,6 +493,11 @@ fn pull_of(cfg: &NdtConfig, key: (i64, i64), s: &Sums) -> Option<Pull> {
     let corner = (key.0 as f64 * cfg.cell_m, key.1 as f64 * cfg.cell_m);
     Some(Pull {
         mean: Point2::new(corner.0 + mx, corner.1 + my),
+        height_m: if s.n_h > 0 {
+            s.h / s.n_h as f64
+        } else {
+            f64::NAN
+        },
         information,
     })
 }
@@ -581,6 +642,41 @@ mod tests {
                 "along the beam {along_beam}: {spread} against {plain}"
             );
         }
+    }
+
+    /// The same rock face 3 cm farther, its hits taken with the plane 0.3 m above the ground
+    /// and seen now 10 cm lower: with a shift of 4 m a metre of height they count as spread
+    /// 40 cm along their beams and barely move the rover; seen at the height they were taken
+    /// at, they pull as before.
+    #[test]
+    fn a_rocks_outline_cut_at_another_height_moves_an_outline_shift_refinement_less() {
+        let cfg = NdtConfig {
+            outline_shift_per_height: 4.0,
+            ..NdtConfig::default()
+        };
+        let mut map = NdtMap::new(cfg);
+        let wall = (0..800).map(|i| Point2::new(i as f64 * 0.01, 1.513));
+        let face = (0..100).map(|i| Point2::new(15.013, -0.5 + i as f64 * 0.01));
+        map.insert_with_heights(wall.chain(face).map(|p| (p, 0.3)));
+        let truth = Pose2::new(4.0, 0.0, 0.0);
+        let (scan, face_now): (Vec<Point2>, Vec<bool>) = (0..100)
+            .map(|i| (Point2::new(2.0 + i as f64 * 0.04, 1.513), false))
+            .chain((0..5).map(|i| (Point2::new(15.043, -0.4 + i as f64 * 0.2), true)))
+            .map(|(p, face)| (truth.inverse().transform_point(p), face))
+            .unzip();
+        let shift = |face_height: f64| {
+            let heights: Vec<f64> = face_now
+                .iter()
+                .map(|face| if *face { face_height } else { 0.3 })
+                .collect();
+            let refined = map
+                .refine_with_heights(&scan, &heights, truth, STILL, 3.0, 3.0)
+                .expect("refined");
+            refined.x_m - truth.x_m
+        };
+        let (same, lower) = (shift(0.3), shift(0.2));
+        assert!(same < -0.025, "dragged back at the same height: {same}");
+        assert!(lower < 0.0 && lower > 0.5 * same, "{lower} against {same}");
     }
 
     #[test]
