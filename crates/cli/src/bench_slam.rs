@@ -28,6 +28,13 @@ struct Variant {
     apply: fn(&mut MappingConfig),
 }
 
+/// Changes the refinement on the hits, if the setup has one.
+fn on_refinement(c: &mut MappingConfig, change: impl FnOnce(&mut realms_slam::ndt::NdtConfig)) {
+    if let Some(n) = &mut c.mapper.ndt_refine {
+        change(n);
+    }
+}
+
 /// The variants `--variant` may name (the setup as it is, `baseline`, always runs).
 const VARIANTS: &[Variant] = &[
     Variant {
@@ -143,20 +150,12 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "line-hits-10",
         what: "the refinement's cells pull as lines only with 10 hits or more (not 4); fewer along a line pull not at all",
-        apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
-                n.min_line_hits = 10;
-            }
-        },
+        apply: |c| on_refinement(c, |n| n.min_line_hits = 10),
     },
     Variant {
         name: "line-hits-20",
         what: "the refinement's cells pull as lines only with 20 hits or more (not 4); fewer along a line pull not at all",
-        apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
-                n.min_line_hits = 20;
-            }
-        },
+        apply: |c| on_refinement(c, |n| n.min_line_hits = 20),
     },
     Variant {
         name: "weak-floor-30",
@@ -181,39 +180,27 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "min-hits-20",
         what: "the refinement's cells pull only with 20 hits or more, not 4 (a cell of a few hits along a wall can look like a line across it)",
-        apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
-                n.min_hits = 20;
-            }
-        },
+        apply: |c| on_refinement(c, |n| n.min_hits = 20),
     },
     Variant {
         name: "tilt-spread-10mm",
         what: "the refinement counts each hit as spread 1 cm in every direction per metre of range (a rock's outline moves as the lidar's plane tilts)",
-        apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
-                n.tilt_spread_per_m = 0.010;
-            }
-        },
+        apply: |c| on_refinement(c, |n| n.tilt_spread_per_m = 0.010),
     },
     Variant {
         name: "tilt-beam-10mm",
         what: "the refinement counts each hit as spread 1 cm along its beam (only) per metre of range (a rock's outline moves along the line of sight as the lidar's plane tilts)",
         apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
+            on_refinement(c, |n| {
                 n.tilt_spread_per_m = 0.010;
                 n.tilt_spread_along_beam = true;
-            }
+            })
         },
     },
     Variant {
         name: "outline-shift-4",
         what: "the refinement counts each hit as spread along its beam by 4 m per metre its levelled height differs from its cell's hits' (a rock cut higher by the tilting lidar is cut narrower)",
-        apply: |c| {
-            if let Some(n) = &mut c.mapper.ndt_refine {
-                n.outline_shift_per_height = 4.0;
-            }
-        },
+        apply: |c| on_refinement(c, |n| n.outline_shift_per_height = 4.0),
     },
     Variant {
         name: "relief",

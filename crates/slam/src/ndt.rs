@@ -111,9 +111,41 @@ struct Pull {
 
 impl Pull {
     fn mahalanobis2(&self, q: Point2) -> f64 {
-        let (dx, dy) = (q.x_m - self.mean.x_m, q.y_m - self.mean.y_m);
+        self.information_along(q.x_m - self.mean.x_m, q.y_m - self.mean.y_m)
+    }
+
+    /// `v' Omega v`: the cell's information along `v`, times its squared length.
+    fn information_along(&self, vx: f64, vy: f64) -> f64 {
         let [a, b, c] = self.information;
-        a * dx * dx + 2.0 * b * dx * dy + c * dy * dy
+        a * vx * vx + 2.0 * b * vx * vy + c * vy * vy
+    }
+
+    /// The share of its information a hit keeps once its own spread from the tilting plane
+    /// is added to the cell's (exact for a line, whose information lies across it only; the
+    /// trace's bound for a blob): `p` the hit in the scan's frame, `beam` the same vector in
+    /// the map's frame, `height` the hit's height (NaN: unknown). 1 with both spreads off.
+    fn share_kept(&self, cfg: &NdtConfig, p: Point2, beam: (f64, f64), height: f64) -> f64 {
+        let tilt2 = cfg.tilt_spread_per_m * cfg.tilt_spread_per_m;
+        let shift2 = cfg.outline_shift_per_height * cfg.outline_shift_per_height;
+        if tilt2 == 0.0 && shift2 == 0.0 {
+            return 1.0;
+        }
+        let [a, _, d] = self.information;
+        // k^2 r^2 u' Omega u, with the beam as long as the range.
+        let on_beam = self.information_along(beam.0, beam.1);
+        let tilt = if cfg.tilt_spread_along_beam {
+            1.0 / (1.0 + tilt2 * on_beam)
+        } else {
+            1.0 / (1.0 + (a + d) * (tilt2 * (p.x_m * p.x_m + p.y_m * p.y_m)))
+        };
+        // The outline moved along the beam by as much as the plane's height there did.
+        let dh = height - self.height_m;
+        if shift2 > 0.0 && dh.is_finite() {
+            let r2 = beam.0 * beam.0 + beam.1 * beam.1;
+            tilt / (1.0 + shift2 * dh * dh * (on_beam / r2.max(1e-12)))
+        } else {
+            tilt
+        }
     }
 }
 
@@ -379,38 +411,18 @@ impl NdtMap {
     ) -> Option<[f64; 3]> {
         // Cauchy's scale, in squared Mahalanobis units: three noise deviations.
         const CAUCHY2: f64 = 9.0;
-        let tilt2 = self.cfg.tilt_spread_per_m * self.cfg.tilt_spread_per_m;
         let (s, c) = pose.yaw_rad.sin_cos();
         let mut h = [[0.0; 3]; 3];
         let mut g = [0.0; 3];
-        let shift2 = self.cfg.outline_shift_per_height * self.cfg.outline_shift_per_height;
         for (p, pull, height) in pairs {
             let q = pose.transform_point(*p);
             let e = [q.x_m - pull.mean.x_m, q.y_m - pull.mean.y_m];
             let [a, b, d] = pull.information;
-            // The hit's own spread from the tilting plane, added to the cell's: exact for a
-            // line (information across it only), the trace's bound for a blob.
-            let f = if self.cfg.tilt_spread_along_beam {
-                // The beam in the map's frame, as long as the range: k^2 r^2 u' Omega u.
-                let (bx, by) = (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m);
-                1.0 / (1.0 + tilt2 * (a * bx * bx + 2.0 * b * bx * by + d * by * by))
-            } else {
-                let spread2 = tilt2 * (p.x_m * p.x_m + p.y_m * p.y_m);
-                1.0 / (1.0 + (a + d) * spread2)
-            };
-            // The outline moved along the beam by as much as the plane's height there did.
-            let dh = height - pull.height_m;
-            let f = if shift2 > 0.0 && dh.is_finite() {
-                let (bx, by) = (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m);
-                let r2 = bx * bx + by * by;
-                let along = (a * bx * bx + 2.0 * b * bx * by + d * by * by) / r2.max(1e-12);
-                f / (1.0 + shift2 * dh * dh * along)
-            } else {
-                f
-            };
+            let beam = (c * p.x_m - s * p.y_m, s * p.x_m + c * p.y_m);
+            let f = pull.share_kept(&self.cfg, *p, beam, *height);
             let w = f / (1.0 + f * pull.mahalanobis2(q) / CAUCHY2);
-            // d q / d theta.
-            let (tx, ty) = (-s * p.x_m - c * p.y_m, c * p.x_m - s * p.y_m);
+            // d q / d theta: the beam turned a quarter.
+            let (tx, ty) = (-beam.1, beam.0);
             // Columns of J (2 x 3): x, y, theta; Omega J column by column.
             let j = [[1.0, 0.0], [0.0, 1.0], [tx, ty]];
             let oj: [[f64; 2]; 3] = j.map(|col| [a * col[0] + b * col[1], b * col[0] + d * col[1]]);

@@ -9,6 +9,8 @@
 //! - A pyramid of maximum heights (a "maximum mipmap", after Tevs, Ihrke & Seidel, "Maximum
 //!   Mipmaps for Fast, Accurate, and Scalable Dynamic Height Field Rendering", I3D 2008) for
 //!   the last stretch before a hit, where it skips any block the ray passes entirely above.
+//!   Where the clearance field hands over, a few cells are walked one by one first: most
+//!   rays stopped by a wall or rock hit within them (`cast_near`).
 //! - For images, fans (`fan.rs`): the rays of an image column lie in one plane, so one pass
 //!   along the band of ground they can touch tells each where to walk exactly.
 

@@ -1,7 +1,7 @@
-//! The two walks of a cast, written as state machines that advance one step per call: the
-//! clearance walk through open space (every cast takes it) and the short near walk from a
-//! start known to be clear (image pixels take it from where their fan's profile stops them,
-//! see `fan.rs`).
+//! The two walks of a cast: the clearance walk through open space, one step per call (every
+//! cast takes it), and the short near walk from a start known to be clear, run cell by cell
+//! until it settles (image pixels take it from where their fan's profile stops them, see
+//! `fan.rs`; every cast takes it where the clearance field hands over).
 //!
 //! Each clearance step is a short chain of dependent arithmetic and one load, so the lidar's
 //! beams are walked eight side by side ([`HeightPyramid::cast_side_by_side`]): the core
