@@ -48,6 +48,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.densify = None,
     },
     Variant {
+        name: "fill-untraced",
+        what: "free space traced into the submaps along the beams only; the points filled in between them marked hit without a beam of their own",
+        apply: |c| c.mapper.frontend.trace_filled = false,
+    },
+    Variant {
         name: "closures-every-4",
         what: "closures searched at every fourth keyframe, not every second",
         apply: |c| c.mapper.loop_every_keyframes = 4,

@@ -456,26 +456,33 @@ impl Assembly {
             .map(|s| &mut s.cells)
             .collect();
         // One walk along each beam for every shadow it goes into.
-        trace_beams(&lattice, sensor, endpoints, self.miss_rule, |i, delta| {
-            let mut change = 0.0;
-            for shadow in targets.iter_mut() {
-                let before = shadow[i];
-                let after = updated_log_odds(before, delta);
-                shadow[i] = after;
-                change += after - before;
-            }
-            if change != 0.0 {
-                shadow_sum[i] += change;
-                restate(
-                    [finished, shadow_sum],
-                    states,
-                    tile_version,
-                    shape,
-                    *version,
-                    i,
-                );
-            }
-        });
+        trace_beams(
+            &lattice,
+            sensor,
+            endpoints,
+            None,
+            self.miss_rule,
+            |i, delta| {
+                let mut change = 0.0;
+                for shadow in targets.iter_mut() {
+                    let before = shadow[i];
+                    let after = updated_log_odds(before, delta);
+                    shadow[i] = after;
+                    change += after - before;
+                }
+                if change != 0.0 {
+                    shadow_sum[i] += change;
+                    restate(
+                        [finished, shadow_sum],
+                        states,
+                        tile_version,
+                        shape,
+                        *version,
+                        i,
+                    );
+                }
+            },
+        );
     }
 
     /// The live map: the finished submaps' sum with the `active` submaps (index, grid, pose)

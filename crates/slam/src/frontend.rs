@@ -27,6 +27,10 @@ pub struct FrontendConfig {
     /// Fill the gaps between neighbouring beams' endpoints before matching and mapping
     /// (`None`: use the endpoints as they are). See [`densify`].
     pub densify: Option<Densify>,
+    /// Whether a keyframe's free space is traced to the points [`densify`] fills in as well
+    /// as to its beams' own endpoints (`false`: the filled-in points are marked hit, and
+    /// free space is traced along the beams only, a fraction of the walks).
+    pub trace_filled: bool,
     /// How each scan clears the cells its beams cross.
     pub miss_rule: MissRule,
     /// Matcher tuning.
@@ -43,6 +47,7 @@ impl Default for FrontendConfig {
             insert_translation_m: 0.05,
             insert_rotation_rad: 2f64.to_radians(),
             densify: None,
+            trace_filled: true,
             miss_rule: MissRule::EveryBeam,
             matcher: MatcherConfig::default(),
         }

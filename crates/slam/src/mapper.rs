@@ -626,8 +626,17 @@ impl Mapper {
             .iter()
             .map(|p| (local.transform_point(*p), true))
             .collect();
+        // Filled-in points are hits only: free space along the beams themselves.
+        let rays: Option<Vec<Point2>> =
+            (!self.cfg.frontend.trace_filled && self.cfg.frontend.densify.is_some()).then(|| {
+                self.keyframe_points[node]
+                    .iter()
+                    .map(|p| local.transform_point(*p))
+                    .collect()
+            });
         let s = &mut self.submaps[submap];
-        s.map.insert(local.position(), &world);
+        s.map
+            .insert_with_rays(local.position(), &world, rays.as_deref());
         s.keyframes += 1;
         if let Some(hits) = &mut s.hits {
             let heights = &self.point_heights;

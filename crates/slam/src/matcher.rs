@@ -35,8 +35,19 @@ impl MultiResMap {
 
     /// Inserts a scan into every level.
     pub fn insert(&mut self, sensor: Point2, endpoints: &[(Point2, bool)]) {
+        self.insert_with_rays(sensor, endpoints, None);
+    }
+
+    /// Inserts a scan into every level, tracing free space only to `rays` when given (see
+    /// [`crate::occupancy::OccupancyGrid::insert_with_rays`]).
+    pub fn insert_with_rays(
+        &mut self,
+        sensor: Point2,
+        endpoints: &[(Point2, bool)],
+        rays: Option<&[Point2]>,
+    ) {
         for l in &mut self.levels {
-            l.insert(sensor, endpoints);
+            l.insert_with_rays(sensor, endpoints, rays);
         }
     }
 

@@ -191,6 +191,18 @@ impl OccupancyGrid {
     /// Inserts one scan: beams from `sensor` to each endpoint (world frame); endpoints marked
     /// `hit` are occupied, the others (max-range readings, clipped) only clear free space.
     pub fn insert(&mut self, sensor: Point2, endpoints: &[(Point2, bool)]) {
+        self.insert_with_rays(sensor, endpoints, None);
+    }
+
+    /// [`insert`](Self::insert), tracing free space only to `rays` (each the end of one of
+    /// the endpoints' beams) when given: the other endpoints are surface filled in between
+    /// beams ([`crate::frontend::densify`]), marked hit without a beam of their own.
+    pub fn insert_with_rays(
+        &mut self,
+        sensor: Point2,
+        endpoints: &[(Point2, bool)],
+        rays: Option<&[Point2]>,
+    ) {
         if endpoints.is_empty() {
             return;
         }
@@ -202,9 +214,14 @@ impl OccupancyGrid {
             resolution_m: self.resolution_m,
             width: self.width,
         };
-        trace_beams(&lattice, sensor, endpoints, self.miss_rule, |i, delta| {
-            self.update(i, delta)
-        });
+        trace_beams(
+            &lattice,
+            sensor,
+            endpoints,
+            rays,
+            self.miss_rule,
+            |i, delta| self.update(i, delta),
+        );
     }
 
     /// The log-odds of the cell holding `p`; 0 (no evidence) outside the grid.
@@ -358,11 +375,13 @@ pub(crate) struct Lattice {
 /// Traces beams from `sensor` to each endpoint over the cells of `lattice` (which must hold
 /// them all), calling `update(cell index, log-odds evidence)`: a hit for each endpoint
 /// marked `hit`, and misses for the cells the beams cross (and the ends of clipped
-/// max-range readings) as `rule` says.
+/// max-range readings) as `rule` says. With `rays`, beams run to those points only (which
+/// must lie in the endpoints' box), and every endpoint is only a hit or a miss at its cell.
 pub(crate) fn trace_beams(
     lattice: &Lattice,
     sensor: Point2,
     endpoints: &[(Point2, bool)],
+    rays: Option<&[Point2]>,
     rule: MissRule,
     mut update: impl FnMut(usize, f32),
 ) {
@@ -378,9 +397,18 @@ pub(crate) fn trace_beams(
     let w = lattice.width as i64;
     match rule {
         MissRule::EveryBeam => {
+            if let Some(rays) = rays {
+                for p in rays {
+                    walk(start, to_cell(*p), |x, y| {
+                        update((y * w + x) as usize, MISS)
+                    });
+                }
+            }
             for (p, hit) in endpoints {
                 let end = to_cell(*p);
-                walk(start, end, |x, y| update((y * w + x) as usize, MISS));
+                if rays.is_none() {
+                    walk(start, end, |x, y| update((y * w + x) as usize, MISS));
+                }
                 update((end.1 * w + end.0) as usize, if *hit { HIT } else { MISS });
             }
         }
@@ -409,9 +437,21 @@ pub(crate) fn trace_beams(
                     update((y * w + x) as usize, MISS);
                 }
             };
-            for &end in &ends {
-                walk(start, end, &mut miss);
-                miss(end.0, end.1);
+            match rays {
+                None => {
+                    for &end in &ends {
+                        walk(start, end, &mut miss);
+                        miss(end.0, end.1);
+                    }
+                }
+                Some(rays) => {
+                    for &end in &ends {
+                        miss(end.0, end.1);
+                    }
+                    for p in rays {
+                        walk(start, to_cell(*p), &mut miss);
+                    }
+                }
             }
         }
     }
@@ -548,5 +588,27 @@ mod tests {
         let at = |x: f64| g.log_odds_at(Point2::new(x, 0.05));
         assert_eq!(at(0.55), 3.0 * MISS);
         assert_eq!(at(1.05), HIT + 2.0 * MISS);
+    }
+
+    #[test]
+    fn points_filled_in_between_beams_are_hits_without_beams_of_their_own() {
+        let sensor = Point2::new(0.05, 0.05);
+        // Two beams along the axes and a filled-in point on the diagonal between their ends.
+        let ends = [Point2::new(2.05, 0.05), Point2::new(0.05, 2.05)];
+        let filled = (Point2::new(1.05, 1.05), true);
+        let endpoints = [(ends[0], true), filled, (ends[1], true)];
+        for rule in [MissRule::OncePerScan, MissRule::EveryBeam] {
+            let mut g = OccupancyGrid::new(0.1).with_miss_rule(rule);
+            g.insert_with_rays(sensor, &endpoints, Some(&ends));
+            let at = |x: f64, y: f64| g.log_odds_at(Point2::new(x, y));
+            assert_eq!(at(1.05, 1.05), HIT, "{rule:?}: the filled-in point is a hit");
+            assert_eq!(at(0.55, 0.55), 0.0, "{rule:?}: no beam runs to it");
+            assert_eq!(at(1.05, 0.05), MISS, "{rule:?}: the beams clear their own cells");
+            assert_eq!(at(2.05, 0.05), HIT);
+            // Traced to every endpoint, the diagonal is cleared too.
+            let mut g = OccupancyGrid::new(0.1).with_miss_rule(rule);
+            g.insert(sensor, &endpoints);
+            assert_eq!(g.log_odds_at(Point2::new(0.55, 0.55)), MISS, "{rule:?}");
+        }
     }
 }

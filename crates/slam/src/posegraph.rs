@@ -126,13 +126,26 @@ impl PoseGraph {
         if a >= n || b >= n {
             return None;
         }
-        let mut adjacent: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-        for e in &self.edges {
+        // The adjacency in two flat arrays (node `k`'s neighbours are
+        // `neighbours[start[k]..start[k + 1]]`, in the order of the edges): a list per node
+        // cost more in allocations than the search itself.
+        let within = |e: &&Edge| e.from < n && e.to < n;
+        let mut start = vec![0usize; n + 1];
+        for e in self.edges.iter().filter(within) {
+            start[e.from + 1] += 1;
+            start[e.to + 1] += 1;
+        }
+        for k in 0..n {
+            start[k + 1] += start[k];
+        }
+        let mut neighbours = vec![(0usize, 0f64); start[n]];
+        let mut filled = start.clone();
+        for e in self.edges.iter().filter(within) {
             let length_m = edge_length_m(e);
-            if e.from < n && e.to < n {
-                adjacent[e.from].push((e.to, length_m));
-                adjacent[e.to].push((e.from, length_m));
-            }
+            neighbours[filled[e.from]] = (e.to, length_m);
+            filled[e.from] += 1;
+            neighbours[filled[e.to]] = (e.from, length_m);
+            filled[e.to] += 1;
         }
         let mut best = vec![f64::INFINITY; n];
         let mut frontier = BinaryHeap::new();
@@ -147,7 +160,7 @@ impl PoseGraph {
             if node == b {
                 return Some(d);
             }
-            for &(next, length_m) in &adjacent[node] {
+            for &(next, length_m) in &neighbours[start[node]..start[node + 1]] {
                 let via = d + length_m;
                 if via <= limit_m && via < best[next] {
                     best[next] = via;
@@ -272,12 +285,14 @@ impl PoseGraph {
             let cap = (4 * n + 100).min(500);
             let chain_solve = || {
                 let chain = ChainFactor::new(&diag, &off);
-                conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| chain.solve(r))
+                conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r, z| chain.solve_into(r, z))
             };
             let step = match self.solver {
                 GraphSolver::BlockJacobi => {
                     let pre: Vec<Block> = diag.iter().map(invert).collect();
-                    conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r| block_jacobi(&pre, r))
+                    conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r, z| {
+                        block_jacobi(&pre, r, z)
+                    })
                 }
                 GraphSolver::Chain => chain_solve(),
                 GraphSolver::Elimination => {
@@ -296,26 +311,29 @@ impl PoseGraph {
     }
 }
 
-/// y = H x for the block-sparse symmetric H.
-fn multiply(diag: &[Block], off: &[(usize, usize, Block)], x: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    let mut y: Vec<[f64; 3]> = diag
-        .iter()
-        .zip(x)
-        .map(|(d, v)| {
-            let mut o = [0.0; 3];
-            for (r, out) in o.iter_mut().enumerate() {
-                *out = (0..3).map(|c| d[r][c] * v[c]).sum();
-            }
-            o
-        })
-        .collect();
-    for (i, j, h) in off {
-        for r in 0..3 {
-            y[*i][r] += (0..3).map(|c| h[r][c] * x[*j][c]).sum::<f64>();
-            y[*j][r] += (0..3).map(|c| h[c][r] * x[*i][c]).sum::<f64>();
+/// `y = H x` for the block-sparse symmetric H, into `y` (as long as `x`).
+fn multiply_into(
+    diag: &[Block],
+    off: &[(usize, usize, Block)],
+    x: &[[f64; 3]],
+    y: &mut [[f64; 3]],
+) {
+    for ((o, d), v) in y.iter_mut().zip(diag).zip(x) {
+        for (r, out) in o.iter_mut().enumerate() {
+            *out = (0..3).map(|c| d[r][c] * v[c]).sum();
         }
     }
-    y
+    // `off` never holds a node's edge to itself, so each edge's two rows are apart.
+    for (i, j, h) in off {
+        let (xi, xj) = (x[*i], x[*j]);
+        let (mut yi, mut yj) = (y[*i], y[*j]);
+        for r in 0..3 {
+            yi[r] += (0..3).map(|c| h[r][c] * xj[c]).sum::<f64>();
+            yj[r] += (0..3).map(|c| h[c][r] * xi[c]).sum::<f64>();
+        }
+        y[*i] = yi;
+        y[*j] = yj;
+    }
 }
 
 fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
@@ -393,9 +411,12 @@ pub(crate) fn transpose(m: &Block) -> Block {
     o
 }
 
-/// The block-Jacobi preconditioner applied: each block's inverse `pre[i]` times `r[i]`.
-fn block_jacobi(pre: &[Block], r: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    pre.iter().zip(r).map(|(p, v)| block_times(p, v)).collect()
+/// The block-Jacobi preconditioner applied: each block's inverse `pre[i]` times `r[i]`,
+/// into `z`.
+fn block_jacobi(pre: &[Block], r: &[[f64; 3]], z: &mut [[f64; 3]]) {
+    for ((z, p), v) in z.iter_mut().zip(pre).zip(r) {
+        *z = block_times(p, v);
+    }
 }
 
 /// The block-tridiagonal part of the normal equations, factored: every diagonal block, and
@@ -441,6 +462,11 @@ impl ChainFactor {
         ChainFactor { d_inv, upper }
     }
 
+    /// Solves the tridiagonal system for `r`, into `out`.
+    fn solve_into(&self, r: &[[f64; 3]], out: &mut [[f64; 3]]) {
+        out.copy_from_slice(&self.solve(r));
+    }
+
     /// Solves the tridiagonal system for `r`.
     fn solve(&self, r: &[[f64; 3]]) -> Vec<[f64; 3]> {
         let n = r.len();
@@ -469,40 +495,47 @@ impl ChainFactor {
     }
 }
 
-/// Preconditioned conjugate gradients for H x = b, `apply_pre` applying the preconditioner's
-/// inverse.
+/// Preconditioned conjugate gradients for H x = b, `apply_pre(r, z)` writing the
+/// preconditioner's inverse applied to `r` into `z`. The iterations' vectors are kept and
+/// written in place: a graph of a few thousand poses runs hundreds of them per solve.
 fn conjugate_gradient(
     diag: &[Block],
     off: &[(usize, usize, Block)],
     b: &[[f64; 3]],
     tol: f64,
     max_iter: usize,
-    apply_pre: impl Fn(&[[f64; 3]]) -> Vec<[f64; 3]>,
+    apply_pre: impl Fn(&[[f64; 3]], &mut [[f64; 3]]),
 ) -> Vec<[f64; 3]> {
     let n = b.len();
     let mut x = vec![[0.0; 3]; n];
     let mut r = b.to_vec();
-    let mut z = apply_pre(&r);
+    let mut z = vec![[0.0; 3]; n];
+    apply_pre(&r, &mut z);
     let mut p = z.clone();
+    let mut hp = vec![[0.0; 3]; n];
     let mut rz = dot(&r, &z);
     let b_norm = dot(b, b).sqrt().max(1e-300);
+    let mut rr = dot(&r, &r);
     for _ in 0..max_iter {
-        if dot(&r, &r).sqrt() <= tol * b_norm {
+        if rr.sqrt() <= tol * b_norm {
             break;
         }
-        let hp = multiply(diag, off, &p);
+        multiply_into(diag, off, &p, &mut hp);
         let php = dot(&p, &hp);
         if php <= 0.0 {
             break;
         }
         let alpha = rz / php;
+        // The next residual's squared norm summed as it is made, in `dot`'s order.
+        rr = 0.0;
         for i in 0..n {
             for c in 0..3 {
                 x[i][c] += alpha * p[i][c];
                 r[i][c] -= alpha * hp[i][c];
             }
+            rr += r[i][0] * r[i][0] + r[i][1] * r[i][1] + r[i][2] * r[i][2];
         }
-        z = apply_pre(&r);
+        apply_pre(&r, &mut z);
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
