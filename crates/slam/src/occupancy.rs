@@ -601,9 +601,17 @@ mod tests {
             let mut g = OccupancyGrid::new(0.1).with_miss_rule(rule);
             g.insert_with_rays(sensor, &endpoints, Some(&ends));
             let at = |x: f64, y: f64| g.log_odds_at(Point2::new(x, y));
-            assert_eq!(at(1.05, 1.05), HIT, "{rule:?}: the filled-in point is a hit");
+            assert_eq!(
+                at(1.05, 1.05),
+                HIT,
+                "{rule:?}: the filled-in point is a hit"
+            );
             assert_eq!(at(0.55, 0.55), 0.0, "{rule:?}: no beam runs to it");
-            assert_eq!(at(1.05, 0.05), MISS, "{rule:?}: the beams clear their own cells");
+            assert_eq!(
+                at(1.05, 0.05),
+                MISS,
+                "{rule:?}: the beams clear their own cells"
+            );
             assert_eq!(at(2.05, 0.05), HIT);
             // Traced to every endpoint, the diagonal is cleared too.
             let mut g = OccupancyGrid::new(0.1).with_miss_rule(rule);

@@ -1,0 +1,255 @@
+//! Criterion benchmarks of the SLAM's per-scan and per-keyframe steps, on a real scan (the
+//! Intel Research Lab log in `../shared/data/slam`, skipped with a note when it is not
+//! there) and on a simulated rover's scan of a sparse lunar hall:
+//!
+//! - `match_scan`: the occupancy scan-to-map match (Gauss-Newton), from a prior 5 cm and a
+//!   degree off;
+//! - `refine_on_hits`: the rovers' refinement of that match on the submap's hits;
+//! - `map_update`: one keyframe traced into a map (free space along the beams, hits at
+//!   their ends), as a submap takes it;
+//! - `closure_search`: the branch-and-bound search a loop closure starts with (2.5 m and
+//!   3 degrees around the prior, as the rovers search).
+//!
+//! `cargo bench -p realms-slam --bench slam`. Figures in BENCHMARKS.md.
+
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use realms_core::{Point2, Pose2};
+use realms_slam::bnb::{PrecomputedMap, SearchWindow};
+use realms_slam::carmen::CarmenLog;
+use realms_slam::frontend::{Densify, densify, scan_points};
+use realms_slam::mapper::{Mapper, MapperConfig};
+use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
+use realms_slam::ndt::{NdtConfig, NdtMap};
+use realms_slam::occupancy::MissRule;
+use std::hint::black_box;
+
+/// A scene to match in: a map of a few scans, the scan to match, where it truly is, and the
+/// hits the map's scans left (for the refinement).
+struct Scene {
+    name: &'static str,
+    map: MultiResMap,
+    hits: NdtMap,
+    /// The scan's points, robot frame, as matched (filled in between beams for the rover).
+    points: Vec<Point2>,
+    /// The beams' own endpoints, robot frame.
+    beams: Vec<Point2>,
+    pose: Pose2,
+    matcher: MatcherConfig,
+}
+
+/// The prior a match starts from: 5 cm and a degree off the scan's pose.
+fn off_prior(pose: Pose2) -> Pose2 {
+    Pose2::new(
+        pose.x_m + 0.05,
+        pose.y_m - 0.04,
+        pose.yaw_rad + 1f64.to_radians(),
+    )
+}
+
+fn draw(map: &mut MultiResMap, hits: &mut NdtMap, pose: Pose2, points: &[Point2]) {
+    let world: Vec<(Point2, bool)> = points
+        .iter()
+        .map(|p| (pose.transform_point(*p), true))
+        .collect();
+    map.insert(pose.position(), &world);
+    hits.insert(world.iter().map(|(p, _)| *p));
+}
+
+/// The Intel log's scans 300-320 drawn at the poses our SLAM gives them, and scan 321.
+fn intel_scene() -> Option<Scene> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/slam/intel.clf");
+    let log = match CarmenLog::read_file(&path) {
+        Ok(log) => log,
+        Err(e) => {
+            eprintln!("note: the Intel log is not there ({e}); its benchmarks are skipped");
+            return None;
+        }
+    };
+    let last = 321.min(log.scans.len().checked_sub(1)?);
+    let mut mapper = Mapper::new(MapperConfig::default());
+    for scan in &log.scans[..=last] {
+        mapper.add_scan(scan);
+    }
+    let poses = mapper.trajectory();
+    let cfg = MapperConfig::default().frontend;
+    let points = |k: usize| scan_points(&log.scans[k], cfg.min_range_m, cfg.max_range_m);
+    let mut map = MultiResMap::new(cfg.resolution_m, cfg.levels);
+    let mut hits = NdtMap::new(NdtConfig::default());
+    for k in last.saturating_sub(21)..last {
+        draw(&mut map, &mut hits, poses[k].pose, &points(k));
+    }
+    let beams = points(last);
+    Some(Scene {
+        name: "intel",
+        map,
+        hits,
+        points: beams.clone(),
+        beams,
+        pose: poses[last].pose,
+        matcher: cfg.matcher,
+    })
+}
+
+/// Where a ray from `from` along `heading` first meets the hall: its walls, a lander and
+/// a few boulders (a sparse scene, like the rovers' arena); `None` past the lidar's 12 m.
+fn hall_range(from: Point2, heading: f64) -> Option<f64> {
+    let walls = [
+        (0.0, 0.0, 40.0, 0.0),
+        (40.0, 0.0, 40.0, 24.0),
+        (40.0, 24.0, 0.0, 24.0),
+        (0.0, 24.0, 0.0, 0.0),
+        // The lander, a 3 m square.
+        (18.0, 10.0, 21.0, 10.0),
+        (21.0, 10.0, 21.0, 13.0),
+        (21.0, 13.0, 18.0, 13.0),
+        (18.0, 13.0, 18.0, 10.0),
+    ];
+    let boulders = [
+        (12.0, 6.0, 0.4),
+        (9.0, 15.0, 0.6),
+        (26.0, 7.0, 0.3),
+        (28.0, 17.0, 0.5),
+        (15.0, 19.0, 0.35),
+    ];
+    let (dy, dx) = heading.sin_cos();
+    let walls = walls.iter().filter_map(|&(x1, y1, x2, y2)| {
+        let (ex, ey) = (x2 - x1, y2 - y1);
+        let den = dx * ey - dy * ex;
+        if den.abs() < 1e-12 {
+            return None;
+        }
+        let t = ((x1 - from.x_m) * ey - (y1 - from.y_m) * ex) / den;
+        let u = ((x1 - from.x_m) * dy - (y1 - from.y_m) * dx) / den;
+        (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+    });
+    let boulders = boulders.iter().filter_map(|&(cx, cy, r)| {
+        let (ox, oy) = (from.x_m - cx, from.y_m - cy);
+        let b = ox * dx + oy * dy;
+        let disc = b * b - (ox * ox + oy * oy - r * r);
+        let t = -b - disc.max(0.0).sqrt();
+        (disc >= 0.0 && t > 0.0).then_some(t)
+    });
+    let range = walls.chain(boulders).fold(f64::INFINITY, f64::min);
+    (range < 12.0).then_some(range)
+}
+
+/// A rover's lidar scan (360 beams a degree apart, to 12 m) from `pose`, robot frame.
+fn hall_scan(pose: Pose2) -> Vec<Point2> {
+    (0..360)
+        .filter_map(|i| {
+            let local = (i as f64).to_radians();
+            hall_range(pose.position(), pose.yaw_rad + local)
+                .map(|r| Point2::new(r * local.cos(), r * local.sin()))
+        })
+        .collect()
+}
+
+/// A rover's submap of ten keyframes 0.3 m apart along the hall, set up as the rovers'
+/// (one 5 cm grid, a cell cleared once a scan, scans filled in between beams), and the
+/// scan from the middle of its path.
+fn hall_scene() -> Scene {
+    let fill = Densify {
+        max_gap_m: 0.3,
+        spacing_m: 0.05,
+    };
+    let mut map = MultiResMap::new(0.05, 1).with_miss_rule(MissRule::OncePerScan);
+    let mut hits = NdtMap::new(NdtConfig::default());
+    let at = |k: usize| Pose2::new(6.0 + 0.3 * k as f64, 5.0 + 0.1 * k as f64, 0.2);
+    for k in 0..10 {
+        let pose = at(k);
+        draw(&mut map, &mut hits, pose, &densify(&hall_scan(pose), fill));
+    }
+    let pose = Pose2::new(7.45, 5.52, 0.21);
+    let beams = hall_scan(pose);
+    Scene {
+        name: "sim_hall",
+        map,
+        hits,
+        points: densify(&beams, fill),
+        beams,
+        pose,
+        matcher: MatcherConfig::default(),
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    let scenes: Vec<Scene> = intel_scene().into_iter().chain([hall_scene()]).collect();
+    for s in &scenes {
+        let prior = off_prior(s.pose);
+        c.bench_function(&format!("match_scan/{}", s.name), |b| {
+            b.iter(|| match_scan(black_box(&s.map), black_box(&s.points), prior, &s.matcher))
+        });
+        let matched = match_scan(&s.map, &s.points, prior, &s.matcher).pose;
+        // What is timed must be a working match, not a diverging one.
+        let off = |p: Pose2| {
+            let d = s.pose.inverse() * p;
+            format!(
+                "{:.1} cm, {:.2} deg",
+                100.0 * d.x_m.hypot(d.y_m),
+                d.yaw_rad.to_degrees()
+            )
+        };
+        eprintln!(
+            "{}: the match lands {} from the scan's pose",
+            s.name,
+            off(matched)
+        );
+        let wheels = [prior.position(), prior.position()];
+        c.bench_function(&format!("refine_on_hits/{}", s.name), |b| {
+            b.iter(|| {
+                s.hits.refine(
+                    black_box(&s.beams),
+                    matched,
+                    wheels,
+                    s.matcher.prior_translation_weight,
+                    s.matcher.prior_rotation_weight,
+                )
+            })
+        });
+        let world: Vec<(Point2, bool)> = s
+            .points
+            .iter()
+            .map(|p| (s.pose.transform_point(*p), true))
+            .collect();
+        c.bench_function(&format!("map_update/{}", s.name), |b| {
+            b.iter_batched_ref(
+                || s.map.clone(),
+                |map| map.insert(s.pose.position(), black_box(&world)),
+                BatchSize::LargeInput,
+            )
+        });
+        let precomputed = PrecomputedMap::new(s.map.finest(), 4);
+        let window = SearchWindow {
+            linear_m: 2.5,
+            angular_rad: 3f64.to_radians(),
+            step_range_m: 12.0,
+        };
+        let far_prior = Pose2::new(s.pose.x_m + 1.2, s.pose.y_m - 0.9, s.pose.yaw_rad + 0.03);
+        let found = realms_slam::bnb::search(&precomputed, &s.beams, far_prior, &window, 0.5, 0.08);
+        eprintln!(
+            "{}: the closure search lands {}",
+            s.name,
+            found.map_or("nowhere".to_string(), |f| off(f.pose))
+        );
+        c.bench_function(&format!("closure_search/{}", s.name), |b| {
+            b.iter(|| {
+                realms_slam::bnb::search(
+                    &precomputed,
+                    black_box(&s.beams),
+                    far_prior,
+                    &window,
+                    0.5,
+                    0.08,
+                )
+            })
+        });
+    }
+}
+
+criterion_group! {
+    name = slam;
+    config = Criterion::default().sample_size(30);
+    targets = benches
+}
+criterion_main!(slam);
