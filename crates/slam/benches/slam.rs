@@ -76,8 +76,9 @@ fn intel_scene() -> Option<Scene> {
     let points = |k: usize| scan_points(&log.scans[k], cfg.min_range_m, cfg.max_range_m);
     let mut map = MultiResMap::new(cfg.resolution_m, cfg.levels);
     let mut hits = NdtMap::new(NdtConfig::default());
-    for k in last.saturating_sub(21)..last {
-        draw(&mut map, &mut hits, poses[k].pose, &points(k));
+    let first = last.saturating_sub(21);
+    for (k, at) in poses.iter().enumerate().take(last).skip(first) {
+        draw(&mut map, &mut hits, at.pose, &points(k));
     }
     let beams = points(last);
     Some(Scene {
