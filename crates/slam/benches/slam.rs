@@ -220,7 +220,8 @@ fn benches(c: &mut Criterion) {
                 BatchSize::LargeInput,
             )
         });
-        let precomputed = PrecomputedMap::new(s.map.finest(), 4);
+        // As the rovers search: blocks up to 64 cells, and a margin as wide as the window.
+        let precomputed = PrecomputedMap::with_margin(s.map.finest(), 6, 50);
         let window = SearchWindow {
             linear_m: 2.5,
             angular_rad: 3f64.to_radians(),

@@ -1021,10 +1021,13 @@ impl Mapper {
         window: &SearchWindow,
     ) -> Option<crate::matcher::Match> {
         let origin = self.graph.nodes[self.submaps[s].origin_node];
+        // Unknown cells around the submap as far as a closure's window reaches: a scan that
+        // reaches no farther past the submap than the window is scored without bounds checks.
+        let margin = (self.cfg.loop_window_m / self.cfg.frontend.resolution_m).ceil() as usize;
         let sub = &mut self.submaps[s];
-        let precomputed = sub
-            .precomputed
-            .get_or_insert_with(|| PrecomputedMap::new(sub.map.finest(), LOOP_DEPTH));
+        let precomputed = sub.precomputed.get_or_insert_with(|| {
+            PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
+        });
         let found = bnb::search(
             precomputed,
             sample,
