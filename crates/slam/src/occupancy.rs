@@ -418,41 +418,82 @@ pub(crate) fn trace_beams(
             let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
             let bw = tx - bx + 1;
             let mut done = vec![0u64; ((bw * (ty - by + 1)) as usize).div_ceil(64)];
-            let mut first_time = |x: i64, y: i64| {
-                let k = ((y - by) * bw + (x - bx)) as usize;
-                let (word, bit) = (k / 64, 1u64 << (k % 64));
+            // A cell's bit in `done` and its index in the grid.
+            let indices = |(x, y): (i64, i64)| ((y - by) * bw + (x - bx), y * w + x);
+            let mut first_time = |k: i64| {
+                let (word, bit) = (k as usize / 64, 1u64 << (k % 64));
                 let fresh = done[word] & bit == 0;
                 done[word] |= bit;
                 fresh
             };
             let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
-            for (&(x, y), (_, hit)) in ends.iter().zip(endpoints) {
+            for (&end, (_, hit)) in ends.iter().zip(endpoints) {
                 if *hit {
-                    first_time(x, y);
-                    update((y * w + x) as usize, HIT);
+                    let (k, i) = indices(end);
+                    first_time(k);
+                    update(i as usize, HIT);
                 }
             }
-            let mut miss = |x: i64, y: i64| {
-                if first_time(x, y) {
-                    update((y * w + x) as usize, MISS);
+            let mut miss = |k: i64, i: i64| {
+                if first_time(k) {
+                    update(i as usize, MISS);
                 }
             };
+            let from = indices(start);
+            let rows = (bw, w);
             match rays {
                 None => {
                     for &end in &ends {
-                        walk(start, end, &mut miss);
-                        miss(end.0, end.1);
+                        walk_indexed(start, end, from, rows, &mut miss);
+                        let (k, i) = indices(end);
+                        miss(k, i);
                     }
                 }
                 Some(rays) => {
                     for &end in &ends {
-                        miss(end.0, end.1);
+                        let (k, i) = indices(end);
+                        miss(k, i);
                     }
                     for p in rays {
-                        walk(start, to_cell(*p), &mut miss);
+                        walk_indexed(start, to_cell(*p), from, rows, &mut miss);
                     }
                 }
             }
+        }
+    }
+}
+
+/// [`walk`], handing `visit` each cell's index in two row-major layouts instead of its
+/// coordinates: rows `rows.0` and `rows.1` long, with cell `from` at `at.0` and `at.1`.
+/// The indices move by strides, with no multiplication per cell: a keyframe's beams cross
+/// a hundred thousand cells.
+fn walk_indexed(
+    from: (i64, i64),
+    (ex, ey): (i64, i64),
+    at: (i64, i64),
+    rows: (i64, i64),
+    mut visit: impl FnMut(i64, i64),
+) {
+    let (sx, sy) = from;
+    let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
+    let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
+    let (row_a, row_b) = (sty * rows.0, sty * rows.1);
+    let (mut x, mut y, mut err) = (sx, sy, dx + dy);
+    let (mut a, mut b) = at;
+    while (x, y) != (ex, ey) {
+        visit(a, b);
+        let e2 = 2 * err;
+        if e2 >= dy {
+            err += dy;
+            x += stx;
+            a += stx;
+            b += stx;
+        }
+        if e2 <= dx {
+            err += dx;
+            y += sty;
+            a += row_a;
+            b += row_b;
         }
     }
 }
