@@ -53,6 +53,26 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.trace_filled = false,
     },
     Variant {
+        name: "optimize-every-40",
+        what: "accepted closures folded into the graph at every 40th keyframe, not every 20th",
+        apply: |c| c.mapper.optimize_every_keyframes = 40,
+    },
+    Variant {
+        name: "graph-steps-2",
+        what: "the pose graph optimised by 2 Gauss-Newton steps, not 3",
+        apply: |c| c.mapper.graph_iterations = 2,
+    },
+    Variant {
+        name: "graph-steps-1",
+        what: "the pose graph optimised by 1 Gauss-Newton step, not 3",
+        apply: |c| c.mapper.graph_iterations = 1,
+    },
+    Variant {
+        name: "graph-later-100",
+        what: "the pose graph's Gauss-Newton steps after the first stopped after 100 block-Jacobi iterations, not 500",
+        apply: |c| c.mapper.graph_later_cap = Some(100),
+    },
+    Variant {
         name: "closures-every-4",
         what: "closures searched at every fourth keyframe, not every second",
         apply: |c| c.mapper.loop_every_keyframes = 4,

@@ -34,8 +34,6 @@ use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Cell, Point2, Pose2};
 
-/// Accepted closures are folded into the graph at every this many keyframes.
-const OPTIMIZE_EVERY_KEYFRAMES: usize = 20;
 /// A closure is confirmed by another found at most this many keyframes earlier...
 const CONFIRM_WITHIN_KEYFRAMES: usize = 10;
 /// ... that asks for the same correction within this distance ...
@@ -221,6 +219,13 @@ pub struct MapperConfig {
     /// [`crate::ndt`]; the refinement is bounded, also in how far it may move the match back
     /// against the wheels' travel); `None`: the occupancy match as it is.
     pub ndt_refine: Option<NdtConfig>,
+    /// Accepted closures are folded into the graph at every this many keyframes ...
+    pub optimize_every_keyframes: usize,
+    /// ... by this many Gauss-Newton steps ...
+    pub graph_iterations: usize,
+    /// ... the iterative solvers' steps after the first stopped after this many
+    /// iterations (`None`: as the first).
+    pub graph_later_cap: Option<usize>,
 }
 
 /// Over a scan whose predicted turn exceeds `turn_rad`, the headings within
@@ -430,6 +435,9 @@ impl Default for MapperConfig {
                 margin: 0.1,
             }),
             ndt_refine: None,
+            optimize_every_keyframes: 20,
+            graph_iterations: 3,
+            graph_later_cap: None,
         }
     }
 }
@@ -1142,7 +1150,7 @@ impl Mapper {
         if node.is_multiple_of(self.cfg.loop_every_keyframes.max(1)) && self.close_loops(node) {
             self.pending_closures = true;
         }
-        if self.pending_closures && node.is_multiple_of(OPTIMIZE_EVERY_KEYFRAMES) {
+        if self.pending_closures && node.is_multiple_of(self.cfg.optimize_every_keyframes.max(1)) {
             // The active submaps' keyframes as they were drawn into them, before the
             // optimisation bends them.
             let active = self
@@ -1157,7 +1165,10 @@ impl Mapper {
                 })
                 .flatten()
                 .map(|first| (first, self.graph.nodes[first..].to_vec()));
-            self.graph.optimize(3);
+            self.graph.optimize_with_later_cap(
+                self.cfg.graph_iterations,
+                self.cfg.graph_later_cap.unwrap_or(usize::MAX),
+            );
             if let Some((first, drawn)) = active {
                 // The active submaps' cells show those keyframes where they were: move them
                 // with the oldest one as a block, so tracking goes on in cells that agree

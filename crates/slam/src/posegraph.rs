@@ -246,11 +246,18 @@ impl PoseGraph {
 
     /// Runs up to `iterations` Gauss-Newton steps; stops early when a step changes nothing.
     pub fn optimize(&mut self, iterations: usize) {
+        self.optimize_with_later_cap(iterations, usize::MAX);
+    }
+
+    /// [`optimize`](Self::optimize), the iterative solvers' steps after the first capped
+    /// at `later_cap` iterations: the first step makes the large correction, the later
+    /// ones refine it.
+    pub fn optimize_with_later_cap(&mut self, iterations: usize, later_cap: usize) {
         let n = self.nodes.len();
         if n < 2 {
             return;
         }
-        for _ in 0..iterations {
+        for step in 0..iterations {
             let mut diag = vec![[[0.0; 3]; 3]; n];
             // Off-diagonal blocks: (i, j, H_ij) with i != j; H_ji is its transpose.
             let mut off: Vec<(usize, usize, Block)> = Vec::with_capacity(self.edges.len());
@@ -283,6 +290,7 @@ impl PoseGraph {
             // Capped: with block-Jacobi, a few hundred iterations resolve the large-scale
             // correction and later Gauss-Newton steps refine; the chain needs far fewer.
             let cap = (4 * n + 100).min(500);
+            let cap = if step == 0 { cap } else { cap.min(later_cap) };
             let chain_solve = || {
                 let chain = ChainFactor::new(&diag, &off);
                 conjugate_gradient(&diag, &off, &rhs, 1e-10, cap, |r, z| chain.solve_into(r, z))
@@ -696,6 +704,29 @@ mod tests {
                 .fold(0.0, f64::max);
             assert!(turn < 1e-8, "{:?}: {turn}", other.solver);
         }
+    }
+
+    #[test]
+    fn a_cap_on_the_later_steps_leaves_the_first_step_whole() {
+        let (truth, mut graph) = drifting_square();
+        graph.edges.push(Edge {
+            from: 0,
+            to: 40,
+            measurement: truth[0].inverse() * truth[40],
+            information: [1000.0, 1000.0, 4000.0],
+            robust: true,
+        });
+        let mut one_step = graph.clone();
+        one_step.optimize(1);
+        let mut capped = graph.clone();
+        capped.optimize_with_later_cap(3, 0);
+        assert_eq!(
+            capped.nodes, one_step.nodes,
+            "later steps with no iterations move nothing"
+        );
+        let mut refined = graph.clone();
+        refined.optimize_with_later_cap(3, 20);
+        assert!(refined.chi2() < one_step.chi2(), "later steps refine");
     }
 
     #[test]
