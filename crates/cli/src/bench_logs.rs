@@ -4,7 +4,8 @@
 //! Each log is read, run through the mapper with its default setup, and its trajectory
 //! scored against the log's relations. Mean translation is the benchmark's figure; the
 //! median shows what most relations see, since one missed loop closure moves the mean by a
-//! factor of ten. Speed is the log's duration over the wall time of the SLAM alone.
+//! factor of ten. Speed is the log's duration over the wall time of the SLAM alone, and the
+//! scans it took per wall second.
 
 use crate::cli::BenchLogsArgs;
 use anyhow::{Context, Result};
@@ -28,9 +29,9 @@ fn published(log: &str) -> Option<(f64, f64, f64)> {
 /// `realms bench logs`.
 pub fn run(args: BenchLogsArgs) -> Result<()> {
     println!(
-        "| log | scans | translation mean +- std | median | rotation mean | median | closures | speed | graph mapping | Cartographer |"
+        "| log | scans | translation mean +- std | median | rotation mean | median | closures | speed | scans per second | graph mapping | Cartographer |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for name in &args.logs {
         let clf = args.data.join(format!("{name}.clf"));
         let mut log =
@@ -56,7 +57,7 @@ pub fn run(args: BenchLogsArgs) -> Result<()> {
             None => ("-".into(), "-".into()),
         };
         println!(
-            "| {name} | {} | {:.4} +- {:.4} m | {:.4} m | {:.3} deg | {:.3} deg | {} | {:.0}x | {graph} | {carto} |",
+            "| {name} | {} | {:.4} +- {:.4} m | {:.4} m | {:.3} deg | {:.3} deg | {} | {:.0}x | {:.0} | {graph} | {carto} |",
             log.scans.len(),
             e.trans_mean_m,
             e.trans_std_m,
@@ -65,6 +66,7 @@ pub fn run(args: BenchLogsArgs) -> Result<()> {
             e.rot_median_deg,
             mapper.closures,
             log.duration_s() / wall_s,
+            log.scans.len() as f64 / wall_s,
         );
     }
     Ok(())
