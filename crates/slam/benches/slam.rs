@@ -8,7 +8,10 @@
 //! - `map_update`: one keyframe traced into a map (free space along the beams, hits at
 //!   their ends), as a submap takes it;
 //! - `closure_search`: the branch-and-bound search a loop closure starts with (2.5 m and
-//!   3 degrees around the prior, as the rovers search).
+//!   3 degrees around the prior, as the rovers search);
+//! - `graph_optimize`: one Gauss-Newton step of a rover's pose graph after an hour of
+//!   driving (1,500 keyframes on laps of a 10 m square, 273 closures), by the rovers'
+//!   capped block-Jacobi conjugate gradients.
 //!
 //! `cargo bench -p realms-slam --bench slam`. Figures in BENCHMARKS.md.
 
@@ -21,6 +24,7 @@ use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::ndt::{NdtConfig, NdtMap};
 use realms_slam::occupancy::MissRule;
+use realms_slam::posegraph::{Edge, PoseGraph};
 use std::hint::black_box;
 
 /// A scene to match in: a map of a few scans, the scan to match, where it truly is, and the
@@ -249,9 +253,63 @@ fn benches(c: &mut Criterion) {
     }
 }
 
+/// A rover's graph after an hour: keyframes 0.3 m apart on laps of a 10 m square, the
+/// wheels' steps 2 % long and turning a little, a closure every fifth keyframe of every lap
+/// after the first to the same place one lap before (exact), and one solve already done.
+fn lapped_graph() -> PoseGraph {
+    const PER_SIDE: usize = 33;
+    const KEYFRAMES: usize = 1500;
+    let lap = 4 * PER_SIDE;
+    let step = |k: usize| {
+        let turn = if k % PER_SIDE == PER_SIDE - 1 {
+            std::f64::consts::FRAC_PI_2
+        } else {
+            0.0
+        };
+        Pose2::new(0.3, 0.0, turn)
+    };
+    let mut truth = vec![Pose2::IDENTITY];
+    let mut graph = PoseGraph {
+        nodes: vec![Pose2::IDENTITY],
+        ..PoseGraph::default()
+    };
+    for k in 0..KEYFRAMES - 1 {
+        let exact = step(k);
+        let measured = Pose2::new(exact.x_m * 1.02, 0.0, exact.yaw_rad + 0.002);
+        truth.push(truth[k] * exact);
+        graph.nodes.push(graph.nodes[k] * measured);
+        graph.edges.push(Edge {
+            from: k,
+            to: k + 1,
+            measurement: measured,
+            information: [400.0, 400.0, 2500.0],
+            robust: false,
+        });
+        let to = k + 1;
+        if to >= lap && to % 5 == 0 {
+            graph.edges.push(Edge {
+                from: to - lap,
+                to,
+                measurement: truth[to - lap].inverse() * truth[to],
+                information: [400.0, 400.0, 2500.0],
+                robust: true,
+            });
+        }
+    }
+    graph.optimize(1);
+    graph
+}
+
+fn graph_bench(c: &mut Criterion) {
+    let graph = lapped_graph();
+    c.bench_function("graph_optimize/lapped_square", |b| {
+        b.iter_batched_ref(|| graph.clone(), |g| g.optimize(1), BatchSize::LargeInput)
+    });
+}
+
 criterion_group! {
     name = slam;
     config = Criterion::default().sample_size(30);
-    targets = benches
+    targets = benches, graph_bench
 }
 criterion_main!(slam);

@@ -537,11 +537,15 @@ fn conjugate_gradient(
         // The next residual's squared norm summed as it is made, in `dot`'s order.
         rr = 0.0;
         for i in 0..n {
+            // Summed from the values in hand, not read back from memory: reading a whole
+            // residual just written element by element stalled on every pose.
+            let mut ri = r[i];
             for c in 0..3 {
                 x[i][c] += alpha * p[i][c];
-                r[i][c] -= alpha * hp[i][c];
+                ri[c] -= alpha * hp[i][c];
             }
-            rr += r[i][0] * r[i][0] + r[i][1] * r[i][1] + r[i][2] * r[i][2];
+            r[i] = ri;
+            rr += ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
         }
         apply_pre(&r, &mut z);
         let rz_new = dot(&r, &z);
