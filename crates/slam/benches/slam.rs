@@ -7,6 +7,8 @@
 //! - `refine_on_hits`: the rovers' refinement of that match on the submap's hits;
 //! - `map_update`: one keyframe traced into a map (free space along the beams, hits at
 //!   their ends), as a submap takes it;
+//! - `closure_precompute`: a finished submap's stack of block maxima, made once before
+//!   its first closure search;
 //! - `closure_search`: the branch-and-bound search a loop closure starts with (2.5 m and
 //!   3 degrees around the prior, as the rovers search);
 //! - `graph_optimize`: one Gauss-Newton step of a rover's pose graph after an hour of
@@ -225,6 +227,9 @@ fn benches(c: &mut Criterion) {
             )
         });
         // As the rovers search: blocks up to 64 cells, and a margin as wide as the window.
+        c.bench_function(&format!("closure_precompute/{}", s.name), |b| {
+            b.iter(|| PrecomputedMap::with_margin(black_box(s.map.finest()), 6, 50))
+        });
         let precomputed = PrecomputedMap::with_margin(s.map.finest(), 6, 50);
         let window = SearchWindow {
             linear_m: 2.5,

@@ -89,24 +89,50 @@ impl PrecomputedMap {
             levels: vec![level0],
         };
         for d in 1..=depth {
-            let half = 1i64 << (d - 1);
-            let low = (1i64 << d) - 1 + m;
-            let (w, h) = (width + low + m, height + low + m);
-            let mut cells = vec![0u8; (w * h) as usize];
-            for y in 0..h {
-                for x in 0..w {
-                    let (cx, cy) = (x - low, y - low);
-                    let v = map
-                        .at(d - 1, cx, cy)
-                        .max(map.at(d - 1, cx + half, cy))
-                        .max(map.at(d - 1, cx, cy + half))
-                        .max(map.at(d - 1, cx + half, cy + half));
-                    cells[(y * w + x) as usize] = v;
-                }
-            }
-            map.levels.push(cells);
+            let next = map.next_level(d);
+            map.levels.push(next);
         }
         map
+    }
+
+    /// Level `d` (`d >= 1`) from level `d - 1`: each cell the highest of the four cells
+    /// `2^(d-1)` apart that its block covers, unknown outside the level below. Two passes
+    /// of pairwise maxima over rows, then columns, on the level below set in a border of
+    /// unknown cells, so no cell is looked up with a bounds check.
+    fn next_level(&self, d: usize) -> Vec<u8> {
+        let half = 1usize << (d - 1);
+        let m = self.margin as usize;
+        let (width, height) = (self.width as usize, self.height as usize);
+        let below = &self.levels[d - 1];
+        // The level below spans map cells `-(low - half)..width + m` in x (likewise y).
+        let low = (1usize << d) - 1 + m;
+        let (bw, bh) = (width + low - half + m, height + low - half + m);
+        let (w, h) = (width + low + m, height + low + m);
+        // The level below with `half` unknown cells before and after it: cells
+        // `-low..width + m + half`.
+        let ew = w + half;
+        let mut ext = vec![UNKNOWN; ew * (h + half)];
+        for y in 0..bh {
+            let at = (y + half) * ew + half;
+            ext[at..at + bw].copy_from_slice(&below[y * bw..(y + 1) * bw]);
+        }
+        let mut rows = vec![0u8; w * (h + half)];
+        for (out, row) in rows.chunks_exact_mut(w).zip(ext.chunks_exact(ew)) {
+            for (x, v) in out.iter_mut().enumerate() {
+                *v = row[x].max(row[x + half]);
+            }
+        }
+        let mut cells = vec![0u8; w * h];
+        for (y, out) in cells.chunks_exact_mut(w).enumerate() {
+            let (a, b) = (
+                &rows[y * w..(y + 1) * w],
+                &rows[(y + half) * w..(y + half + 1) * w],
+            );
+            for ((v, p), q) in out.iter_mut().zip(a).zip(b) {
+                *v = (*p).max(*q);
+            }
+        }
+        cells
     }
 
     /// The deepest level.
@@ -123,11 +149,6 @@ impl PrecomputedMap {
             width: self.width + low + self.margin,
             height: self.height + low + self.margin,
         }
-    }
-
-    /// Level `d` at cell `(x, y)`; unknown outside.
-    fn at(&self, d: usize, x: i64, y: i64) -> u8 {
-        self.level(d).at(x, y)
     }
 }
 
@@ -573,6 +594,42 @@ mod tests {
             -4503599627370495.5,
         ] {
             assert_eq!(floor_to_i64(v), v.floor() as i64, "{v}");
+        }
+    }
+
+    #[test]
+    fn every_level_holds_the_highest_cell_of_its_block() {
+        let mut grid = OccupancyGrid::new(0.05);
+        let sensor = Point2::new(0.0, 0.0);
+        let ends: Vec<(Point2, bool)> = (0..90)
+            .map(|i| {
+                let a = (i as f64 * 4.0).to_radians();
+                let r = 1.0 + 0.7 * ((i * 7) % 5) as f64;
+                (Point2::new(r * a.cos(), r * a.sin()), i % 3 != 0)
+            })
+            .collect();
+        grid.insert(sensor, &ends);
+        for margin in [0, 7] {
+            let map = PrecomputedMap::with_margin(&grid, 4, margin);
+            let base = map.level(0);
+            for d in 1..=4usize {
+                let level = map.level(d);
+                let block = 1i64 << d;
+                for y in -level.pad - 2..map.height + margin as i64 + 2 {
+                    for x in -level.pad - 2..map.width + margin as i64 + 2 {
+                        let brute = (0..block)
+                            .flat_map(|dy| (0..block).map(move |dx| (dx, dy)))
+                            .map(|(dx, dy)| base.at(x + dx, y + dy))
+                            .max()
+                            .unwrap_or(UNKNOWN);
+                        assert_eq!(
+                            level.at(x, y),
+                            brute,
+                            "level {d}, margin {margin}, ({x}, {y})"
+                        );
+                    }
+                }
+            }
         }
     }
 }
