@@ -509,7 +509,7 @@ mod tests {
                 for dy in -n_c..=n_c {
                     let s: u32 = cells
                         .iter()
-                        .map(|(x, y)| map.at(0, x + dx, y + dy) as u32)
+                        .map(|(x, y)| map.level(0).at(x + dx, y + dy) as u32)
                         .sum();
                     best = best.max(s);
                 }
