@@ -211,14 +211,24 @@ pub fn shadow_gaps(
     min_gap_m: f64,
 ) -> Vec<(Point2, bool)> {
     let mut out = Vec::new();
+    // One buffer for every column, and an unstable sort whose ties fall in the column's
+    // order (as a stable sort's would) but that needs no scratch: a frame has a hundred
+    // columns, and allocating for each cost a fifth of this.
+    let mut ranked: Vec<(f64, usize, [f64; 3])> = Vec::new();
+    let mut pts: Vec<(f64, [f64; 3])> = Vec::new();
     for col in columns {
-        let mut pts: Vec<(f64, [f64; 3])> = col
-            .iter()
-            .filter(|p| p.iter().all(|v| v.is_finite()))
-            .map(|p| (p[0].hypot(p[1]), *p))
-            .filter(|(d, _)| *d <= cfg.gap_reach_m.max(cfg.max_range_m))
-            .collect();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        ranked.clear();
+        ranked.extend(
+            col.iter()
+                .filter(|p| p.iter().all(|v| v.is_finite()))
+                .map(|p| (p[0].hypot(p[1]), *p))
+                .filter(|(d, _)| *d <= cfg.gap_reach_m.max(cfg.max_range_m))
+                .enumerate()
+                .map(|(k, (d, p))| (d, k, p)),
+        );
+        ranked.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        pts.clear();
+        pts.extend(ranked.iter().map(|(d, _, p)| (*d, *p)));
         for (k, w) in pts.windows(2).enumerate() {
             let ((d0, near), (d1, far)) = (w[0], w[1]);
             if d1 - d0 < min_gap_m || d0 >= cfg.max_range_m {
