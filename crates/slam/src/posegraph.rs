@@ -420,11 +420,15 @@ pub(crate) fn transpose(m: &Block) -> Block {
 }
 
 /// The block-Jacobi preconditioner applied: each block's inverse `pre[i]` times `r[i]`,
-/// into `z`.
-fn block_jacobi(pre: &[Block], r: &[[f64; 3]], z: &mut [[f64; 3]]) {
+/// into `z`; returns `r . z`, summed pose by pose as [`dot`] sums.
+fn block_jacobi(pre: &[Block], r: &[[f64; 3]], z: &mut [[f64; 3]]) -> f64 {
+    let mut rz = 0.0;
     for ((z, p), v) in z.iter_mut().zip(pre).zip(r) {
-        *z = block_times(p, v);
+        let zi = block_times(p, v);
+        *z = zi;
+        rz += v[0] * zi[0] + v[1] * zi[1] + v[2] * zi[2];
     }
+    rz
 }
 
 /// The block-tridiagonal part of the normal equations, factored: every diagonal block, and
@@ -470,9 +474,10 @@ impl ChainFactor {
         ChainFactor { d_inv, upper }
     }
 
-    /// Solves the tridiagonal system for `r`, into `out`.
-    fn solve_into(&self, r: &[[f64; 3]], out: &mut [[f64; 3]]) {
+    /// Solves the tridiagonal system for `r`, into `out`; returns `r . out`.
+    fn solve_into(&self, r: &[[f64; 3]], out: &mut [[f64; 3]]) -> f64 {
         out.copy_from_slice(&self.solve(r));
+        dot(r, out)
     }
 
     /// Solves the tridiagonal system for `r`.
@@ -504,24 +509,24 @@ impl ChainFactor {
 }
 
 /// Preconditioned conjugate gradients for H x = b, `apply_pre(r, z)` writing the
-/// preconditioner's inverse applied to `r` into `z`. The iterations' vectors are kept and
-/// written in place: a graph of a few thousand poses runs hundreds of them per solve.
+/// preconditioner's inverse applied to `r` into `z` and returning `r . z`. The iterations'
+/// vectors are kept and written in place: a graph of a few thousand poses runs hundreds of
+/// them per solve.
 fn conjugate_gradient(
     diag: &[Block],
     off: &[(usize, usize, Block)],
     b: &[[f64; 3]],
     tol: f64,
     max_iter: usize,
-    apply_pre: impl Fn(&[[f64; 3]], &mut [[f64; 3]]),
+    apply_pre: impl Fn(&[[f64; 3]], &mut [[f64; 3]]) -> f64,
 ) -> Vec<[f64; 3]> {
     let n = b.len();
     let mut x = vec![[0.0; 3]; n];
     let mut r = b.to_vec();
     let mut z = vec![[0.0; 3]; n];
-    apply_pre(&r, &mut z);
+    let mut rz = apply_pre(&r, &mut z);
     let mut p = z.clone();
     let mut hp = vec![[0.0; 3]; n];
-    let mut rz = dot(&r, &z);
     let b_norm = dot(b, b).sqrt().max(1e-300);
     let mut rr = dot(&r, &r);
     for _ in 0..max_iter {
@@ -547,8 +552,7 @@ fn conjugate_gradient(
             r[i] = ri;
             rr += ri[0] * ri[0] + ri[1] * ri[1] + ri[2] * ri[2];
         }
-        apply_pre(&r, &mut z);
-        let rz_new = dot(&r, &z);
+        let rz_new = apply_pre(&r, &mut z);
         let beta = rz_new / rz;
         rz = rz_new;
         for i in 0..n {
