@@ -13,7 +13,7 @@
 //! search also reports the best pose *clearly away* from the winner (the rival), and callers
 //! refuse closures whose winner does not stand out.
 
-use crate::occupancy::OccupancyGrid;
+use crate::occupancy::{OccupancyGrid, floor_to_i64};
 use realms_core::{Point2, Pose2};
 
 /// What an unobserved cell (or one outside the map) scores: its occupancy probability, 0.5.
@@ -252,14 +252,6 @@ impl Discretised {
             })
             .collect()
     }
-}
-
-/// `v.floor() as i64`, without the call to the C library's `floor` that the baseline
-/// x86-64 target (no SSE4.1 rounding) makes: a search discretises every point at every
-/// heading of its window, and the calls cost a tenth of it.
-fn floor_to_i64(v: f64) -> i64 {
-    let t = v as i64;
-    t.saturating_sub(i64::from(t as f64 > v))
 }
 
 /// Finds the best pose of `points` (robot frame) in `map` within `window` around `prior`,
@@ -572,29 +564,6 @@ mod tests {
             found.score - found.rival_score < 0.02,
             "the corridor must look ambiguous: {found:?}"
         );
-    }
-
-    #[test]
-    fn floor_to_i64_is_floor() {
-        for v in [
-            0.0,
-            -0.0,
-            0.5,
-            -0.5,
-            1.0,
-            -1.0,
-            -1.0000001,
-            2.9999999,
-            -2.9999999,
-            1e300,
-            -1e300,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -4503599627370495.5,
-        ] {
-            assert_eq!(floor_to_i64(v), v.floor() as i64, "{v}");
-        }
     }
 
     #[test]
