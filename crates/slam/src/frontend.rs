@@ -27,9 +27,10 @@ pub struct FrontendConfig {
     /// Fill the gaps between neighbouring beams' endpoints before matching and mapping
     /// (`None`: use the endpoints as they are). See [`densify`].
     pub densify: Option<Densify>,
-    /// Whether a keyframe's free space is traced to the points [`densify`] fills in as well
-    /// as to its beams' own endpoints (`false`: the filled-in points are marked hit, and
-    /// free space is traced along the beams only, a fraction of the walks).
+    /// Whether a keyframe's free space is traced into the mapper's submaps to the points
+    /// [`densify`] fills in as well as to its beams' own endpoints (`false`: the filled-in
+    /// points are marked hit, and free space is traced along the beams only, a fraction of
+    /// the walks). The scan-by-scan [`Frontend`] traces every point either way.
     pub trace_filled: bool,
     /// How each scan clears the cells its beams cross.
     pub miss_rule: MissRule,

@@ -350,7 +350,6 @@ impl OccupancyGrid {
     }
 }
 
-/// A cell's log-odds `l` after evidence `delta`, clamped.
 /// `v.floor()`, without the call to the C library's `floor` that the baseline x86-64 target
 /// (no SSE4.1 rounding) makes: maps look up and trace hundreds of thousands of cells a
 /// second. Exact: below 2^52 in size the truncation to an integer is exact, and anything
@@ -371,6 +370,7 @@ pub(crate) fn floor_to_i64(v: f64) -> i64 {
     t.saturating_sub(i64::from(t as f64 > v))
 }
 
+/// A cell's log-odds `l` after evidence `delta`, clamped.
 pub(crate) fn updated_log_odds(l: f32, delta: f32) -> f32 {
     (l + delta).clamp(-CLAMP, CLAMP)
 }

@@ -714,8 +714,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_cap_on_the_later_steps_leaves_the_first_step_whole() {
+    /// The drifting square with its loop closed: node 40 is back at node 0 (a scan match
+    /// would say so).
+    fn closed_square() -> (Vec<Pose2>, PoseGraph) {
         let (truth, mut graph) = drifting_square();
         graph.edges.push(Edge {
             from: 0,
@@ -724,6 +725,12 @@ mod tests {
             information: [1000.0, 1000.0, 4000.0],
             robust: true,
         });
+        (truth, graph)
+    }
+
+    #[test]
+    fn a_cap_on_the_later_steps_leaves_the_first_step_whole() {
+        let (_, graph) = closed_square();
         let mut one_step = graph.clone();
         one_step.optimize(1);
         let mut capped = graph.clone();
@@ -739,17 +746,9 @@ mod tests {
 
     #[test]
     fn a_loop_with_drifting_odometry_closes() {
-        let (truth, mut graph) = drifting_square();
+        let (truth, mut graph) = closed_square();
         let before = max_error(&truth, &graph.nodes);
         assert!(before > 1.0, "drift {before}");
-        // The loop closure: node 40 is back at node 0 (a scan match would say so).
-        graph.edges.push(Edge {
-            from: 0,
-            to: 40,
-            measurement: truth[0].inverse() * truth[40],
-            information: [1000.0, 1000.0, 4000.0],
-            robust: true,
-        });
         let chi_before = graph.chi2();
         graph.optimize(20);
         assert!(graph.chi2() < chi_before * 0.1);
@@ -770,15 +769,8 @@ mod tests {
 
     #[test]
     fn a_wrong_closure_does_far_less_damage_under_the_robust_loss() {
-        let (truth, mut graph) = drifting_square();
-        let closure = Edge {
-            from: 0,
-            to: 40,
-            measurement: truth[0].inverse() * truth[40],
-            information: [1000.0, 1000.0, 4000.0],
-            robust: true,
-        };
-        graph.edges.push(closure);
+        let (_, mut graph) = closed_square();
+        let closure = *graph.edges.last().expect("the closure");
         let mut good = graph.clone();
         good.optimize(20);
         // A false closure claiming node 20 sits where node 0 is (a repetitive-scene mismatch),

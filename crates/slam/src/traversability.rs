@@ -227,12 +227,12 @@ pub fn shadow_gaps(
     let mut out = Vec::new();
     // One buffer for every column, and an unstable sort whose ties fall in the column's
     // order (as a stable sort's would) but that needs no scratch: a frame has a hundred
-    // columns, and allocating for each cost a fifth of this.
-    let mut ranked: Vec<(f64, usize, [f64; 3])> = Vec::new();
-    let mut pts: Vec<(f64, [f64; 3])> = Vec::new();
+    // columns, and each column allocated twice before. Each point: its distance, its place
+    // in the column, the point.
+    let mut pts: Vec<(f64, usize, [f64; 3])> = Vec::new();
     for col in columns {
-        ranked.clear();
-        ranked.extend(
+        pts.clear();
+        pts.extend(
             col.iter()
                 .filter(|p| p.iter().all(|v| v.is_finite()))
                 .map(|p| (p[0].hypot(p[1]), *p))
@@ -240,19 +240,17 @@ pub fn shadow_gaps(
                 .enumerate()
                 .map(|(k, (d, p))| (d, k, p)),
         );
-        ranked.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        pts.clear();
-        pts.extend(ranked.iter().map(|(d, _, p)| (*d, *p)));
+        pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for (k, w) in pts.windows(2).enumerate() {
-            let ((d0, near), (d1, far)) = (w[0], w[1]);
+            let ((d0, _, near), (d1, _, far)) = (w[0], w[1]);
             if d1 - d0 < min_gap_m || d0 >= cfg.max_range_m {
                 continue;
             }
             let ground_before = pts[..=k]
                 .iter()
                 .rev()
-                .take_while(|(d, _)| *d >= d0 - GROUND_BEFORE_GAP_M)
-                .fold(near[2], |low, (_, p)| low.min(p[2]));
+                .take_while(|(d, _, _)| *d >= d0 - GROUND_BEFORE_GAP_M)
+                .fold(near[2], |low, (_, _, p)| low.min(p[2]));
             if far[2] > ground_before - cfg.gap_drop_m {
                 continue;
             }
