@@ -296,16 +296,42 @@ impl Assembly {
         let fixed = |v: f64| (v * FIXED_ONE).floor() as i64;
         let (dx, dy) = (fixed(c * r / g.resolution_m), fixed(s * r / g.resolution_m));
         let (w, h) = (g.width as u64, g.height as u64);
+        // The submap's content box in its own cells, a cell wider on each side: a row's
+        // samples outside it read zeros, so each row is cut to the stretch that can fall
+        // inside (the placed box's corners hold up to a third of its cells).
+        let Some((lo, hi)) = grid.content_bounds() else {
+            return;
+        };
+        let content_x = (
+            (lo.x_m - g.origin.x_m) / g.resolution_m - 1.0,
+            (hi.x_m - g.origin.x_m) / g.resolution_m + 1.0,
+        );
+        let content_y = (
+            (lo.y_m - g.origin.y_m) / g.resolution_m - 1.0,
+            (hi.y_m - g.origin.y_m) / g.resolution_m + 1.0,
+        );
+        let (span_lo, span_hi) = (0i64, (x1 - x0) as i64);
         for y in y0..=y1 {
             let row0 = Point2::new(
                 self.origin.x_m + (x0 as f64 + 0.5) * r,
                 self.origin.y_m + (y as f64 + 0.5) * r,
             );
             let p = inv.transform_point(row0);
-            let mut lx = fixed((p.x_m - g.origin.x_m) / g.resolution_m);
-            let mut ly = fixed((p.y_m - g.origin.y_m) / g.resolution_m);
+            let lx = fixed((p.x_m - g.origin.x_m) / g.resolution_m);
+            let ly = fixed((p.y_m - g.origin.y_m) / g.resolution_m);
+            let (mut k_lo, mut k_hi) = (span_lo, span_hi);
+            for (start, step, (c_lo, c_hi)) in [(lx, dx, content_x), (ly, dy, content_y)] {
+                let (k_a, k_b) = steps_within(start, step, c_lo * FIXED_ONE, c_hi * FIXED_ONE);
+                k_lo = k_lo.max(k_a);
+                k_hi = k_hi.min(k_b);
+            }
+            if k_lo > k_hi {
+                continue;
+            }
+            let mut lx = lx + k_lo * dx;
+            let mut ly = ly + k_lo * dy;
             let row = y * self.width;
-            for x in x0..=x1 {
+            for x in x0 + k_lo as usize..=x0 + k_hi as usize {
                 // A negative position wraps to a huge cell, outside like any other.
                 let (cx, cy) = ((lx as u64) >> FIXED_BITS, (ly as u64) >> FIXED_BITS);
                 if cx < w && cy < h {
@@ -574,6 +600,24 @@ pub fn hazard_vote(l: f32) -> f32 {
 }
 
 /// The world box holding what `grid` has seen, once placed at `pose`.
+/// The steps `k` (a superset, by a step or so either way) at which `start + k * step`
+/// lies within `[lo, hi]`, all in the same units: all of them when `step` is zero and
+/// `start` lies within, none (an empty range) when it lies outside.
+fn steps_within(start: i64, step: i64, lo: f64, hi: f64) -> (i64, i64) {
+    let start = start as f64;
+    if step == 0 {
+        return if (lo..=hi).contains(&start) {
+            (i64::MIN, i64::MAX)
+        } else {
+            (1, 0)
+        };
+    }
+    let (a, b) = ((lo - start) / step as f64, (hi - start) / step as f64);
+    let (a, b) = if a < b { (a, b) } else { (b, a) };
+    // Conversions saturate, and a step either way covers the rounding of the divisions.
+    ((a as i64).saturating_sub(1), (b as i64).saturating_add(1))
+}
+
 fn placed_box(grid: &OccupancyGrid, pose: Pose2) -> Option<(Point2, Point2)> {
     let (lo, hi) = grid.content_bounds()?;
     let corners = [
@@ -620,6 +664,29 @@ mod tests {
             a.place(i, g, *p);
         }
         a.states(&[])
+    }
+
+    #[test]
+    fn a_rows_cut_keeps_every_step_that_lands_inside() {
+        let (lo, hi) = (-3.5e9, 7.25e9);
+        for start in [
+            -9e9 as i64,
+            -3_500_000_000,
+            0,
+            1,
+            7_250_000_000,
+            2e10 as i64,
+        ] {
+            for step in [-3_000_000_000i64, -1, 0, 1, 12_345_678, 4_294_967_296] {
+                let (k_lo, k_hi) = steps_within(start, step, lo, hi);
+                for k in 0..2000i64 {
+                    let at = (start + k * step) as f64;
+                    if (lo..=hi).contains(&at) {
+                        assert!((k_lo..=k_hi).contains(&k), "{start} {step} {k}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
