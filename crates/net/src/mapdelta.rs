@@ -9,6 +9,7 @@
 //! re-laying is a shift by whole cells.
 
 use realms_core::{Grid, GridGeometry};
+use std::borrow::Cow;
 
 /// The unknown cell value (ROS `nav_msgs/OccupancyGrid`).
 pub const UNKNOWN: i8 = -1;
@@ -55,9 +56,9 @@ pub struct Encoder {
     seq: u64,
 }
 
-/// `old` laid onto `geometry` (unknown where it did not reach); `None` if the two grids are
-/// not on the same lattice of cells.
-fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
+/// `old` laid onto `geometry` (unknown where it did not reach), `old` itself where the map
+/// did not grow; `None` if the two grids are not on the same lattice of cells.
+fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Cow<'_, Grid<i8>>> {
     let g = old.geometry();
     if (g.resolution_m - geometry.resolution_m).abs() > 1e-9 * g.resolution_m {
         return None;
@@ -72,7 +73,7 @@ fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
     let dy = shift(g.origin.y_m, geometry.origin.y_m)?;
     if (dx, dy, g.width, g.height) == (0, 0, geometry.width, geometry.height) {
         // The map did not grow (most updates): nothing to re-lay.
-        return Some(old.clone());
+        return Some(Cow::Borrowed(old));
     }
     let mut out = Grid::new(geometry, UNKNOWN);
     // Row by row: the old columns that land inside the new grid, copied as one slice.
@@ -88,14 +89,13 @@ fn relay_onto(old: &Grid<i8>, geometry: GridGeometry) -> Option<Grid<i8>> {
         let dst0 = ny as usize * new_width + (x_from as i64 + dx) as usize;
         out.cells_mut()[dst0..dst0 + src.len()].copy_from_slice(src);
     }
-    Some(out)
+    Some(Cow::Owned(out))
 }
 
 /// Run-length encodes the cells of `now` that differ from `before` (everything, without it).
-fn runs(before: Option<&Grid<i8>>, now: &Grid<i8>) -> Vec<Run> {
+fn runs(before: Option<&Grid<i8>>, cells: &[i8]) -> Vec<Run> {
     let mut out: Vec<Run> = Vec::new();
     let mut gap = 0u32;
-    let cells = now.cells();
     let mut push = |i: usize, v: i8, gap: &mut u32| {
         if before.is_some_and(|b| b.cells()[i] == v) {
             *gap += 1;
@@ -138,7 +138,21 @@ impl Encoder {
     /// when `snapshot` is asked for, when nothing was sent yet, or when the map moved off
     /// its lattice.
     pub fn update(&mut self, map: &Grid<i8>, snapshot: bool) -> MapUpdate {
-        let g = *map.geometry();
+        self.update_cells(*map.geometry(), map.cells(), snapshot)
+    }
+
+    /// [`update`](Self::update) for the map with geometry `g` and `cells` (row-major, one
+    /// per cell of `g`).
+    ///
+    /// # Panics
+    ///
+    /// If `cells` does not hold one value per cell of `g`.
+    pub fn update_cells(&mut self, g: GridGeometry, cells: &[i8], snapshot: bool) -> MapUpdate {
+        assert_eq!(
+            cells.len(),
+            g.len(),
+            "one cell value per cell of the geometry"
+        );
         let base = if snapshot {
             None
         } else {
@@ -149,10 +163,17 @@ impl Encoder {
         };
         self.seq += 1;
         let (base_seq, encoded) = match &base {
-            Some((seq, before)) => (Some(*seq), runs(Some(before), map)),
-            None => (None, runs(None, map)),
+            Some((seq, before)) => (Some(*seq), runs(Some(before), cells)),
+            None => (None, runs(None, cells)),
         };
-        self.sent = Some(map.clone());
+        // What the receiver now has, copied into the grid kept for it when the map did not
+        // grow (most updates), not cloned into a fresh one.
+        match &mut self.sent {
+            Some(sent) if *sent.geometry() == g => sent.cells_mut().copy_from_slice(cells),
+            sent => {
+                *sent = Grid::from_cells(g, cells.to_vec());
+            }
+        }
         MapUpdate {
             seq: self.seq,
             base: base_seq,
@@ -223,7 +244,10 @@ impl Decoder {
                     .map
                     .as_ref()
                     .ok_or_else(|| malformed("no map to change"))?;
-                relay_onto(old, g).ok_or_else(|| malformed("geometry off the old lattice"))?
+                // A copy: the map kept stays whole if the update turns out malformed.
+                relay_onto(old, g)
+                    .ok_or_else(|| malformed("geometry off the old lattice"))?
+                    .into_owned()
             }
         };
         let mut i = 0usize;
@@ -305,7 +329,7 @@ mod tests {
             for s in steps {
                 let (l, b, r, t) = (s.grow.0 as i64, s.grow.1 as i64, s.grow.2 as usize, s.grow.3 as usize);
                 let g = geometry(x0 - l, y0 - b, w + l as usize + r, h + b as usize + t);
-                map = relay_onto(&map, g).expect("same lattice");
+                map = relay_onto(&map, g).expect("same lattice").into_owned();
                 (x0, y0, w, h) = (x0 - l, y0 - b, g.width, g.height);
                 for (k, v) in &s.edits {
                     let n = map.cells().len();

@@ -740,10 +740,9 @@ impl Mapping {
             resolution_m: grid.geometry().resolution_m as f32 as f64,
             ..*grid.geometry()
         };
-        let Some(grid) = Grid::from_cells(geometry, grid.cells().to_vec()) else {
-            return;
-        };
-        let update = self.delta_encoder.update(&grid, self.snapshot_wanted);
+        let update = self
+            .delta_encoder
+            .update_cells(geometry, grid.cells(), self.snapshot_wanted);
         self.snapshot_wanted = false;
         // Snapshots go on their own topic: a queue that supersedes stale map updates must
         // never replace a snapshot with an update that builds on it.

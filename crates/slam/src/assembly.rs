@@ -599,7 +599,6 @@ pub fn hazard_vote(l: f32) -> f32 {
     }
 }
 
-/// The world box holding what `grid` has seen, once placed at `pose`.
 /// The steps `k` (a superset, by a step or so either way) at which `start + k * step`
 /// lies within `[lo, hi]`, all in the same units: all of them when `step` is zero and
 /// `start` lies within, none (an empty range) when it lies outside.
@@ -618,6 +617,7 @@ fn steps_within(start: i64, step: i64, lo: f64, hi: f64) -> (i64, i64) {
     ((a as i64).saturating_sub(1), (b as i64).saturating_add(1))
 }
 
+/// The world box holding what `grid` has seen, once placed at `pose`.
 fn placed_box(grid: &OccupancyGrid, pose: Pose2) -> Option<(Point2, Point2)> {
     let (lo, hi) = grid.content_bounds()?;
     let corners = [
