@@ -211,6 +211,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.matcher.prior_translation_weight *= 100.0,
     },
     Variant {
+        name: "surface-turn-10deg",
+        what: "a scan point on a straight run of the scan not paired with a line cell whose line turns more than 10 deg from the run (a wall drawn at two offsets tilts its cells)",
+        apply: |c| on_refinement(c, |n| n.max_surface_turn_rad = Some(10f64.to_radians())),
+    },
+    Variant {
         name: "min-hits-20",
         what: "the refinement's cells pull only with 20 hits or more, not 4 (a cell of a few hits along a wall can look like a line across it)",
         apply: |c| on_refinement(c, |n| n.min_hits = 20),

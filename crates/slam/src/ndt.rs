@@ -55,7 +55,16 @@ pub struct NdtConfig {
     pub max_hold_back_m: f64,
     /// ... or turning it more than this, radians.
     pub max_turn_rad: f64,
+    /// A scan point on a straight run of the scan (five neighbouring points, see
+    /// `surface_directions`) whose run turns from its line cell's line by more than this is
+    /// not paired with that cell, radians (`None`: every point is). A line cell drawn where
+    /// a wall was seen at two offsets is turned from the wall, and pulls the wall's points
+    /// along it.
+    pub max_surface_turn_rad: Option<f64>,
 }
+
+/// Neighbouring scan points farther apart than this are not one surface, metres.
+const NORMAL_NEIGHBOUR_M: f64 = 0.3;
 
 impl Default for NdtConfig {
     fn default() -> Self {
@@ -80,6 +89,7 @@ impl Default for NdtConfig {
             max_shift_m: 0.04,
             max_hold_back_m: 0.02,
             max_turn_rad: 0.5f64.to_radians(),
+            max_surface_turn_rad: None,
         }
     }
 }
@@ -363,14 +373,31 @@ impl NdtMap {
         prior_rotation: f64,
     ) -> Option<Pose2> {
         const MIN_PAIRED: usize = 20;
+        let surfaces: Vec<Option<(f64, f64)>> = match self.cfg.max_surface_turn_rad {
+            Some(_) => surface_directions(points),
+            None => Vec::new(),
+        };
+        let max_sin2 = self.cfg.max_surface_turn_rad.map(|t| t.sin().powi(2));
         let mut pose = start;
         let mut pairs: Vec<(Point2, Pull, f64)> = Vec::with_capacity(points.len());
         for _ in 0..self.cfg.rounds {
             pairs.clear();
+            let (sin, cos) = pose.yaw_rad.sin_cos();
             pairs.extend(points.iter().enumerate().filter_map(|(i, p)| {
                 let height = heights.get(i).copied().unwrap_or(f64::NAN);
-                self.associate(pose.transform_point(*p))
-                    .map(|c| (*p, c, height))
+                let pull = self.associate(pose.transform_point(*p))?;
+                if let (Some(max_sin2), Some(Some((dx, dy)))) = (max_sin2, surfaces.get(i)) {
+                    // A line cell's information lies across its line only: its share along
+                    // the point's surface is the squared sine of the turn between them.
+                    let [a, b, d] = pull.information;
+                    let trace = a + d;
+                    let line = (a * d - b * b).abs() <= 1e-9 * trace * trace;
+                    let along = pull.information_along(cos * dx - sin * dy, sin * dx + cos * dy);
+                    if line && along > max_sin2 * trace {
+                        return None;
+                    }
+                }
+                Some((*p, pull, height))
             }));
             if pairs.len() < MIN_PAIRED {
                 return None;
@@ -450,6 +477,39 @@ impl NdtMap {
         Some([-step[0], -step[1], -step[2]])
     }
 }
+
+/// Each point's surface direction (unit, scan frame), where the scan shows a straight
+/// surface there: the chord between its second neighbours either side, when each point
+/// of the five lies within [`NORMAL_NEIGHBOUR_M`] of the next and the three between lie
+/// within [`STRAIGHT_WITHIN_M`] of the chord; else `None` (a rock's curved outline, an edge).
+fn surface_directions(points: &[Point2]) -> Vec<Option<(f64, f64)>> {
+    (0..points.len())
+        .map(|i| {
+            let five = points.get(i.checked_sub(2)?..i + 3)?;
+            if five
+                .windows(2)
+                .any(|w| w[0].distance_m(w[1]) > NORMAL_NEIGHBOUR_M)
+            {
+                return None;
+            }
+            let (a, b) = (five[0], five[4]);
+            let (dx, dy) = (b.x_m - a.x_m, b.y_m - a.y_m);
+            let len = dx.hypot(dy);
+            if len <= 1e-9 {
+                return None;
+            }
+            let (ux, uy) = (dx / len, dy / len);
+            let straight = five[1..4]
+                .iter()
+                .all(|p| ((p.x_m - a.x_m) * uy - (p.y_m - a.y_m) * ux).abs() <= STRAIGHT_WITHIN_M);
+            straight.then_some((ux, uy))
+        })
+        .collect()
+}
+
+/// How far from the chord through five neighbouring scan points the middle three may lie
+/// for the surface to count as straight, metres.
+const STRAIGHT_WITHIN_M: f64 = 0.01;
 
 /// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
 /// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
@@ -654,6 +714,63 @@ mod tests {
                 "along the beam {along_beam}: {spread} against {plain}"
             );
         }
+    }
+
+    /// A lone wall along x pins y only. A cell 2 m off it holds hits along a line turned 20
+    /// degrees (a surface drawn at two offsets), and the scan sees a straight surface there 1
+    /// cm off that cell's middle, longer than the cell (the points its check reads have
+    /// both neighbours). Paired with the turned cell, its points drag the rover along the
+    /// wall; with the surface check they are not paired with it, and the rover stays.
+    #[test]
+    fn a_turned_line_cell_does_not_drag_a_straight_surface_along_the_wall() {
+        let wall = (0..800).map(|i| Point2::new(i as f64 * 0.01, 1.513));
+        let tilt = 20f64.to_radians().tan();
+        let turned = (0..25).map(|i| {
+            let x = 4.0 + i as f64 * 0.01;
+            Point2::new(x, 3.6 + (x - 4.125) * tilt)
+        });
+        let truth = Pose2::new(4.0, 0.0, 0.0);
+        let scan: Vec<Point2> = (0..100)
+            .map(|i| Point2::new(2.0 + i as f64 * 0.04, 1.513))
+            .chain((0..43).map(|i| Point2::new(3.71 + i as f64 * 0.02, 3.61)))
+            .map(|p| truth.inverse().transform_point(p))
+            .collect();
+        let shift = |max_surface_turn_rad: Option<f64>| {
+            let mut map = NdtMap::new(NdtConfig {
+                max_surface_turn_rad,
+                ..NdtConfig::default()
+            });
+            map.insert(wall.clone().chain(turned.clone()));
+            let refined = map.refine(&scan, truth, STILL, 3.0, 3.0).expect("refined");
+            (refined.x_m - truth.x_m, refined.y_m - truth.y_m)
+        };
+        let (plain_x, _) = shift(None);
+        assert!(plain_x.abs() > 0.003, "dragged along the wall: {plain_x}");
+        let (checked_x, checked_y) = shift(Some(10f64.to_radians()));
+        assert!(
+            checked_x.abs() < 1e-4 && checked_y.abs() < 1e-4,
+            "{checked_x} {checked_y}"
+        );
+    }
+
+    #[test]
+    fn a_points_surface_is_read_only_where_the_scan_runs_straight() {
+        // A straight run along (0.8, 0.6), a corner, and a point far off.
+        let mut pts: Vec<Point2> = (0..6)
+            .map(|i| Point2::new(0.08 * i as f64, 0.06 * i as f64))
+            .collect();
+        pts.push(Point2::new(0.4, 0.4));
+        pts.push(Point2::new(0.4, 1.0));
+        let s = surface_directions(&pts);
+        // Two neighbours either side are needed.
+        assert_eq!((s[0], s[1]), (None, None));
+        for k in [2, 3] {
+            let (dx, dy) = s[k].expect("straight");
+            assert!((dx - 0.8).abs() < 1e-12 && (dy - 0.6).abs() < 1e-12, "{k}");
+        }
+        // The run turns at point 6 (0.6 m along, 0.04 m off the line), and point 7 is
+        // 0.6 m from it: no surface.
+        assert_eq!((s[4], s[5], s[6], s[7]), (None, None, None, None));
     }
 
     /// The same rock face 3 cm farther, its hits taken with the plane 0.3 m above the ground
