@@ -211,6 +211,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.matcher.prior_translation_weight *= 100.0,
     },
     Variant {
+        name: "drop-closures-16",
+        what: "closures the optimised graph leaves more than 16 (squared Mahalanobis: 0.2 m at the closures' 5 cm) off are dropped and the graph optimised again",
+        apply: |c| c.mapper.drop_closures_beyond = Some(16.0),
+    },
+    Variant {
+        name: "drop-closures-9",
+        what: "drop-closures-16 at 9 (0.15 m at 5 cm)",
+        apply: |c| c.mapper.drop_closures_beyond = Some(9.0),
+    },
+    Variant {
         name: "surface-turn-10deg",
         what: "a scan point on a straight run of the scan not paired with a line cell whose line turns more than 10 deg from the run (a wall drawn at two offsets tilts its cells)",
         apply: |c| on_refinement(c, |n| n.max_surface_turn_rad = Some(10f64.to_radians())),

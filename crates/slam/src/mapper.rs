@@ -226,6 +226,10 @@ pub struct MapperConfig {
     /// ... the iterative solvers' steps after the first stopped after this many
     /// iterations (`None`: as the first).
     pub graph_later_cap: Option<usize>,
+    /// After an optimisation, loop closures the optimised graph still leaves this far off
+    /// (squared Mahalanobis error) are dropped from it and the graph optimised again
+    /// (`None`: every accepted closure stays).
+    pub drop_closures_beyond: Option<f64>,
 }
 
 /// Over a scan whose predicted turn exceeds `turn_rad`, the headings within
@@ -438,6 +442,7 @@ impl Default for MapperConfig {
             optimize_every_keyframes: 20,
             graph_iterations: 3,
             graph_later_cap: None,
+            drop_closures_beyond: None,
         }
     }
 }
@@ -553,6 +558,9 @@ pub struct Mapper {
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
+    /// Accepted closures dropped again as the optimised graph left them too far off
+    /// ([`MapperConfig::drop_closures_beyond`]).
+    pub closures_dropped: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
     /// Matches redone with the heading held to the gyro's because it had strayed from it
@@ -608,6 +616,7 @@ impl Mapper {
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
+            closures_dropped: 0,
             heading_holds: 0,
             heading_anchor_holds: 0,
             relocalise_searches: 0,
@@ -1169,6 +1178,16 @@ impl Mapper {
                 self.cfg.graph_iterations,
                 self.cfg.graph_later_cap.unwrap_or(usize::MAX),
             );
+            if let Some(limit) = self.cfg.drop_closures_beyond {
+                let dropped = self.graph.drop_robust_edges_beyond(limit);
+                if dropped > 0 {
+                    self.closures_dropped += dropped;
+                    self.graph.optimize_with_later_cap(
+                        self.cfg.graph_iterations,
+                        self.cfg.graph_later_cap.unwrap_or(usize::MAX),
+                    );
+                }
+            }
             if let Some((first, drawn)) = active {
                 // The active submaps' cells show those keyframes where they were: move them
                 // with the oldest one as a block, so tracking goes on in cells that agree

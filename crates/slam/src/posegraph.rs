@@ -228,6 +228,31 @@ pub(crate) fn add_block(m: &mut Block, d: &Block) {
 }
 
 impl PoseGraph {
+    /// The squared Mahalanobis error of `edge` at the nodes' poses now (no robust weight).
+    pub fn edge_error2(&self, edge: &Edge) -> f64 {
+        let (r, _, _) = residual(
+            &self.nodes[edge.from],
+            &self.nodes[edge.to],
+            &edge.measurement,
+        );
+        (0..3).map(|k| r[k] * r[k] * edge.information[k]).sum()
+    }
+
+    /// Drops the robust edges (loop closures) whose squared Mahalanobis error at the
+    /// nodes' poses now exceeds `limit`; returns how many went. After an optimisation these
+    /// are the closures the rest of the graph disagrees with.
+    pub fn drop_robust_edges_beyond(&mut self, limit: f64) -> usize {
+        let before = self.edges.len();
+        let keep: Vec<bool> = self
+            .edges
+            .iter()
+            .map(|e| !e.robust || self.edge_error2(e) <= limit)
+            .collect();
+        let mut keep = keep.into_iter();
+        self.edges.retain(|_| keep.next().unwrap_or(true));
+        before - self.edges.len()
+    }
+
     /// The total weighted squared error (robust edges Huber-weighted).
     pub fn chi2(&self) -> f64 {
         self.edges
@@ -814,6 +839,30 @@ mod tests {
                 "{solver:?}: DCS moved {moved_dcs:.3} m, Huber {moved:.3} m"
             );
         }
+    }
+
+    #[test]
+    fn a_closure_the_optimised_graph_disagrees_with_is_dropped_and_the_true_one_kept() {
+        let (_, mut graph) = closed_square();
+        let closure = *graph.edges.last().expect("the closure");
+        let mut good = graph.clone();
+        good.optimize(20);
+        // The true closure, once optimised, sits well within the limit.
+        assert_eq!(good.clone().drop_robust_edges_beyond(16.0), 0);
+        graph.edges.push(Edge {
+            to: 20,
+            measurement: Pose2::IDENTITY,
+            ..closure
+        });
+        graph.optimize(20);
+        let edges = graph.edges.len();
+        assert_eq!(graph.drop_robust_edges_beyond(16.0), 1);
+        assert_eq!(graph.edges.len(), edges - 1);
+        assert!(!graph.edges.iter().any(|e| e.to == 20 && e.robust));
+        assert!(graph.edges.contains(&closure));
+        graph.optimize(20);
+        let moved = max_error(&good.nodes, &graph.nodes);
+        assert!(moved < 0.01, "{moved}");
     }
 
     #[test]
