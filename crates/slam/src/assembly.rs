@@ -298,7 +298,8 @@ impl Assembly {
         let (w, h) = (g.width as u64, g.height as u64);
         // The submap's content box in its own cells, a cell wider on each side: a row's
         // samples outside it read zeros, so each row is cut to the stretch that can fall
-        // inside (the placed box's corners hold up to a third of its cells).
+        // inside (the placed box's corners hold half its cells for a square submap turned 45
+        // degrees).
         let Some((lo, hi)) = grid.content_bounds() else {
             return;
         };

@@ -558,9 +558,6 @@ pub struct Mapper {
     last_information: [[f64; 3]; 3],
     /// Accepted loop closures.
     pub closures: usize,
-    /// Accepted closures dropped again as the optimised graph left them too far off
-    /// ([`MapperConfig::drop_closures_beyond`]).
-    pub closures_dropped: usize,
     /// Matches redone with the heading held to the odometry's.
     pub heading_holds: usize,
     /// Matches redone with the heading held to the gyro's because it had strayed from it
@@ -616,7 +613,6 @@ impl Mapper {
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             closures: 0,
-            closures_dropped: 0,
             heading_holds: 0,
             heading_anchor_holds: 0,
             relocalise_searches: 0,
@@ -1174,19 +1170,15 @@ impl Mapper {
                 })
                 .flatten()
                 .map(|first| (first, self.graph.nodes[first..].to_vec()));
-            self.graph.optimize_with_later_cap(
+            let (steps, later_cap) = (
                 self.cfg.graph_iterations,
                 self.cfg.graph_later_cap.unwrap_or(usize::MAX),
             );
-            if let Some(limit) = self.cfg.drop_closures_beyond {
-                let dropped = self.graph.drop_robust_edges_beyond(limit);
-                if dropped > 0 {
-                    self.closures_dropped += dropped;
-                    self.graph.optimize_with_later_cap(
-                        self.cfg.graph_iterations,
-                        self.cfg.graph_later_cap.unwrap_or(usize::MAX),
-                    );
-                }
+            self.graph.optimize_with_later_cap(steps, later_cap);
+            if let Some(limit) = self.cfg.drop_closures_beyond
+                && self.graph.drop_robust_edges_beyond(limit) > 0
+            {
+                self.graph.optimize_with_later_cap(steps, later_cap);
             }
             if let Some((first, drawn)) = active {
                 // The active submaps' cells show those keyframes where they were: move them
