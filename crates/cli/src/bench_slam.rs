@@ -19,6 +19,7 @@ use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map,
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
 use realms_sim::{GroundTruth, World};
+use realms_slam::mapper::ClosureWeighting;
 use std::time::Instant;
 
 /// A named change to the rovers' SLAM setup, compared against the setup as it is.
@@ -221,6 +222,62 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.drop_closures_beyond = Some(9.0),
     },
     Variant {
+        name: "closure-weighting-2000",
+        what: "loop closures weighed by their match: along a direction the refined match's information is under 2,000, the closure's falls in proportion",
+        apply: |c| {
+            c.mapper.closure_weighting = Some(ClosureWeighting {
+                translation_reference: 2000.0,
+                heading_reference: None,
+            })
+        },
+    },
+    Variant {
+        name: "closure-weighting-8000",
+        what: "closure-weighting-2000 at 8,000",
+        apply: |c| {
+            c.mapper.closure_weighting = Some(ClosureWeighting {
+                translation_reference: 8000.0,
+                heading_reference: None,
+            })
+        },
+    },
+    Variant {
+        name: "closure-weighting-2000-heading",
+        what: "closure-weighting-2000, and the heading's information falls in proportion under 100,000",
+        apply: |c| {
+            c.mapper.closure_weighting = Some(ClosureWeighting {
+                translation_reference: 2000.0,
+                heading_reference: Some(1e5),
+            })
+        },
+    },
+    Variant {
+        name: "closure-min-information-500",
+        what: "loop closures whose refined match's weakest translation information is under 500 not taken",
+        apply: |c| c.mapper.closure_min_information = Some(500.0),
+    },
+    Variant {
+        name: "closure-min-information-800",
+        what: "loop closures whose refined match's weakest translation information is under 800 not taken",
+        apply: |c| c.mapper.closure_min_information = Some(800.0),
+    },
+    Variant {
+        name: "closure-min-information-1200",
+        what: "loop closures whose refined match's weakest translation information is under 1200 not taken",
+        apply: |c| c.mapper.closure_min_information = Some(1200.0),
+    },
+    Variant {
+        name: "closure-min-information-500-weighting-2000",
+        what: "closure-min-information-500 and closure-weighting-2000",
+        apply: |c| {
+            c.mapper.closure_min_information = Some(500.0);
+            c.mapper.closure_weighting = Some(ClosureWeighting {
+                translation_reference: 2000.0,
+                heading_reference: None,
+            })
+        },
+    },
+    Variant {
         name: "surface-turn-10deg",
         what: "a scan point on a straight run of the scan not paired with a line cell whose line turns more than 10 deg from the run (a wall drawn at two offsets tilts its cells)",
         apply: |c| on_refinement(c, |n| n.max_surface_turn_rad = Some(10f64.to_radians())),
@@ -310,6 +367,11 @@ struct Replay {
     lost: usize,
     /// Loop closures accepted.
     closures: usize,
+    /// ... of which this many were off the truth by more than [`WRONG_CLOSURE_M`] or
+    /// [`WRONG_CLOSURE_DEG`].
+    wrong_closures: usize,
+    /// Every verified closure match graded against the truth, as CSV, when asked for.
+    closures_csv: Option<String>,
     /// Simulated seconds of input and SLAM's wall seconds on them.
     sim_s: f64,
     wall_s: f64,
@@ -321,6 +383,47 @@ struct Replay {
     relief: Vec<(ReliefHop, Pose2)>,
     /// The final map graded against the truth, as the mission's report grades it.
     map: MapGrade,
+}
+
+/// An accepted closure farther than this from the truth's relative pose counts as wrong ...
+const WRONG_CLOSURE_M: f64 = 0.1;
+/// ... or turned more than this, degrees.
+const WRONG_CLOSURE_DEG: f64 = 1.0;
+
+/// The columns of a `--trajectories` closures file.
+const CLOSURES_HEADER: &str = "from_t_s,to_t_s,error_m,error_deg,along_weakest_m,search_score,rival_score,score,weakest_information,strongest_information,heading_information,within_drift,accepted";
+
+/// Each verified closure match of `mapper` against the truth: its error's length, its
+/// turn in degrees, and the error's part along the match's weakest direction. `truth_at`
+/// gives the true pose at a keyframe's time.
+fn closure_errors(
+    mapper: &realms_slam::mapper::Mapper,
+    truth_at: impl Fn(f64) -> Option<Pose2>,
+) -> Vec<(realms_slam::mapper::ClosureRecord, f64, f64, f64, f64, f64)> {
+    mapper
+        .closure_records()
+        .iter()
+        .filter_map(|r| {
+            let t0 = mapper.keyframe_time_s(r.edge.from)?;
+            let t1 = mapper.keyframe_time_s(r.edge.to)?;
+            let want = truth_at(t0)?.inverse() * truth_at(t1)?;
+            let d = r.edge.measurement.relative_to(&want);
+            // The error in the submap's frame, along the match's weakest direction.
+            let dx = r.edge.measurement.x_m - want.x_m;
+            let dy = r.edge.measurement.y_m - want.y_m;
+            let i = &r.information;
+            let (weakest, strongest, (ux, uy)) =
+                realms_slam::ndt::eigen_symmetric2(i[0][0], i[0][1], i[1][1]);
+            Some((
+                *r,
+                d.x_m.hypot(d.y_m),
+                d.yaw_rad.abs().to_degrees(),
+                (dx * ux + dy * uy).abs(),
+                weakest,
+                strongest,
+            ))
+        })
+        .collect()
 }
 
 /// The columns of a `--trajectories` file.
@@ -381,6 +484,8 @@ fn replay(
     let relief = relief_against_truth(mapping.relief_hops(), input);
     let path: Vec<_> = scans.iter().map(|(_, truth, _)| truth.position()).collect();
     let end = input.last().map_or(Time::ZERO, |c| c.t);
+    // As the rover does before its last map.
+    mapping.finish_map();
     let map = grade_map(&mapping.map(end), truth, &path);
     // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
@@ -388,6 +493,32 @@ fn replay(
         scans.get(k).filter(|s| s.0 == t).map(|s| s.1)
     };
     let trajectory = mapping.trajectory();
+    let graded = closure_errors(mapping.mapper(), |t| {
+        let k = scans.partition_point(|s| s.0 < t);
+        scans.get(k).filter(|s| (s.0 - t).abs() < 1e-6).map(|s| s.1)
+    });
+    let wrong_closures = graded
+        .iter()
+        .filter(|(r, m, deg, ..)| r.accepted && (*m > WRONG_CLOSURE_M || *deg > WRONG_CLOSURE_DEG))
+        .count();
+    let closures_csv = with_csv.then(|| {
+        let mut text = format!("{CLOSURES_HEADER}\n");
+        for (r, m, deg, along, weakest, strongest) in &graded {
+            let t = |n: usize| mapping.mapper().keyframe_time_s(n).unwrap_or(f64::NAN);
+            text += &format!(
+                "{:.3},{:.3},{m:.4},{deg:.3},{along:.4},{:.3},{:.3},{:.3},{weakest:.1},{strongest:.1},{:.1},{},{}\n",
+                t(r.edge.from),
+                t(r.edge.to),
+                r.search_score,
+                r.rival_score,
+                r.score,
+                r.information[2][2],
+                r.within_drift,
+                r.accepted
+            );
+        }
+        text
+    });
     let csv = with_csv.then(|| {
         let mut text = format!("{CSV_HEADER}\n");
         let mut finals = trajectory.iter().peekable();
@@ -433,6 +564,8 @@ fn replay(
         aligned_rms_m: aligned_rmse(&positions).unwrap_or(f64::NAN),
         lost,
         closures: mapping.mapper().closures,
+        wrong_closures,
+        closures_csv,
         sim_s,
         wall_s,
         scans: input
@@ -650,18 +783,24 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                 std::fs::write(&path, csv)
                     .with_context(|| format!("cannot write {}", path.display()))?;
             }
+            if let Some(csv) = &r.closures_csv {
+                let name = format!("seed{}-{}-{}-closures.csv", r.seed, r.rover, r.variant);
+                let path = dir.join(name);
+                std::fs::write(&path, csv)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+            }
         }
         println!("poses scan by scan: {}", dir.display());
     }
     println!(
-        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures | SLAM speed | scans per wall second (with the depth frames between them) | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right |"
+        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures (wrong) | SLAM speed | scans per wall second (with the depth frames between them) | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right |"
     );
     println!(
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for r in &all {
         println!(
-            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} | {:.0}x | {:.0} | {:.1} % ({}) | {:.1} % | {:.1} % |",
+            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} ({}) | {:.0}x | {:.0} | {:.1} % ({}) | {:.1} % | {:.1} % |",
             r.seed,
             r.rover,
             r.variant,
@@ -672,6 +811,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             r.last.heading_rmse_deg,
             r.lost,
             r.closures,
+            r.wrong_closures,
             r.sim_s / r.wall_s.max(1e-9),
             r.scans as f64 / r.wall_s.max(1e-9),
             100.0 * r.map.path_hazards_flagged,

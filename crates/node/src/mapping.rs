@@ -317,6 +317,12 @@ impl Mapping {
         &self.mapper
     }
 
+    /// Draws the map once more from the final trajectory, for the last map the rover
+    /// publishes (see [`Mapper::redraw_finished_submaps`]).
+    pub fn finish_map(&mut self) {
+        self.mapper.redraw_finished_submaps();
+    }
+
     /// Lidar returns dropped so far as hits on the floor.
     pub fn floor_hits(&self) -> u64 {
         self.floor_hits

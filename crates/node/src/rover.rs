@@ -320,8 +320,10 @@ impl Node for RoverNode {
 
     fn on_shutdown(&mut self, now: Time) {
         let (mapping, outbox) = (&mut self.mapping, &mut self.outbox);
-        self.cost_clock
-            .time(&mut self.slam_wall, || mapping.publish_map(now, outbox));
+        self.cost_clock.time(&mut self.slam_wall, || {
+            mapping.finish_map();
+            mapping.publish_map(now, outbox)
+        });
     }
 
     fn as_rover(&self) -> Option<&RoverNode> {

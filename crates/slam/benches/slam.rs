@@ -288,6 +288,7 @@ fn lapped_graph() -> PoseGraph {
             to: k + 1,
             measurement: measured,
             information: [400.0, 400.0, 2500.0],
+            information_axis_rad: 0.0,
             robust: false,
         });
         let to = k + 1;
@@ -297,6 +298,7 @@ fn lapped_graph() -> PoseGraph {
                 to,
                 measurement: truth[to - lap].inverse() * truth[to],
                 information: [400.0, 400.0, 2500.0],
+                information_axis_rad: 0.0,
                 robust: true,
             });
         }

@@ -524,7 +524,7 @@ fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) 
 
 /// The eigenvalues of the symmetric 2 x 2 matrix `[[a, b], [b, c]]`, smaller (at least 0)
 /// then larger, and the smaller one's unit axis.
-pub(crate) fn eigen_symmetric2(a: f64, b: f64, c: f64) -> (f64, f64, (f64, f64)) {
+pub fn eigen_symmetric2(a: f64, b: f64, c: f64) -> (f64, f64, (f64, f64)) {
     let half_trace = 0.5 * (a + c);
     let root = (0.25 * (a - c).powi(2) + b * b).sqrt();
     let (small, large) = ((half_trace - root).max(0.0), half_trace + root);

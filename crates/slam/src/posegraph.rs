@@ -24,6 +24,10 @@ pub struct Edge {
     pub measurement: Pose2,
     /// Information (inverse variance) of x, y and theta.
     pub information: [f64; 3],
+    /// The axes of the x and y information, turned this far from the measured pose's own
+    /// (0: along them). A match pinned firmly across a wall and loosely along it has
+    /// information along the wall's axes, not the robot's.
+    pub information_axis_rad: f64,
     /// Loop closures get a robust (Huber) loss; sequential edges do not.
     pub robust: bool,
 }
@@ -209,6 +213,24 @@ fn residual(xi: &Pose2, xj: &Pose2, z: &Pose2) -> ([f64; 3], Block, Block) {
     (e, a, b)
 }
 
+/// [`residual`] of edge `e` at the nodes' poses now, its x and y rows turned onto the axes
+/// of the edge's information.
+fn edge_residual(nodes: &[Pose2], e: &Edge) -> ([f64; 3], Block, Block) {
+    let (mut r, mut a, mut b) = residual(&nodes[e.from], &nodes[e.to], &e.measurement);
+    if e.information_axis_rad != 0.0 {
+        let (s, c) = e.information_axis_rad.sin_cos();
+        let turn = |u: f64, v: f64| (c * u + s * v, -s * u + c * v);
+        (r[0], r[1]) = turn(r[0], r[1]);
+        for m in [&mut a, &mut b] {
+            let [x, y, _] = m;
+            for (u, v) in x.iter_mut().zip(y.iter_mut()) {
+                (*u, *v) = turn(*u, *v);
+            }
+        }
+    }
+    (r, a, b)
+}
+
 fn at_w_b(a: &Block, w: &[f64; 3], b: &Block) -> Block {
     let mut out = [[0.0; 3]; 3];
     for (r, row) in out.iter_mut().enumerate() {
@@ -230,11 +252,7 @@ pub(crate) fn add_block(m: &mut Block, d: &Block) {
 impl PoseGraph {
     /// The squared Mahalanobis error of `edge` at the nodes' poses now (no robust weight).
     pub fn edge_error2(&self, edge: &Edge) -> f64 {
-        let (r, _, _) = residual(
-            &self.nodes[edge.from],
-            &self.nodes[edge.to],
-            &edge.measurement,
-        );
+        let (r, _, _) = edge_residual(&self.nodes, edge);
         (0..3).map(|k| r[k] * r[k] * edge.information[k]).sum()
     }
 
@@ -288,7 +306,7 @@ impl PoseGraph {
                 if e.from >= n || e.to >= n || e.from == e.to {
                     continue;
                 }
-                let (r, a, b) = residual(&self.nodes[e.from], &self.nodes[e.to], &e.measurement);
+                let (r, a, b) = edge_residual(&self.nodes, e);
                 let m2: f64 = (0..3).map(|k| r[k] * r[k] * e.information[k]).sum();
                 let scale = if e.robust { self.loss.weight(m2) } else { 1.0 };
                 let w = [
@@ -596,6 +614,7 @@ mod tests {
             to: from + 1,
             measurement: m,
             information: [100.0, 100.0, 400.0],
+            information_axis_rad: 0.0,
             robust: false,
         }
     }
@@ -619,6 +638,7 @@ mod tests {
             to: 9,
             measurement: Pose2::new(8.0, 0.0, 0.0),
             information: [400.0, 400.0, 2500.0],
+            information_axis_rad: 0.0,
             robust: true,
         });
         assert_eq!(graph.path_length_within(0, 10, 100.0, hop), Some(4.0));
@@ -683,6 +703,7 @@ mod tests {
             to: n - 1,
             measurement: truth[0].inverse() * truth[n - 1],
             information: [1000.0, 1000.0, 4000.0],
+            information_axis_rad: 0.0,
             robust: true,
         });
         (truth, graph)
@@ -719,6 +740,7 @@ mod tests {
                 to: 40,
                 measurement: Pose2::IDENTITY,
                 information: [1000.0, 1000.0, 4000.0],
+                information_axis_rad: 0.0,
                 robust: true,
             });
             g.optimize(20);
@@ -745,6 +767,7 @@ mod tests {
             to: 40,
             measurement: truth[0].inverse() * truth[40],
             information: [1000.0, 1000.0, 4000.0],
+            information_axis_rad: 0.0,
             robust: true,
         });
         (truth, graph)
@@ -869,6 +892,42 @@ mod tests {
         assert!((dcs.weight(45.0) - 0.04).abs() < 1e-12);
         // Huber at the same residual keeps 1 / sqrt(45), four times as much.
         assert!((RobustLoss::Huber.weight(45.0) - 45f64.sqrt().recip()).abs() < 1e-12);
+    }
+
+    /// Node 1 held loosely at (1, 0) by one edge and firmly along one axis at (2, 1) by
+    /// another: it goes to the firm edge along that axis only.
+    fn pinned_along(axis_rad: f64) -> Pose2 {
+        let mut graph = PoseGraph {
+            nodes: vec![Pose2::IDENTITY, Pose2::new(1.0, 0.0, 0.0)],
+            ..PoseGraph::default()
+        };
+        graph.edges.push(Edge {
+            information: [1.0, 1.0, 1.0],
+            ..odometry_edge(0, Pose2::new(1.0, 0.0, 0.0))
+        });
+        graph.edges.push(Edge {
+            measurement: Pose2::new(2.0, 1.0, 0.0),
+            information: [1e4, 0.0, 1.0],
+            information_axis_rad: axis_rad,
+            ..odometry_edge(0, Pose2::IDENTITY)
+        });
+        graph.optimize(5);
+        graph.nodes[1]
+    }
+
+    #[test]
+    fn an_edge_pins_only_along_its_information_axes() {
+        let along_x = pinned_along(0.0);
+        assert!((along_x.x_m - 2.0).abs() < 1e-3, "{along_x:?}");
+        assert!(along_x.y_m.abs() < 1e-3, "{along_x:?}");
+        let along_y = pinned_along(std::f64::consts::FRAC_PI_2);
+        assert!((along_y.x_m - 1.0).abs() < 1e-3, "{along_y:?}");
+        assert!((along_y.y_m - 1.0).abs() < 1e-3, "{along_y:?}");
+        // Turned 45 degrees the firm axis is (1, 1): the node lands on the line through
+        // (2, 1) across it.
+        let diagonal = pinned_along(std::f64::consts::FRAC_PI_4);
+        let across = (diagonal.x_m - 2.0 + diagonal.y_m - 1.0) / 2f64.sqrt();
+        assert!(across.abs() < 1e-3, "{diagonal:?}");
     }
 
     #[test]
