@@ -278,6 +278,26 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "redraw-bent-5cm",
+        what: "after each optimisation, finished submaps whose keyframes moved over 5 cm or 1 deg relative to their first drawn again from them",
+        apply: |c| {
+            c.mapper.redraw_bent_submaps = Some(realms_slam::mapper::SubmapBend {
+                translation_m: 0.05,
+                rotation_rad: 1f64.to_radians(),
+            })
+        },
+    },
+    Variant {
+        name: "redraw-bent-2cm",
+        what: "redraw-bent-5cm at 2 cm or 0.4 deg",
+        apply: |c| {
+            c.mapper.redraw_bent_submaps = Some(realms_slam::mapper::SubmapBend {
+                translation_m: 0.02,
+                rotation_rad: 0.4f64.to_radians(),
+            })
+        },
+    },
+    Variant {
         name: "surface-turn-10deg",
         what: "a scan point on a straight run of the scan not paired with a line cell whose line turns more than 10 deg from the run (a wall drawn at two offsets tilts its cells)",
         apply: |c| on_refinement(c, |n| n.max_surface_turn_rad = Some(10f64.to_radians())),

@@ -34,6 +34,16 @@ use crate::trajectory::StampedPose;
 use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Cell, Point2, Pose2};
 
+/// How far a finished submap's keyframes may move, relative to its first, before it is
+/// drawn again (see [`MapperConfig::redraw_bent_submaps`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SubmapBend {
+    /// Metres, any keyframe.
+    pub translation_m: f64,
+    /// Radians, any keyframe.
+    pub rotation_rad: f64,
+}
+
 /// A loop closure's information (x, y, heading) where its match pins the pose firmly.
 pub const CLOSURE_INFORMATION: [f64; 3] = [400.0, 400.0, 2500.0];
 
@@ -278,6 +288,11 @@ pub struct MapperConfig {
     /// Loop closures weighed by what their match pins (see [`ClosureWeighting`]); `None`:
     /// every closure weighs [`CLOSURE_INFORMATION`].
     pub closure_weighting: Option<ClosureWeighting>,
+    /// After each optimisation, finished submaps whose keyframes the graph moved this far
+    /// relative to their first are drawn again from them (`None`: only when asked, see
+    /// [`Mapper::redraw_finished_submaps`]). Closures are then searched against cells that
+    /// agree with the graph.
+    pub redraw_bent_submaps: Option<SubmapBend>,
     /// Loop closures whose refined match pins the position less firmly than this in some
     /// direction (the smaller eigenvalue of the match's translation information) are not
     /// taken (`None`: no such floor). See [`ClosureWeighting`] for what the weak ones were.
@@ -501,6 +516,7 @@ impl Default for MapperConfig {
             drop_closures_beyond: None,
             closure_weighting: None,
             closure_min_information: None,
+            redraw_bent_submaps: None,
         }
     }
 }
@@ -517,6 +533,8 @@ struct Submap {
     trimmed: bool,
     /// Its keyframes' hits per cell, for refining tracking matches; while it is active.
     hits: Option<NdtMap>,
+    /// Where each of its keyframes was drawn, relative to its first keyframe.
+    drawn: Vec<Pose2>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -732,6 +750,7 @@ impl Mapper {
         s.map
             .insert_with_rays(local.position(), &world, rays.as_deref());
         s.keyframes += 1;
+        s.drawn.push(local);
         if let Some(hits) = &mut s.hits {
             let heights = &self.point_heights;
             hits.insert_with_heights(
@@ -1211,6 +1230,7 @@ impl Mapper {
                 precomputed: None,
                 trimmed: false,
                 hits: self.cfg.ndt_refine.map(NdtMap::new),
+                drawn: Vec::new(),
             });
         }
         let active: Vec<usize> = (0..self.submaps.len())
@@ -1268,6 +1288,9 @@ impl Mapper {
                 // with it. Once their submaps are finished, the optimisation is free to bend
                 // them.
                 move_as_block(&mut self.graph.nodes[first..], &drawn);
+            }
+            if let Some(bend) = self.cfg.redraw_bent_submaps {
+                self.redraw_submaps_bent_beyond(bend);
             }
             // Where a stall began moves with the pose, into the optimised frame.
             self.odometry
@@ -1634,18 +1657,38 @@ impl Mapper {
     /// optimised pose). Costs one keyframe's tracing per keyframe kept: for a final map,
     /// not for every optimisation.
     pub fn redraw_finished_submaps(&mut self) {
+        self.redraw_submaps_bent_beyond(SubmapBend {
+            translation_m: -1.0,
+            rotation_rad: -1.0,
+        });
+    }
+
+    /// Draws again every finished submap whose keyframes the graph has moved, relative to
+    /// its first, farther than `bend` from where they were drawn.
+    fn redraw_submaps_bent_beyond(&mut self, bend: SubmapBend) {
         let f = self.cfg.frontend;
+        let mut redrawn = false;
         for s in 0..self.submaps.len() {
             let sub = &self.submaps[s];
             if !sub.finished || sub.trimmed || sub.keyframes == 0 {
                 continue;
             }
             let (first, n) = (sub.origin_node, sub.keyframes);
+            let origin = self.graph.nodes[first];
+            let bent = sub.drawn.iter().enumerate().any(|(k, drawn)| {
+                let d = (origin.inverse() * self.graph.nodes[first + k]).relative_to(drawn);
+                d.x_m.hypot(d.y_m) > bend.translation_m || d.yaw_rad.abs() > bend.rotation_rad
+            });
+            if !bent {
+                continue;
+            }
+            redrawn = true;
             let fresh = MultiResMap::new(f.resolution_m, f.levels).with_miss_rule(f.miss_rule);
             let old = std::mem::replace(&mut self.submaps[s].map, fresh);
             self.assembly.remove(s, old.finest());
             self.submaps[s].keyframes = 0;
             self.submaps[s].precomputed = None;
+            self.submaps[s].drawn.clear();
             for node in first..first + n {
                 let dense = match f.densify {
                     Some(d) => crate::frontend::densify(&self.keyframe_points[node], d),
@@ -1654,7 +1697,9 @@ impl Mapper {
                 self.insert(s, node, &dense);
             }
         }
-        self.sync_assembly();
+        if redrawn {
+            self.sync_assembly();
+        }
     }
 
     /// Optimises the graph to the end (ten Gauss-Newton steps).
@@ -1824,6 +1869,7 @@ mod tests {
                 precomputed: None,
                 trimmed: false,
                 hits: None,
+                drawn: vec![Pose2::IDENTITY],
             });
         }
         mapper.trim_submaps(1);
