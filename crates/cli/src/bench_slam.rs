@@ -10,11 +10,12 @@
 //! mission's own figure also counts drawing the planner's map).
 
 use crate::bench::{in_parallel, median};
+use crate::bench_slam_drift::{BAND_EDGES_M, Band, WINDOW_SCANS, drift_by_band};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LocalisationState, Message};
-use realms_core::{Pose2, RoverId, Time};
+use realms_core::{Point2, Pose2, RoverId, Time};
 use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
@@ -403,6 +404,8 @@ struct Replay {
     relief: Vec<(ReliefHop, Pose2)>,
     /// The final map graded against the truth, as the mission's report grades it.
     map: MapGrade,
+    /// The pose as tracked: its drift by distance to the arena's edge.
+    drift: [Band; 3],
 }
 
 /// An accepted closure farther than this from the truth's relative pose counts as wrong ...
@@ -462,6 +465,8 @@ fn replay(
     let mut mapping = Mapping::new(rover, cfg.clone());
     // Each scan's time, true pose and pose as tracked.
     let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
+    // ... and whether the rover was tracking then.
+    let mut tracking: Vec<bool> = Vec::new();
     // ... and its state, the closures accepted by then and the wheels' odometry as last
     // published (its own frame), for the CSV.
     let mut states: Vec<(LocalisationState, usize, Option<Pose2>)> = Vec::new();
@@ -489,6 +494,7 @@ fn replay(
             _ => c.t,
         };
         scans.push((stamp.as_secs_f64(), c.truth, m.pose()));
+        tracking.push(m.state() == LocalisationState::Tracking);
         if with_csv {
             while let Some((_, pose)) = next_odometry.filter(|(t, _)| *t <= c.t) {
                 wheels = Some(pose);
@@ -501,6 +507,21 @@ fn replay(
         was_lost = is_lost;
     });
     let wall_s = started.elapsed().as_secs_f64();
+    let arena = truth.lidar_obstacles.geometry();
+    let drift = drift_by_band(
+        &scans
+            .iter()
+            .zip(&tracking)
+            .map(|((_, truth, tracked), on)| (*truth, *tracked, *on))
+            .collect::<Vec<_>>(),
+        (
+            arena.origin,
+            Point2::new(
+                arena.origin.x_m + arena.width_m(),
+                arena.origin.y_m + arena.height_m(),
+            ),
+        ),
+    );
     let relief = relief_against_truth(mapping.relief_hops(), input);
     let path: Vec<_> = scans.iter().map(|(_, truth, _)| truth.position()).collect();
     let end = input.last().map_or(Time::ZERO, |c| c.t);
@@ -595,6 +616,7 @@ fn replay(
         csv,
         relief,
         map,
+        drift,
     }
 }
 
@@ -884,6 +906,38 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             median(fleet_speed),
             share(|m| (m.path_hazards_flagged, m.path_hazards)),
             share(|m| (m.hazard_correct, m.hazard_cells)),
+        );
+    }
+    println!();
+    println!(
+        "Tracking drift: the tracked motion over windows of {WINDOW_SCANS} scans against the true motion, by the rover's least distance to the arena's edge in the window (windows with an optimisation's jump or not tracking left out); position error as a share of the travel, heading error per metre, all rovers pooled"
+    );
+    println!();
+    println!(
+        "| variant | under {} m from the edge | {} to {} m | {} m and more |",
+        BAND_EDGES_M[0], BAND_EDGES_M[0], BAND_EDGES_M[1], BAND_EDGES_M[1]
+    );
+    println!("| --- | --- | --- | --- |");
+    for name in std::iter::once("baseline").chain(variants.iter().map(|v| v.name)) {
+        let mut pooled = [Band::default(); 3];
+        for r in all.iter().filter(|r| r.variant == name) {
+            for (p, b) in pooled.iter_mut().zip(&r.drift) {
+                p.add(b);
+            }
+        }
+        let cell = |b: &Band| {
+            format!(
+                "{:.2} %, {:.3} deg/m ({:.0} m)",
+                100.0 * b.position_share(),
+                b.heading_deg_per_m(),
+                b.travel_m
+            )
+        };
+        println!(
+            "| {name} | {} | {} | {} |",
+            cell(&pooled[0]),
+            cell(&pooled[1]),
+            cell(&pooled[2])
         );
     }
     if all.iter().any(|r| !r.relief.is_empty()) {
