@@ -10,6 +10,7 @@
 //! mission's own figure also counts drawing the planner's map).
 
 use crate::bench::{in_parallel, median};
+use crate::bench_slam_closures;
 use crate::bench_slam_drift::{BAND_EDGES_M, Band, WINDOW_SCANS, drift_by_band};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
@@ -388,8 +389,8 @@ struct Replay {
     lost: usize,
     /// Loop closures accepted.
     closures: usize,
-    /// ... of which this many were off the truth by more than [`WRONG_CLOSURE_M`] or
-    /// [`WRONG_CLOSURE_DEG`].
+    /// ... of which this many were off the truth by more than
+    /// [`bench_slam_closures::WRONG_CLOSURE_M`] or [`bench_slam_closures::WRONG_CLOSURE_DEG`].
     wrong_closures: usize,
     /// Every verified closure match graded against the truth, as CSV, when asked for.
     closures_csv: Option<String>,
@@ -406,47 +407,6 @@ struct Replay {
     map: MapGrade,
     /// The pose as tracked: its drift by distance to the arena's edge.
     drift: [Band; 3],
-}
-
-/// An accepted closure farther than this from the truth's relative pose counts as wrong ...
-const WRONG_CLOSURE_M: f64 = 0.1;
-/// ... or turned more than this, degrees.
-const WRONG_CLOSURE_DEG: f64 = 1.0;
-
-/// The columns of a `--trajectories` closures file.
-const CLOSURES_HEADER: &str = "from_t_s,to_t_s,error_m,error_deg,along_weakest_m,search_score,rival_score,score,weakest_information,strongest_information,heading_information,within_drift,accepted";
-
-/// Each verified closure match of `mapper` against the truth: its error's length, its
-/// turn in degrees, and the error's part along the match's weakest direction. `truth_at`
-/// gives the true pose at a keyframe's time.
-fn closure_errors(
-    mapper: &realms_slam::mapper::Mapper,
-    truth_at: impl Fn(f64) -> Option<Pose2>,
-) -> Vec<(realms_slam::mapper::ClosureRecord, f64, f64, f64, f64, f64)> {
-    mapper
-        .closure_records()
-        .iter()
-        .filter_map(|r| {
-            let t0 = mapper.keyframe_time_s(r.edge.from)?;
-            let t1 = mapper.keyframe_time_s(r.edge.to)?;
-            let want = truth_at(t0)?.inverse() * truth_at(t1)?;
-            let d = r.edge.measurement.relative_to(&want);
-            // The error in the submap's frame, along the match's weakest direction.
-            let dx = r.edge.measurement.x_m - want.x_m;
-            let dy = r.edge.measurement.y_m - want.y_m;
-            let i = &r.information;
-            let (weakest, strongest, (ux, uy)) =
-                realms_slam::ndt::eigen_symmetric2(i[0][0], i[0][1], i[1][1]);
-            Some((
-                *r,
-                d.x_m.hypot(d.y_m),
-                d.yaw_rad.abs().to_degrees(),
-                (dx * ux + dy * uy).abs(),
-                weakest,
-                strongest,
-            ))
-        })
-        .collect()
 }
 
 /// The columns of a `--trajectories` file.
@@ -534,32 +494,12 @@ fn replay(
         scans.get(k).filter(|s| s.0 == t).map(|s| s.1)
     };
     let trajectory = mapping.trajectory();
-    let graded = closure_errors(mapping.mapper(), |t| {
+    let graded = bench_slam_closures::grade_all(mapping.mapper(), |t| {
         let k = scans.partition_point(|s| s.0 < t);
         scans.get(k).filter(|s| (s.0 - t).abs() < 1e-6).map(|s| s.1)
     });
-    let wrong_closures = graded
-        .iter()
-        .filter(|(r, m, deg, ..)| r.accepted && (*m > WRONG_CLOSURE_M || *deg > WRONG_CLOSURE_DEG))
-        .count();
-    let closures_csv = with_csv.then(|| {
-        let mut text = format!("{CLOSURES_HEADER}\n");
-        for (r, m, deg, along, weakest, strongest) in &graded {
-            let t = |n: usize| mapping.mapper().keyframe_time_s(n).unwrap_or(f64::NAN);
-            text += &format!(
-                "{:.3},{:.3},{m:.4},{deg:.3},{along:.4},{:.3},{:.3},{:.3},{weakest:.1},{strongest:.1},{:.1},{},{}\n",
-                t(r.edge.from),
-                t(r.edge.to),
-                r.search_score,
-                r.rival_score,
-                r.score,
-                r.information[2][2],
-                r.within_drift,
-                r.accepted
-            );
-        }
-        text
-    });
+    let wrong_closures = graded.iter().filter(|g| g.accepted_wrong()).count();
+    let closures_csv = with_csv.then(|| bench_slam_closures::csv(&graded));
     let csv = with_csv.then(|| {
         let mut text = format!("{CSV_HEADER}\n");
         let mut finals = trajectory.iter().peekable();

@@ -14,6 +14,7 @@ mod bench_merge_rovers;
 mod bench_nav;
 mod bench_net;
 mod bench_slam;
+mod bench_slam_closures;
 mod bench_slam_drift;
 mod bench_slip;
 mod cli;
