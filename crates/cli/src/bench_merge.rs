@@ -310,6 +310,22 @@ fn evaluate(
     eprintln!(
         "  true heading {off_peak:.1} deg from the nearest direction peak (ratio {ratio:.2})"
     );
+    // How far the truth and the estimate lie from laying a long wall of each map parallel.
+    let wall_offset = |p: &realms_core::Pose2| {
+        realms_merge::lines::parallel_offset_rad(&a.walls, &b.walls, p.yaw_rad)
+            .map_or("-".to_owned(), |d| format!("{:.2}", d.to_degrees()))
+    };
+    eprintln!(
+        "  walls: {} in the first map (longest {:.1} m), {} in the second (longest {:.1} m); parallel within {} deg at the truth, {} deg at the estimate",
+        a.walls.len(),
+        a.walls.first().map_or(0.0, |w| w.length_m),
+        b.walls.len(),
+        b.walls.first().map_or(0.0, |w| w.length_m),
+        wall_offset(&truth_grid),
+        est.a_from_b
+            .as_ref()
+            .map_or("-".to_owned(), |p| wall_offset(&to_grid(p))),
+    );
     let t = at_truth;
     let close = realms_merge::verify::closeness(&a, &b, &truth_grid);
     eprintln!(
@@ -499,6 +515,12 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 known_start,
             };
             (judging, Params::default())
+        };
+        let params = Params {
+            wall_pin_rad: args
+                .wall_pin_deg
+                .map_or(params.wall_pin_rad, f64::to_radians),
+            ..params
         };
         for (o, &overlap_pct) in overlaps.iter().enumerate() {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(

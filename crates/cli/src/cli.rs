@@ -316,6 +316,11 @@ pub struct BenchMergeArgs {
     /// Write every generated pair here as PNG images (for looking at the cases).
     #[arg(long)]
     pub dump: Option<PathBuf>,
+    /// Walls of the two maps laid parallel within this many degrees hold the heading
+    /// (`Params::wall_pin_rad`; 0 turns the rule off, for comparison). Default: the
+    /// merge's own setting for the kind.
+    #[arg(long)]
+    pub wall_pin_deg: Option<f64>,
 }
 
 /// `realms bench net-relay`.

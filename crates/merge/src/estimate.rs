@@ -410,6 +410,9 @@ const FINE_MUCH_BETTER_Z: f64 = -5.0;
 const FINE_MUCH_BETTER_REACH: f64 = 2.0;
 /// Restarts that fit clearly more closely replace the pose at most this many times.
 const FINE_MAX_HOPS: usize = 3;
+/// The heading the walls give ([`held_by_walls`]) is taken only where the pose keeps this
+/// share of its verified score at it.
+const WALL_HELD_SCORE_SHARE: f64 = 0.9;
 
 /// Among the verified poses near the chosen one (`chosen`, an index into `verified`) that
 /// are as consistent and verify nearly as well, the one whose surfaces lie closest on the
@@ -665,6 +668,14 @@ fn run(
         })
         .collect();
     let (overlap, settled_pose) = settle_on_surfaces(a, b, &best_pose, &evidence, params);
+    // The maps' long walls may pin the heading more surely than the overlap can: then the
+    // pose takes their heading, and neither the sharpness nor the precision check turns it.
+    let held = held_by_walls(a, b, &settled_pose, &evidence, params);
+    let heading_held = held.is_some();
+    let (overlap, settled_pose, sharpness_at) = match held {
+        Some((overlap, pose, e)) => (overlap, pose, (pose, e)),
+        None => (overlap, settled_pose, (best_pose, evidence)),
+    };
     // A rival the maps' own surfaces, aligned at both poses, fit clearly worse than the
     // best is none (`Params::rival_worse_z`).
     // (Worked out once per pose, and only for those that would otherwise refuse the merge.)
@@ -703,11 +714,12 @@ fn run(
     let sharpness = verify::sharpness(
         a,
         b,
-        &best_pose,
-        &evidence,
+        &sharpness_at.0,
+        &sharpness_at.1,
         params.conflict_weight,
         params.sharpness_shift_m,
         params.sharpness_min_turn_rad,
+        heading_held,
     );
     let confidence =
         (agreement * (1.0 - ratio) * support * (sharpness / 0.5).min(1.0)).clamp(0.0, 1.0);
@@ -715,7 +727,16 @@ fn run(
     let precise_cell = std::cell::OnceCell::new();
     let precise = || {
         *precise_cell.get_or_init(|| {
-            precision_on_surfaces(a, b, &overlap, settled_pose, &best_pose, &evidence, params)
+            precision_on_surfaces(
+                a,
+                b,
+                &overlap,
+                settled_pose,
+                &sharpness_at.0,
+                &evidence,
+                params,
+                heading_held,
+            )
         })
     };
     // Worked out only for a pose every cheaper check has let through, and only with no
@@ -880,9 +901,59 @@ enum Imprecision {
     CloserOutOfReach(Pose2, fine::Comparison),
 }
 
+/// Where the maps' long walls lie parallel within [`Params::wall_pin_rad`] at `settled`
+/// ([`crate::lines`]): the pose turned about the overlap's centre to lay them exactly
+/// parallel and refitted on the surfaces at that heading, with its overlap and verified
+/// evidence. `None` where the walls say nothing, or where their heading loses more than
+/// [`WALL_HELD_SCORE_SHARE`] of the verified score: walls that are not the same or
+/// parallel ones in the hall.
+fn held_by_walls(
+    a: &Prepared,
+    b: &Prepared,
+    settled: &Pose2,
+    evidence: &Evidence,
+    params: &Params,
+) -> Option<(fine::Overlap, Pose2, Evidence)> {
+    if params.wall_pin_rad <= 0.0 {
+        return None;
+    }
+    let turn = crate::lines::turn_to_parallel_rad(
+        &a.walls,
+        &b.walls,
+        settled.yaw_rad,
+        params.wall_pin_rad,
+    )?;
+    // Turned about the overlap's centre or either end, whichever keeps the most: what pins
+    // the position may lie at one end of a band.
+    let (overlap, pose, held) = [
+        evidence.overlap_centre,
+        evidence.overlap_ends[0],
+        evidence.overlap_ends[1],
+    ]
+    .into_iter()
+    .map(|pivot| {
+        let turned = verify::turned_about(settled, pivot, turn);
+        let overlap = fine::Overlap::at(&a.fine, &b.fine, &turned, FINE_MARGIN_M);
+        let fit = fine::align_at_heading(&a.fine, &b.fine, &overlap, turned);
+        let pose = if fit.pairs >= FINE_MIN_PAIRS
+            && within_reach(&fit.pose, &turned, evidence, params.fine_reach_m, 1.0)
+        {
+            fit.pose
+        } else {
+            turned
+        };
+        let held = verify::verify(a, b, &pose, params.conflict_weight, On::Refine);
+        (overlap, pose, held)
+    })
+    .max_by(|x, y| x.2.score.total_cmp(&y.2.score))?;
+    (held.score >= WALL_HELD_SCORE_SHARE * evidence.score).then_some((overlap, pose, held))
+}
+
 /// The precision check on the surfaces ([`fine::nearby`]) from the settled pose: a restart
 /// that fits clearly more closely, within reach, takes its place (at most
-/// [`FINE_MAX_HOPS`] times); the pose it ends at, and why it is imprecise if it is.
+/// [`FINE_MAX_HOPS`] times); the pose it ends at, and why it is imprecise if it is. With
+/// `heading_held` the restarts keep the heading.
+#[allow(clippy::too_many_arguments)]
 fn precision_on_surfaces(
     a: &Prepared,
     b: &Prepared,
@@ -891,6 +962,7 @@ fn precision_on_surfaces(
     best: &Pose2,
     evidence: &Evidence,
     params: &Params,
+    heading_held: bool,
 ) -> (Pose2, Option<Imprecision>) {
     if !params.check_precision {
         return (settled, None);
@@ -905,6 +977,7 @@ fn precision_on_surfaces(
             evidence.overlap_centre,
             evidence.overlap_ends,
             &params.precision,
+            heading_held,
         ) {
             fine::Nearby::Alone => return (pose, None),
             fine::Nearby::Better(p, c)

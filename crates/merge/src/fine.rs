@@ -307,6 +307,23 @@ const SETTLED_TURN_RAD: f64 = 1e-4;
 /// `start`: Gauss-Newton on the distances along the normal of the point each is paired
 /// with, Huber-weighted beyond half a cell.
 pub fn align(a: &Surfaces, b: &Surfaces, overlap: &Overlap, start: Pose2) -> FineFit {
+    align_with(a, b, overlap, start, true)
+}
+
+/// [`align`] with the heading held at `start`'s: where the maps' walls have pinned it more
+/// surely than the overlap can ([`crate::lines`]).
+pub fn align_at_heading(a: &Surfaces, b: &Surfaces, overlap: &Overlap, start: Pose2) -> FineFit {
+    align_with(a, b, overlap, start, false)
+}
+
+/// [`align`], turning the pose only if `fit_heading`.
+fn align_with(
+    a: &Surfaces,
+    b: &Surfaces,
+    overlap: &Overlap,
+    start: Pose2,
+    fit_heading: bool,
+) -> FineFit {
     let cell_m = a.cell_m.max(b.cell_m);
     let huber = 0.5 * cell_m;
     // Turns are taken about the overlap's centre (both maps' points in it, in the first
@@ -335,7 +352,13 @@ pub fn align(a: &Surfaces, b: &Surfaces, overlap: &Overlap, start: Pose2) -> Fin
             if let Some(pair @ (m, _, n)) = pair {
                 let r = residual(pair);
                 let (ux, uy) = ((m.x_m - pivot.x_m) / lever, (m.y_m - pivot.y_m) / lever);
-                let jac = [n[0], n[1], n[1] * ux - n[0] * uy];
+                // Held, the heading has no column: its eigenvalue is 0 and it never steps.
+                let turn = if fit_heading {
+                    n[1] * ux - n[0] * uy
+                } else {
+                    0.0
+                };
+                let jac = [n[0], n[1], turn];
                 let w = if r.abs() <= huber {
                     1.0
                 } else {
@@ -548,7 +571,9 @@ pub enum Nearby {
 /// Fits restarted from poses around `best` (shifted, turned about the overlap's `centre`,
 /// swung about either of its `ends`; grid-local in the second map): the first that settles
 /// apart from `best` and fits clearly more closely, else the first that fits about as
-/// closely, by `rule`.
+/// closely, by `rule`. With `heading_held`, the restarts are shifts only and keep `best`'s
+/// heading ([`align_at_heading`]).
+#[allow(clippy::too_many_arguments)]
 pub fn nearby(
     a: &Surfaces,
     b: &Surfaces,
@@ -557,6 +582,7 @@ pub fn nearby(
     centre: Point2,
     ends: [Point2; 2],
     rule: &RivalRule,
+    heading_held: bool,
 ) -> Nearby {
     let mut probes = Vec::new();
     for shift in PROBE_SHIFTS_M {
@@ -569,21 +595,23 @@ pub fn nearby(
             ));
         }
     }
-    for turn in PROBE_TURNS_RAD {
-        probes.push(crate::verify::turned_about(best, centre, turn));
-        probes.push(crate::verify::turned_about(best, centre, -turn));
-    }
-    let swing = (PROBE_SWING_M / ends[0].distance_m(ends[1]).max(1.0)).min(0.1);
-    for pivot in ends {
-        probes.push(crate::verify::turned_about(best, pivot, swing));
-        probes.push(crate::verify::turned_about(best, pivot, -swing));
+    if !heading_held {
+        for turn in PROBE_TURNS_RAD {
+            probes.push(crate::verify::turned_about(best, centre, turn));
+            probes.push(crate::verify::turned_about(best, centre, -turn));
+        }
+        let swing = (PROBE_SWING_M / ends[0].distance_m(ends[1]).max(1.0)).min(0.1);
+        for pivot in ends {
+            probes.push(crate::verify::turned_about(best, pivot, swing));
+            probes.push(crate::verify::turned_about(best, pivot, -swing));
+        }
     }
     let here = best.transform_point(centre);
     // Where a restart settles needs fewer points than comparing two poses does.
     let thinned = overlap.thinned(PROBE_FIT_POINTS);
     let mut rival = None;
     for probe in probes {
-        let p = align(a, b, &thinned, probe).pose;
+        let p = align_with(a, b, &thinned, probe, !heading_held).pose;
         let apart = p.transform_point(centre).distance_m(here) > rule.apart_m
             || realms_core::geometry::normalize_angle_rad(p.yaw_rad - best.yaw_rad).abs()
                 > rule.apart_rad;
@@ -702,7 +730,7 @@ mod tests {
         };
         let ends = [Point2::new(1.0, 4.0), Point2::new(9.0, 4.0)];
         let c = Point2::new(5.0, 4.0);
-        let found = nearby(&a, &b, &overlap, &fit.pose, c, ends, &rule);
+        let found = nearby(&a, &b, &overlap, &fit.pose, c, ends, &rule, false);
         assert!(matches!(found, Nearby::Alone), "{found:?}");
     }
 
@@ -738,7 +766,7 @@ mod tests {
         );
         let overlap = Overlap::at(&bare.0, &bare.1, &truth, 0.5);
         let fit = align(&bare.0, &bare.1, &overlap, truth);
-        let found = nearby(&bare.0, &bare.1, &overlap, &fit.pose, c, ends, &rule);
+        let found = nearby(&bare.0, &bare.1, &overlap, &fit.pose, c, ends, &rule, false);
         let Nearby::Rival(p, comparison) = found else {
             panic!("a corridor's walls slide along themselves: {found:?}");
         };
@@ -755,7 +783,9 @@ mod tests {
         );
         let overlap = Overlap::at(&pinned.0, &pinned.1, &truth, 0.5);
         let fit = align(&pinned.0, &pinned.1, &overlap, truth);
-        let found = nearby(&pinned.0, &pinned.1, &overlap, &fit.pose, c, ends, &rule);
+        let found = nearby(
+            &pinned.0, &pinned.1, &overlap, &fit.pose, c, ends, &rule, false,
+        );
         assert!(matches!(found, Nearby::Alone), "{found:?}");
     }
 

@@ -20,6 +20,7 @@ pub mod estimate;
 pub mod fine;
 pub mod io;
 pub mod level;
+pub mod lines;
 pub mod map;
 pub mod prepare;
 pub mod rotation;

@@ -88,6 +88,12 @@ pub struct Params {
     pub sharpness_min_turn_rad: f64,
     /// Refuse below this sharpness ([`crate::verify::sharpness`]).
     pub min_sharpness: f64,
+    /// Walls at least this long count in [`crate::lines`], metres.
+    pub wall_min_length_m: f64,
+    /// A long wall of each map lying parallel within this much at the pose pins its
+    /// heading: the sharpness check then leaves the turns out ([`crate::lines`]), radians.
+    /// 0 turns the rule off.
+    pub wall_pin_rad: f64,
     /// The precision check: a fit on the surfaces at the maps' own resolution
     /// ([`crate::fine::nearby`]), restarted around the best, that settles apart from it and
     /// fits about as closely refuses the merge as imprecise; one that fits clearly more
@@ -194,6 +200,8 @@ impl Default for Params {
             sharpness_shift_m: 0.3,
             sharpness_min_turn_rad: 3f64.to_radians(),
             min_sharpness: 0.25,
+            wall_min_length_m: 6.0,
+            wall_pin_rad: 1.5f64.to_radians(),
             min_confidence: 0.3,
             min_off_two_walls: 0.07,
             rival_share: 0.2,
@@ -276,6 +284,8 @@ pub struct Prepared {
     pub known_points: Vec<Point2>,
     /// Line directions of the structure.
     pub directions: Directions,
+    /// The long straight walls of the refinement level, longest first.
+    pub walls: Vec<crate::lines::Wall>,
     /// Centre of the known cells, grid-local metres.
     pub centroid: Point2,
     /// Pose of the grid-local frame in the map frame.
@@ -354,6 +364,7 @@ impl Prepared {
             refine_points,
             fine,
             directions: Directions::of(&refine),
+            walls: crate::lines::long_walls(&refine, params.wall_min_length_m),
             centroid: map.known_centroid_in_grid(),
             frame_from_grid: map.frame_from_grid(),
             fields: std::cell::OnceCell::new(),

@@ -862,6 +862,10 @@ const FAR_SHIFT_DISCOUNT: f64 = 0.25;
 /// what the near moves keep and [`FAR_SHIFT_DISCOUNT`] less what the far ones keep: with
 /// the merge's 0.25 threshold, a pose whose far moves keep at most half its score is
 /// pinned.
+///
+/// With `heading_held` the turns are left out: the maps' long walls have pinned the
+/// heading ([`crate::lines`]), more surely than the overlap can.
+#[allow(clippy::too_many_arguments)]
 pub fn sharpness(
     a: &Prepared,
     b: &Prepared,
@@ -870,6 +874,7 @@ pub fn sharpness(
     conflict_weight: f64,
     shift_m: f64,
     min_turn_rad: f64,
+    heading_held: bool,
 ) -> f64 {
     if evidence.score <= 0.0 {
         return 0.0;
@@ -899,11 +904,15 @@ pub fn sharpness(
         evidence.overlap_ends[0],
         evidence.overlap_ends[1],
     ];
-    let turned_kept = kept(
-        &mut pivots
-            .into_iter()
-            .flat_map(|c| [turn_rad, -turn_rad].map(|t| turned_about(a_from_b, c, t))),
-    );
+    let turned_kept = if heading_held {
+        0.0
+    } else {
+        kept(
+            &mut pivots
+                .into_iter()
+                .flat_map(|c| [turn_rad, -turn_rad].map(|t| turned_about(a_from_b, c, t))),
+        )
+    };
     let near = 1.0 - kept(&mut shifted(shift_m));
     // Already sharp enough for any threshold up to a half: the far moves cannot matter.
     let shift_sharpness = if near >= 0.5 {
@@ -1040,6 +1049,7 @@ mod tests {
             params.conflict_weight,
             params.sharpness_shift_m,
             params.sharpness_min_turn_rad,
+            false,
         )
     }
 
