@@ -465,6 +465,9 @@ fn eigen_symmetric3(m: &[[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
 
 /// [`compare`] finds no difference between poses that share fewer points than this.
 const MIN_COMMON_POINTS: usize = 30;
+/// ... and two shifts at one heading fewer than this among the points the shift moves
+/// across their surfaces ([`moved_across`]): each of those speaks to the shift.
+const MIN_MOVED_ACROSS_POINTS: usize = 10;
 
 /// Two poses compared point by point.
 #[derive(Clone, Copy, Debug)]
@@ -506,12 +509,17 @@ pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pos
     // only the points the shift moves across their surface are compared. A turn moves the
     // short wall pieces at a band's ends mostly along themselves too, yet their turning is
     // what tells it: there every point counts.
-    let informative = if realms_core::geometry::normalize_angle_rad(q.yaw_rad - p.yaw_rad).abs()
-        < SAME_HEADING_RAD
-    {
+    let shifted =
+        realms_core::geometry::normalize_angle_rad(q.yaw_rad - p.yaw_rad).abs() < SAME_HEADING_RAD;
+    let informative = if shifted {
         moved_across(a, b, overlap, p, q)
     } else {
         vec![true; cp.len()]
+    };
+    let min_common = if shifted {
+        MIN_MOVED_ACROSS_POINTS
+    } else {
+        MIN_COMMON_POINTS
     };
     let (mut n, mut sum_p, mut sum, mut sum2) = (0usize, 0.0, 0.0, 0.0);
     for ((x, y), _) in cp.iter().zip(&cq).zip(&informative).filter(|(_, i)| **i) {
@@ -527,7 +535,7 @@ pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pos
     let mean = sum / nf;
     // Too few points in common is no evidence either way; and differences below a
     // thousandth of a cell squared are rounding.
-    let z = if n < MIN_COMMON_POINTS {
+    let z = if n < min_common {
         0.0
     } else {
         let var = (sum2 - nf * mean * mean).max(0.0) / (nf - 1.0);
