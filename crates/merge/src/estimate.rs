@@ -8,7 +8,8 @@
 //! 2. the global search ([`crate::search`]) over all translations at those headings on the
 //!    coarse level, keeping the best few distinct hypotheses;
 //! 3. on large maps (searched on a level twice as coarse) each also searched again on the
-//!    search level in a small window, both kept;
+//!    search level in a small window, both kept; with no prior, the poses the landmarks vote
+//!    for ([`crate::constellation`]) screened beside them;
 //! 4. each refined and verified on the fine level ([`crate::verify`]);
 //! 5. the best verified hypothesis is the highest scoring consistent one (no landmarks on
 //!    open ground), unless another consistent one explains what it explains and more of the
@@ -384,6 +385,10 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// The heading group of the landmarks' proposals: none of the search's, so they go on only
+/// among the best of the rest.
+const LANDMARK_GROUP: usize = usize::MAX;
+
 /// The share of the chosen pose's verified score a neighbour needs to be weighed against it
 /// in [`settle_among_neighbours`].
 const SETTLE_SCORE_SHARE: f64 = 0.9;
@@ -586,6 +591,35 @@ fn run(
         .zip(&screened)
         .map(|((_, h), (_, _, score))| (to_frames(&h.fixed_from_moving), h.score, *score))
         .collect();
+    // With no prior, the landmarks propose poses of their own
+    // ([`crate::constellation`]): where the walls outscore a band's few rocks in the search,
+    // the rocks still agree on one translation. Screened like the search's, they compete
+    // for refinement with its best.
+    if window.is_none() && params.landmark_hypotheses > 0 {
+        let yaws: Vec<f64> = groups
+            .iter()
+            .filter_map(|g| g.get(g.len() / 2))
+            .map(|&yaw| {
+                crate::lines::turn_to_parallel_rad(
+                    &a.walls,
+                    &b.walls,
+                    yaw,
+                    params.peak_halfwidth_rad,
+                )
+                .map_or(yaw, |turn| yaw + turn)
+            })
+            .collect();
+        let proposed = crate::constellation::hypotheses(
+            &a.landmarks,
+            &b.landmarks,
+            &yaws,
+            params.landmark_hypotheses,
+        );
+        for p in proposed {
+            let score = verify::score(a, b, &p, params.conflict_weight, On::Search);
+            screened.push((LANDMARK_GROUP, p, score));
+        }
+    }
     screened.sort_by(|x, y| y.2.total_cmp(&x.2));
     // The best of every heading group goes on (so that a true heading outscored by walls
     // laid over walls at another heading is still verified, and seen as a rival), then the

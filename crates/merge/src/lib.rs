@@ -10,12 +10,15 @@
 //! - [`synth`]: cases with a known answer cut from a source map, for tests and benchmarks.
 //!
 //! Internals, public for benchmarks and curious readers: [`level`] (maps reduced for
-//! matching), [`rotation`] (heading candidates), [`search`] (global branch and bound),
-//! [`verify`] (refinement and verification), [`prepare`] (per-map precomputation).
+//! matching), [`rotation`] (heading candidates), [`lines`] (long walls, and the heading they
+//! hold), [`search`] (global branch and bound), [`constellation`] (poses the landmarks vote
+//! for), [`verify`] (refinement and verification), [`fine`] (the sub-cell fit),
+//! [`prepare`] (per-map precomputation).
 //!
 //! Nothing here reads a clock; randomness only in [`synth`], from the caller's generator.
 
 pub mod compose;
+pub mod constellation;
 pub mod estimate;
 pub mod fine;
 pub mod io;

@@ -88,6 +88,9 @@ pub struct Params {
     pub sharpness_min_turn_rad: f64,
     /// Refuse below this sharpness ([`crate::verify::sharpness`]).
     pub min_sharpness: f64,
+    /// With no prior, at most this many poses the landmarks vote for
+    /// ([`crate::constellation`]) are refined and verified beside the search's; 0: none.
+    pub landmark_hypotheses: usize,
     /// Walls at least this long count in [`crate::lines`], metres.
     pub wall_min_length_m: f64,
     /// A long wall of each map lying parallel within this much at the pose pins its
@@ -200,6 +203,7 @@ impl Default for Params {
             sharpness_shift_m: 0.3,
             sharpness_min_turn_rad: 3f64.to_radians(),
             min_sharpness: 0.25,
+            landmark_hypotheses: 4,
             wall_min_length_m: 6.0,
             wall_pin_rad: 1.5f64.to_radians(),
             min_confidence: 0.3,
@@ -286,6 +290,8 @@ pub struct Prepared {
     pub directions: Directions,
     /// The long straight walls of the refinement level, longest first.
     pub walls: Vec<crate::lines::Wall>,
+    /// The landmarks of the refinement level ([`crate::constellation`]).
+    pub landmarks: Vec<crate::constellation::Landmark>,
     /// Centre of the known cells, grid-local metres.
     pub centroid: Point2,
     /// Pose of the grid-local frame in the map frame.
@@ -365,6 +371,7 @@ impl Prepared {
             fine,
             directions: Directions::of(&refine),
             walls: crate::lines::long_walls(&refine, params.wall_min_length_m),
+            landmarks: crate::constellation::landmarks(&refine),
             centroid: map.known_centroid_in_grid(),
             frame_from_grid: map.frame_from_grid(),
             fields: std::cell::OnceCell::new(),

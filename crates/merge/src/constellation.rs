@@ -1,0 +1,249 @@
+//! Pose hypotheses from landmarks: rocks, boulders and crater rims taken as points with a
+//! size, and translations voted for by every pair of landmarks of like size, one from each
+//! map, at a few headings.
+//!
+//! The global search ([`crate::search`]) scores every translation on the maps' structure, and
+//! at low overlap on lunar maps the walls dominate that score: a band across the hall whose
+//! three rocks and a crater agree can rank below a dozen poses that lay walls over walls, and
+//! never be verified. Where the rocks are the evidence, they can propose the pose
+//! themselves: at the right heading every landmark the two maps share votes for the same
+//! translation, while chance pairs scatter theirs over the whole hall (geometric hashing;
+//! Lamdan and Wolfson 1988, "Geometric hashing: a general and efficient model-based
+//! recognition scheme"). The headings come from the line-direction peaks, laid on the maps'
+//! walls where they have them ([`crate::lines`]): a degree off, a landmark 20 m from the
+//! map's origin votes 0.35 m astray.
+
+use crate::level::{Class, Level};
+use realms_core::{Point2, Pose2};
+
+/// A landmark: the centre and size of a blob of landmark cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Landmark {
+    /// Centroid of its cells, grid-local metres.
+    pub c: Point2,
+    /// Radius of the disc of the same area, metres.
+    pub radius_m: f64,
+}
+
+/// Blobs of fewer cells than this are no landmark: a speck, or a rock's corner cut by the
+/// map's edge.
+const MIN_CELLS: usize = 4;
+/// Votes are binned on cells this large, metres: the blobs' centres move by a cell or two
+/// with the cut and the noise.
+const BIN_M: f64 = 0.4;
+/// A translation needs this many votes (its bin and the eight around it) to be proposed.
+const MIN_VOTES: usize = 3;
+/// A translation bin, and its votes with the sum of their translations.
+type Bin = (i64, i64);
+type Tally = (usize, f64, f64);
+
+/// Two landmarks are alike when their radii differ by at most this much, metres ...
+const SIZE_SLACK_M: f64 = 0.1;
+/// ... plus this share of the larger.
+const SIZE_SLACK_SHARE: f64 = 0.25;
+/// Proposals closer than this (metres, at the same heading) are one.
+const DISTINCT_M: f64 = 1.0;
+
+/// The landmarks of `level`: its landmark cells ([`Level::landmark`]) in 8-connected blobs.
+pub fn landmarks(level: &Level) -> Vec<Landmark> {
+    let (w, h) = (level.width, level.height);
+    let is_landmark = |i: usize| level.class[i] != Class::Unknown && level.landmark[i];
+    let mut seen = vec![false; w * h];
+    let mut out = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..w * h {
+        if seen[start] || !is_landmark(start) {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % w, i / w);
+            let c = level.center(x, y);
+            n += 1;
+            sx += c.x_m;
+            sy += c.y_m;
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                        continue;
+                    }
+                    let j = ny as usize * w + nx as usize;
+                    if !seen[j] && is_landmark(j) {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        if n >= MIN_CELLS {
+            let area = n as f64 * level.cell_m * level.cell_m;
+            out.push(Landmark {
+                c: Point2::new(sx / n as f64, sy / n as f64),
+                radius_m: (area / std::f64::consts::PI).sqrt(),
+            });
+        }
+    }
+    out
+}
+
+/// At most `max` poses (grid-local, of `b` in `a`) that several landmark pairs of like size
+/// agree on, at the headings `yaws_rad`, the most voted first.
+pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) -> Vec<Pose2> {
+    let mut proposals: Vec<(usize, Pose2)> = Vec::new();
+    for &yaw in yaws_rad {
+        let (s, c) = yaw.sin_cos();
+        let mut votes: Vec<(Bin, f64, f64)> = Vec::new();
+        for la in a {
+            for lb in b {
+                let slack = SIZE_SLACK_M + SIZE_SLACK_SHARE * la.radius_m.max(lb.radius_m);
+                if (la.radius_m - lb.radius_m).abs() > slack {
+                    continue;
+                }
+                let tx = la.c.x_m - (c * lb.c.x_m - s * lb.c.y_m);
+                let ty = la.c.y_m - (s * lb.c.x_m + c * lb.c.y_m);
+                let key = ((tx / BIN_M).floor() as i64, (ty / BIN_M).floor() as i64);
+                votes.push((key, tx, ty));
+            }
+        }
+        // Per bin, in order: votes and the sum of their translations.
+        votes.sort_unstable_by_key(|v| v.0);
+        let mut bins: Vec<(Bin, Tally)> = Vec::new();
+        for (key, tx, ty) in votes {
+            match bins.last_mut() {
+                Some((k, (n, sx, sy))) if *k == key => {
+                    *n += 1;
+                    *sx += tx;
+                    *sy += ty;
+                }
+                _ => bins.push((key, (1, tx, ty))),
+            }
+        }
+        let mut found: Vec<(usize, Pose2)> = Vec::new();
+        for &((kx, ky), _) in &bins {
+            let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Ok(i) = bins.binary_search_by_key(&(kx + dx, ky + dy), |b| b.0) {
+                        let (bn, bx, by) = bins[i].1;
+                        n += bn;
+                        sx += bx;
+                        sy += by;
+                    }
+                }
+            }
+            if n >= MIN_VOTES {
+                found.push((n, Pose2::new(sx / n as f64, sy / n as f64, yaw)));
+            }
+        }
+        // The most voted first, ties by place.
+        found.sort_by(|x, y| {
+            y.0.cmp(&x.0)
+                .then(x.1.x_m.total_cmp(&y.1.x_m))
+                .then(x.1.y_m.total_cmp(&y.1.y_m))
+        });
+        // The `max` most voted distinct ones at this heading.
+        let mut kept: Vec<(usize, Pose2)> = Vec::with_capacity(max);
+        for (n, p) in found {
+            if kept.len() >= max {
+                break;
+            }
+            let near = |(_, q): &(usize, Pose2)| (q.x_m - p.x_m).hypot(q.y_m - p.y_m) < DISTINCT_M;
+            if !kept.iter().any(near) {
+                kept.push((n, p));
+            }
+        }
+        proposals.extend(kept);
+    }
+    proposals.sort_by_key(|p| std::cmp::Reverse(p.0));
+    proposals.into_iter().take(max).map(|(_, p)| p).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::{Map, MapCell};
+    use realms_core::{Grid, GridGeometry};
+
+    #[test]
+    fn rocks_are_found_where_they_lie_and_as_large() {
+        // Two rocks on a 5 cm floor, 0.3 m and 0.6 m across: on the 10 cm level, blobs
+        // centred on them, of about their size.
+        let g = GridGeometry {
+            width: 200,
+            height: 200,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let rocks = [(3.0, 4.0, 0.15), (7.0, 6.0, 0.3)];
+        let mut grid = Grid::new(g, MapCell::Free);
+        for y in 0..200 {
+            for x in 0..200 {
+                let p = g.cell_center(realms_core::Cell { x, y });
+                if rocks
+                    .iter()
+                    .any(|&(rx, ry, r)| (p.x_m - rx).hypot(p.y_m - ry) < r)
+                {
+                    *grid.get_mut(x, y).expect("in the grid") = MapCell::Occupied;
+                }
+            }
+        }
+        let found = landmarks(&Level::build(&Map::new(grid), 0.1));
+        assert_eq!(found.len(), 2, "{found:?}");
+        for &(rx, ry, r) in &rocks {
+            let l = found
+                .iter()
+                .find(|l| l.c.distance_m(Point2::new(rx, ry)) < 0.1)
+                .unwrap_or_else(|| panic!("no landmark at ({rx}, {ry}): {found:?}"));
+            assert!((l.radius_m - r).abs() < 0.08, "{l:?} against {r}");
+        }
+    }
+
+    #[test]
+    fn the_shared_rocks_vote_for_the_true_pose_among_chance_pairs() {
+        // Forty rocks of a few sizes in the first map; the second map holds five of them
+        // seen from a frame turned and shifted, and twenty of its own.
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let rock = |next: &mut dyn FnMut() -> f64| Landmark {
+            c: Point2::new(50.0 * next(), 36.0 * next()),
+            radius_m: 0.1 + 0.3 * next(),
+        };
+        let a: Vec<Landmark> = (0..40).map(|_| rock(&mut next)).collect();
+        let truth = Pose2::new(12.0, -3.0, 0.7);
+        let b_from_a = truth.inverse();
+        let mut b: Vec<Landmark> = a[..5]
+            .iter()
+            .map(|l| Landmark {
+                c: b_from_a.transform_point(l.c),
+                ..*l
+            })
+            .collect();
+        b.extend((0..20).map(|_| rock(&mut next)));
+        let found = hypotheses(&a, &b, &[0.2, truth.yaw_rad, 2.5], 3);
+        let best = found.first().expect("a proposal");
+        assert!(
+            // Within half a bin: the chance votes around it pull the mean a little, and
+            // refinement takes it from there.
+            (best.x_m - truth.x_m).hypot(best.y_m - truth.y_m) < 0.2
+                && best.yaw_rad == truth.yaw_rad,
+            "{found:?}"
+        );
+        // Without the shared rocks, no heading gathers as many votes in one place.
+        let strangers: Vec<Landmark> = b[5..].to_vec();
+        let found = hypotheses(&a, &strangers, &[truth.yaw_rad], 3);
+        assert!(
+            found
+                .iter()
+                .all(|p| (p.x_m - truth.x_m).hypot(p.y_m - truth.y_m) > 1.0),
+            "{found:?}"
+        );
+    }
+}
