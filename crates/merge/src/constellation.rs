@@ -41,6 +41,9 @@ type Tally = (usize, f64, f64);
 const SIZE_SLACK_M: f64 = 0.1;
 /// ... plus this share of the larger.
 const SIZE_SLACK_SHARE: f64 = 0.25;
+/// Landmarks at least this large (radius, metres) are large: craters and boulders, a few
+/// in a hall.
+const LARGE_M: f64 = 0.5;
 /// Proposals closer than this (metres, at the same heading) are one.
 const DISTINCT_M: f64 = 1.0;
 
@@ -89,13 +92,13 @@ pub fn landmarks(level: &Level) -> Vec<Landmark> {
     out
 }
 
-/// At most `max` poses (grid-local, of `b` in `a`) that several landmark pairs of like size
-/// agree on, at the headings `yaws_rad`, the most voted first.
+/// At most `max` poses per heading (grid-local, of `b` in `a`) that several landmark pairs
+/// of like size agree on, at the headings `yaws_rad`, the most voted first at each.
 pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) -> Vec<Pose2> {
     let mut proposals: Vec<(usize, Pose2)> = Vec::new();
     for &yaw in yaws_rad {
         let (s, c) = yaw.sin_cos();
-        let mut votes: Vec<(Bin, f64, f64)> = Vec::new();
+        let mut votes: Vec<(Bin, usize, f64, f64)> = Vec::new();
         for la in a {
             for lb in b {
                 let slack = SIZE_SLACK_M + SIZE_SLACK_SHARE * la.radius_m.max(lb.radius_m);
@@ -105,20 +108,27 @@ pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) 
                 let tx = la.c.x_m - (c * lb.c.x_m - s * lb.c.y_m);
                 let ty = la.c.y_m - (s * lb.c.x_m + c * lb.c.y_m);
                 let key = ((tx / BIN_M).floor() as i64, (ty / BIN_M).floor() as i64);
-                votes.push((key, tx, ty));
+                // Two large landmarks alike (a crater, a boulder) are rare enough to count
+                // as much as a proposal needs on their own.
+                let weight = if la.radius_m.min(lb.radius_m) >= LARGE_M {
+                    MIN_VOTES
+                } else {
+                    1
+                };
+                votes.push((key, weight, tx * weight as f64, ty * weight as f64));
             }
         }
         // Per bin, in order: votes and the sum of their translations.
         votes.sort_unstable_by_key(|v| v.0);
         let mut bins: Vec<(Bin, Tally)> = Vec::new();
-        for (key, tx, ty) in votes {
+        for (key, weight, tx, ty) in votes {
             match bins.last_mut() {
                 Some((k, (n, sx, sy))) if *k == key => {
-                    *n += 1;
+                    *n += weight;
                     *sx += tx;
                     *sy += ty;
                 }
-                _ => bins.push((key, (1, tx, ty))),
+                _ => bins.push((key, (weight, tx, ty))),
             }
         }
         let mut found: Vec<(usize, Pose2)> = Vec::new();
@@ -157,8 +167,9 @@ pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) 
         }
         proposals.extend(kept);
     }
-    proposals.sort_by_key(|p| std::cmp::Reverse(p.0));
-    proposals.into_iter().take(max).map(|(_, p)| p).collect()
+    // Heading by heading: a crater votes as well for its own pose turned half a turn, and
+    // which of the two is right is for the screening to say.
+    proposals.into_iter().map(|(_, p)| p).collect()
 }
 
 #[cfg(test)]
@@ -227,13 +238,37 @@ mod tests {
             })
             .collect();
         b.extend((0..20).map(|_| rock(&mut next)));
+        // At the true heading the most voted proposal is the truth; among three headings it
+        // is proposed too.
         let found = hypotheses(&a, &b, &[0.2, truth.yaw_rad, 2.5], 3);
+        assert!(
+            found.iter().any(|p| p.yaw_rad == truth.yaw_rad
+                && (p.x_m - truth.x_m).hypot(p.y_m - truth.y_m) < 0.2),
+            "{found:?}"
+        );
+        let found = hypotheses(&a, &b, &[truth.yaw_rad], 3);
         let best = found.first().expect("a proposal");
         assert!(
             // Within half a bin: the chance votes around it pull the mean a little, and
             // refinement takes it from there.
             (best.x_m - truth.x_m).hypot(best.y_m - truth.y_m) < 0.2
                 && best.yaw_rad == truth.yaw_rad,
+            "{found:?}"
+        );
+        // One large crater shared, its like nowhere else: proposed on its own.
+        let crater = Landmark {
+            c: Point2::new(20.0, 10.0),
+            radius_m: 1.5,
+        };
+        let seen = Landmark {
+            c: b_from_a.transform_point(crater.c),
+            ..crater
+        };
+        let found = hypotheses(&[&a[..], &[crater]].concat(), &[seen], &[truth.yaw_rad], 3);
+        assert!(
+            found
+                .iter()
+                .any(|p| (p.x_m - truth.x_m).hypot(p.y_m - truth.y_m) < 0.01),
             "{found:?}"
         );
         // Without the shared rocks, no heading gathers as many votes in one place.

@@ -58,7 +58,8 @@ pub struct Estimate {
     /// What the global search cost.
     pub stats: SearchStats,
     /// Every hypothesis of the global search as a pose of the second map's frame in the
-    /// first's, with its search score and coarse screening score (for diagnosis).
+    /// first's, with its search score and coarse screening score (for diagnosis); the
+    /// landmarks' proposals follow, with a search score of -1.
     pub hypotheses: Vec<(Pose2, i32, f64)>,
     /// Every refined and verified hypothesis, best first, as a pose of the second map's
     /// frame in the first's with its evidence (for diagnosis).
@@ -385,6 +386,10 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// The search score the landmarks' proposals are listed with in [`Estimate::hypotheses`]:
+/// none of the search's, which are never negative.
+const LANDMARK_SEARCH_SCORE: i32 = -1;
+
 /// The heading group of the landmarks' proposals: none of the search's, so they go on only
 /// among the best of the rest.
 const LANDMARK_GROUP: usize = usize::MAX;
@@ -586,7 +591,7 @@ fn run(
             (*g, h.fixed_from_moving, score)
         })
         .collect();
-    let hypotheses = hyps
+    let mut hypotheses: Vec<(Pose2, i32, f64)> = hyps
         .iter()
         .zip(&screened)
         .map(|((_, h), (_, _, score))| (to_frames(&h.fixed_from_moving), h.score, *score))
@@ -618,6 +623,7 @@ fn run(
         for p in proposed {
             let score = verify::score(a, b, &p, params.conflict_weight, On::Search);
             screened.push((LANDMARK_GROUP, p, score));
+            hypotheses.push((to_frames(&p), LANDMARK_SEARCH_SCORE, score));
         }
     }
     screened.sort_by(|x, y| y.2.total_cmp(&x.2));
