@@ -44,6 +44,12 @@ const SIZE_SLACK_SHARE: f64 = 0.25;
 /// Landmarks at least this large (radius, metres) are large: craters and boulders, a few
 /// in a hall.
 const LARGE_M: f64 = 0.5;
+/// A blob's outline is fitted with a circle only from this many points ...
+const CIRCLE_MIN_POINTS: usize = 6;
+/// ... and the circle kept where they lie within this much of it (cells, RMS) ...
+const CIRCLE_RMS_CELLS: f64 = 1.0;
+/// ... and it is at most this wide, metres (the default hall's largest crater is 6 m).
+const CIRCLE_MAX_M: f64 = 8.0;
 /// Proposals closer than this (metres, at the same heading) are one.
 const DISTINCT_M: f64 = 1.0;
 
@@ -54,6 +60,7 @@ pub fn landmarks(level: &Level) -> Vec<Landmark> {
     let mut seen = vec![false; w * h];
     let mut out = Vec::new();
     let mut stack = Vec::new();
+    let mut outline = Vec::new();
     for start in 0..w * h {
         if seen[start] || !is_landmark(start) {
             continue;
@@ -61,12 +68,20 @@ pub fn landmarks(level: &Level) -> Vec<Landmark> {
         seen[start] = true;
         stack.push(start);
         let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+        outline.clear();
         while let Some(i) = stack.pop() {
             let (x, y) = (i % w, i / w);
             let c = level.center(x, y);
             n += 1;
             sx += c.x_m;
             sy += c.y_m;
+            let (xi, yi) = (x as i64, y as i64);
+            if [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|(dx, dy)| level.class_at(xi + dx, yi + dy) == Class::Free)
+            {
+                outline.push(c);
+            }
             for dy in -1i64..=1 {
                 for dx in -1i64..=1 {
                     let (nx, ny) = (x as i64 + dx, y as i64 + dy);
@@ -83,13 +98,82 @@ pub fn landmarks(level: &Level) -> Vec<Landmark> {
         }
         if n >= MIN_CELLS {
             let area = n as f64 * level.cell_m * level.cell_m;
-            out.push(Landmark {
+            let blob = Landmark {
                 c: Point2::new(sx / n as f64, sy / n as f64),
                 radius_m: (area / std::f64::consts::PI).sqrt(),
-            });
+            };
+            out.push(circle_through(&outline, level.cell_m).unwrap_or(blob));
         }
     }
     out
+}
+
+/// The circle through `outline` (the cells of a blob that face free ground), where it fits
+/// them within [`CIRCLE_RMS_CELLS`] and is at most [`CIRCLE_MAX_M`] across: a crater cut by
+/// the map's edge keeps its own centre and size, where its blob's centroid and area would
+/// shrink towards the part in view. The algebraic fit of Kasa (1976, "A circle fitting
+/// procedure and its error analysis"), on coordinates about the points' mean.
+fn circle_through(outline: &[Point2], cell_m: f64) -> Option<Landmark> {
+    if outline.len() < CIRCLE_MIN_POINTS {
+        return None;
+    }
+    let n = outline.len() as f64;
+    let (mx, my) = (
+        outline.iter().map(|p| p.x_m).sum::<f64>() / n,
+        outline.iter().map(|p| p.y_m).sum::<f64>() / n,
+    );
+    // Normal equations of x^2 + y^2 + d x + e y + f = 0 in least squares.
+    let mut m = [[0.0f64; 3]; 3];
+    let mut v = [0.0f64; 3];
+    for p in outline {
+        let (x, y) = (p.x_m - mx, p.y_m - my);
+        let row = [x, y, 1.0];
+        let rhs = -(x * x + y * y);
+        for r in 0..3 {
+            v[r] += row[r] * rhs;
+            for c in 0..3 {
+                m[r][c] += row[r] * row[c];
+            }
+        }
+    }
+    let [d, e, f] = solve3(&m, &v)?;
+    let (cx, cy) = (-d / 2.0, -e / 2.0);
+    let r2 = cx * cx + cy * cy - f;
+    if r2 <= 0.0 {
+        return None;
+    }
+    let radius_m = r2.sqrt();
+    let rms = (outline
+        .iter()
+        .map(|p| ((p.x_m - mx - cx).hypot(p.y_m - my - cy) - radius_m).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    (radius_m <= CIRCLE_MAX_M / 2.0 && rms <= CIRCLE_RMS_CELLS * cell_m).then(|| Landmark {
+        c: Point2::new(mx + cx, my + cy),
+        radius_m,
+    })
+}
+
+/// `m x = v` by Cramer's rule; `None` when `m` is (nearly) singular: points on a line.
+fn solve3(m: &[[f64; 3]; 3], v: &[f64; 3]) -> Option<[f64; 3]> {
+    let det = |a: &[[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det(m);
+    let scale = m.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
+    if d.abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    Some(std::array::from_fn(|k| {
+        let mut mk = *m;
+        for r in 0..3 {
+            mk[r][k] = v[r];
+        }
+        det(&mk) / d
+    }))
 }
 
 /// At most `max` poses per heading (grid-local, of `b` in `a`) that several landmark pairs
@@ -210,6 +294,40 @@ mod tests {
                 .unwrap_or_else(|| panic!("no landmark at ({rx}, {ry}): {found:?}"));
             assert!((l.radius_m - r).abs() < 0.08, "{l:?} against {r}");
         }
+    }
+
+    #[test]
+    fn a_crater_cut_by_the_map_s_edge_keeps_its_centre_and_size() {
+        // A crater 4 m across (hazard) at (5, 5), the map ending at x = 5.5 m: its blob's
+        // centroid lies near (4.3, 5), its circle at the crater's own centre.
+        let g = GridGeometry {
+            width: 200,
+            height: 200,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        let mut grid = Grid::new(g, MapCell::Free);
+        for y in 0..200 {
+            for x in 0..200 {
+                let p = g.cell_center(realms_core::Cell { x, y });
+                let cell = if p.x_m > 5.5 {
+                    MapCell::Unknown
+                } else if (p.x_m - 5.0).hypot(p.y_m - 5.0) < 2.0 {
+                    MapCell::Hazard
+                } else {
+                    MapCell::Free
+                };
+                *grid.get_mut(x, y).expect("in the grid") = cell;
+            }
+        }
+        let found = landmarks(&Level::build(&Map::new(grid), 0.1));
+        assert_eq!(found.len(), 1, "{found:?}");
+        let crater = found[0];
+        assert!(
+            crater.c.distance_m(Point2::new(5.0, 5.0)) < 0.1,
+            "{crater:?}"
+        );
+        assert!((crater.radius_m - 2.0).abs() < 0.1, "{crater:?}");
     }
 
     #[test]
