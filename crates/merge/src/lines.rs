@@ -49,6 +49,9 @@ const MAX_RMS_CELLS: f64 = 0.5;
 
 /// The walls of `level` at least `min_length_m` long, longest first.
 pub fn long_walls(level: &Level, min_length_m: f64) -> Vec<Wall> {
+    if level.width == 0 || level.height == 0 {
+        return Vec::new();
+    }
     let points: Vec<Surface> = level
         .surfaces(usize::MAX)
         .into_iter()
