@@ -19,9 +19,13 @@ use realms_core::{Point2, Pose2};
 /// A landmark: the centre and size of a blob of landmark cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Landmark {
-    /// Centroid of its cells, grid-local metres.
+    /// Centre of the circle fitted to the blob's outline where one fits
+    /// ([`circle_through`]), else the centroid of its cells; grid-local metres.
     pub c: Point2,
-    /// Radius of the disc of the same area, metres.
+    /// Radius of that circle, else of the disc of the blob's area; metres. The circle runs
+    /// through the outline cells' centres, so for a solid blob it is about half a cell
+    /// smaller than the area's disc: compare radii of one kind with a slack
+    /// ([`SIZE_SLACK_M`]).
     pub radius_m: f64,
 }
 

@@ -123,7 +123,8 @@ pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
     // long walls over walls can outscore the true one, and one global list would then hold
     // nothing but its variants.
     let mut groups: Vec<Vec<f64>> = Vec::new();
-    if ratio >= params.min_direction_ratio && !peaks.is_empty() {
+    let headed = ratio >= params.min_direction_ratio && !peaks.is_empty();
+    if headed {
         let n = (params.peak_halfwidth_rad / params.yaw_step_rad).round() as i64;
         for p in &peaks {
             for base in [p.to_radians(), p.to_radians() + PI] {
@@ -141,7 +142,9 @@ pub fn estimate(a: &Prepared, b: &Prepared, params: &Params) -> Estimate {
                 .map(<[f64]>::to_vec),
         );
     }
-    run(a, b, &groups, None, params)
+    // Without dominant directions the groups are quarter turns, and their middles no
+    // heading the landmarks could vote at.
+    run(a, b, &groups, None, headed, params)
 }
 
 /// A known-start check: the prior, what the maps say, and whether they differ.
@@ -266,7 +269,7 @@ pub fn estimate_with_prior(
         centroid_at: grid_prior.transform_point(b.centroid),
         half_m: window.linear_m,
     };
-    let estimate = run(a, b, &[yaws], Some(search_window), params);
+    let estimate = run(a, b, &[yaws], Some(search_window), false, params);
     let centre = b.frame_from_grid.transform_point(b.centroid);
     let drift_of = |p: &Pose2| {
         (
@@ -390,8 +393,7 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
 /// none of the search's, which are never negative.
 const LANDMARK_SEARCH_SCORE: i32 = -1;
 
-/// The heading group of the landmarks' proposals: none of the search's, so they go on only
-/// among the best of the rest.
+/// The heading group of the landmarks' proposals: none of the search's.
 const LANDMARK_GROUP: usize = usize::MAX;
 
 /// The share of the chosen pose's verified score a neighbour needs to be weighed against it
@@ -526,6 +528,7 @@ fn run(
     b: &Prepared,
     groups: &[Vec<f64>],
     window: Option<Window>,
+    landmarks_propose: bool,
     params: &Params,
 ) -> Estimate {
     let search_params = SearchParams {
@@ -600,7 +603,7 @@ fn run(
     // ([`crate::constellation`]): where the walls outscore a band's few rocks in the search,
     // the rocks still agree on one translation. Screened like the search's, they compete
     // for refinement with its best.
-    if window.is_none() && params.landmark_hypotheses > 0 {
+    if landmarks_propose && params.landmark_hypotheses > 0 {
         let yaws: Vec<f64> = groups
             .iter()
             .filter_map(|g| g.get(g.len() / 2))
@@ -628,10 +631,11 @@ fn run(
     }
     screened.sort_by(|x, y| y.2.total_cmp(&x.2));
     // The best of every heading group goes on (so that a true heading outscored by walls
-    // laid over walls at another heading is still verified, and seen as a rival), then the
-    // best of the rest.
+    // laid over walls at another heading is still verified, and seen as a rival), and the
+    // landmarks' best (with as many groups as refinements they would otherwise never be),
+    // then the best of the rest.
     let mut chosen: Vec<Pose2> = Vec::new();
-    for g in 0..groups_seen {
+    for g in (0..groups_seen).chain([LANDMARK_GROUP]) {
         if let Some((_, p, score)) = screened.iter().find(|(hg, _, _)| *hg == g)
             && *score > 0.0
         {
@@ -942,11 +946,11 @@ enum Imprecision {
 }
 
 /// Where the maps' long walls lie parallel within [`Params::wall_pin_rad`] at `settled`
-/// ([`crate::lines`]): the pose turned about the overlap's centre to lay them exactly
-/// parallel and refitted on the surfaces at that heading, with its overlap and verified
-/// evidence. `None` where the walls say nothing, or where their heading loses more than
-/// [`WALL_HELD_SCORE_SHARE`] of the verified score: walls that are not the same or
-/// parallel ones in the hall.
+/// ([`crate::lines`]): the pose turned to lay them exactly parallel, about the overlap's
+/// centre or either of its ends (whichever keeps the most verified score), and refitted on
+/// the surfaces at that heading, with its overlap and verified evidence. `None` where the
+/// walls say nothing, or where their heading keeps less than [`WALL_HELD_SCORE_SHARE`] of
+/// the verified score: walls that are not the same or parallel ones in the hall.
 fn held_by_walls(
     a: &Prepared,
     b: &Prepared,

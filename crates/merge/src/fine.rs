@@ -475,7 +475,10 @@ pub struct Comparison {
     /// Points counted at both poses.
     pub common: usize,
     /// How much worse the second pose fits, in standard errors of the mean difference of
-    /// the points' costs (negative: it fits better; 0 with fewer than 30 points in common).
+    /// the points' costs (negative: it fits better). 0 with too few points in common:
+    /// [`MIN_COMMON_POINTS`], or between two poses at one heading
+    /// [`MIN_MOVED_ACROSS_POINTS`] of those the shift moves across their surface (the
+    /// only ones counted there).
     /// Each pair of surface points is counted from both maps and neighbouring points' costs
     /// are correlated, so this overstates the evidence; the thresholds were chosen on it as
     /// it is.
@@ -489,8 +492,9 @@ pub struct Comparison {
 /// Compares how closely grid-local poses `p` and `q` lay the maps' surfaces on each other,
 /// over the points of `overlap` counted at both: each costs its squared distance along the
 /// normal to its pair, at most a cell squared; a point with no pair costs that cap where it
-/// lands on the other map's known ground and is not counted where it does not. A sum over the points that fit would reward a pose
-/// that widens a thin overlap; the same points at both poses do not.
+/// lands on the other map's known ground and is not counted where it does not. A sum over
+/// the points that fit would reward a pose that widens a thin overlap; the same points at
+/// both poses do not.
 pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pose2) -> Comparison {
     let cell_m = a.cell_m.max(b.cell_m);
     let cap = cell_m * cell_m;
@@ -505,8 +509,9 @@ pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pos
         out
     };
     let (cp, cq) = (costs(p), costs(q));
-    // Between two shifts at one heading (the restarts where the walls hold the heading)
-    // only the points the shift moves across their surface are compared. A turn moves the
+    // Between two poses at one heading (any shift: a restart where the walls hold the
+    // heading, a rival, a neighbour) only the points the shift moves across their surface
+    // are compared. A turn moves the
     // short wall pieces at a band's ends mostly along themselves too, yet their turning is
     // what tells it: there every point counts.
     let shifted =

@@ -488,7 +488,11 @@ fn thin<T: Copy>(pts: Vec<T>, max_points: usize) -> Vec<T> {
 }
 
 /// A map's cells with lone feature cells (no feature among their 8 neighbours) made
-/// unknown: speckle is neither evidence of an obstacle nor of free space.
+/// unknown: speckle is neither evidence of an obstacle nor of free space. So are pockets
+/// of free space too small to stand in ([`MAX_FREE_POCKET_CELLS`]) and walled in all
+/// round: missed returns inside a rock, a wall or the lander, which would otherwise line
+/// it with surface points facing inwards, different in each map, that drown its true
+/// outline when two poses are compared.
 pub struct Despeckled {
     geometry: realms_core::GridGeometry,
     cells: Vec<MapCell>,
@@ -521,10 +525,68 @@ impl Despeckled {
                 }
             }
         }
+        unknown_free_pockets(&mut out, w, h);
         Despeckled {
             geometry: *g,
             cells: out,
             free_judged_for_hazards: map.free_judged_for_hazards,
+        }
+    }
+}
+
+/// Free regions (8-connected) of at most this many cells are speckle, not ground.
+const MAX_FREE_POCKET_CELLS: usize = 8;
+
+/// Makes unknown every free region (8-connected) of at most [`MAX_FREE_POCKET_CELLS`]
+/// cells in the row-major `cells` of a `w` x `h` grid that is walled in by obstacles and
+/// hazards all round (not by unknown ground or the grid's edge).
+fn unknown_free_pockets(cells: &mut [MapCell], w: usize, h: usize) {
+    // 0: not yet reached; 1: in a region known to be larger; 2: in the region being grown.
+    let mut mark = vec![0u8; cells.len()];
+    let mut region = Vec::with_capacity(MAX_FREE_POCKET_CELLS + 1);
+    for start in 0..cells.len() {
+        if mark[start] != 0 || cells[start] != MapCell::Free {
+            continue;
+        }
+        region.clear();
+        region.push(start);
+        mark[start] = 2;
+        let mut large = false;
+        let mut next = 0;
+        'grow: while next < region.len() {
+            let i = region[next];
+            next += 1;
+            let (x, y) = (i % w, i / w);
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                large = true;
+                break;
+            }
+            for ny in y - 1..y + 2 {
+                for nx in x - 1..x + 2 {
+                    let j = ny * w + nx;
+                    if cells[j] == MapCell::Unknown {
+                        // Open to ground nobody saw: perhaps more free space.
+                        large = true;
+                        break 'grow;
+                    }
+                    if cells[j] != MapCell::Free || mark[j] == 2 {
+                        continue;
+                    }
+                    // Reaching a region already found large, or growing past the limit.
+                    if mark[j] == 1 || region.len() == MAX_FREE_POCKET_CELLS {
+                        large = true;
+                        break 'grow;
+                    }
+                    mark[j] = 2;
+                    region.push(j);
+                }
+            }
+        }
+        for &i in &region {
+            mark[i] = 1;
+            if !large {
+                cells[i] = MapCell::Unknown;
+            }
         }
     }
 }
@@ -635,6 +697,48 @@ mod tests {
         assert_eq!(s.len(), 1);
         // The wall cell's free side is up and to the right.
         assert!(s[0].normal_rad > 0.2 && s[0].normal_rad < 1.4, "{s:?}");
+    }
+
+    #[test]
+    fn missed_returns_inside_a_block_line_it_with_no_surface() {
+        // A block with holes of one and two cells (missed returns, the two touching at a
+        // corner) beside open ground, and a pocket of twelve free cells walled in (larger
+        // than speckle).
+        let map = map_from(
+            &[
+                "..........#####", //
+                ".##########...#", //
+                ".#.########...#", //
+                ".###..#####...#", //
+                ".######.###...#", //
+                ".#######.######", //
+                "......#########", //
+            ],
+            0.05,
+        );
+        let d = Despeckled::of(&map);
+        let at = |x: usize, y: usize| d.cells[(6 - y) * 15 + x];
+        for (x, y) in [(2, 2), (4, 3), (5, 3), (7, 4), (8, 5)] {
+            assert_eq!(at(x, y), MapCell::Unknown, "hole at ({x}, {y})");
+        }
+        for (x, y) in [(0, 3), (11, 2), (12, 4), (5, 6)] {
+            assert_eq!(at(x, y), MapCell::Free, "ground at ({x}, {y})");
+        }
+        // Only the block's outer faces are surface now: no cell inside has a normal.
+        let o = Outline::of(&d, 0.05);
+        let normal = |x: usize, y: usize| o.normal[(6 - y) * 15 + x];
+        assert!(normal(3, 3).is_nan() && normal(6, 3).is_nan() && normal(7, 3).is_nan());
+        assert!(!normal(1, 3).is_nan() && !normal(10, 2).is_nan());
+        // The same map without the cleaning would have them.
+        let raw = Outline::of(
+            &Despeckled {
+                geometry: *map.geometry(),
+                cells: map.cells.cells().to_vec(),
+                free_judged_for_hazards: false,
+            },
+            0.05,
+        );
+        assert!(!raw.normal[(6 - 3) * 15 + 3].is_nan());
     }
 
     #[test]

@@ -121,8 +121,14 @@ fn fit(run: &[realms_core::Point2], cell_m: f64) -> Option<Wall> {
     if line.rms_m > MAX_RMS_CELLS * cell_m {
         return None;
     }
+    // `rem_euclid` of a tiny negative angle rounds to pi itself, outside `[0, pi)`.
+    let direction_rad = line.direction_rad.rem_euclid(PI);
     Some(Wall {
-        direction_rad: line.direction_rad.rem_euclid(PI),
+        direction_rad: if direction_rad < PI {
+            direction_rad
+        } else {
+            0.0
+        },
         length_m: line.length_m,
         rms_m: line.rms_m,
         points,
@@ -192,8 +198,8 @@ fn angle_between(a: f64, b: f64) -> f64 {
 
 /// The turn that lays the walls of `b` parallel to those of `a` from heading `yaw_rad` (of
 /// `b`'s grid-local frame in `a`'s), if one of at most `max_rad` does: radians, signed,
-/// averaged over every pair of walls it lays parallel, weighted by their lengths (the
-/// longer walls' directions are the surer).
+/// averaged over every pair of walls it lays parallel, each weighted by the product of its
+/// walls' lengths (the longer walls' directions are the surer).
 pub fn turn_to_parallel_rad(a: &[Wall], b: &[Wall], yaw_rad: f64, max_rad: f64) -> Option<f64> {
     let offsets = || {
         a.iter().flat_map(move |wa| {

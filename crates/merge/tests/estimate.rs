@@ -402,9 +402,12 @@ fn a_band_slid_sideways_does_not_outscore_the_truth() {
 /// both ends. Swung about the lander by a degree, the walls slide along themselves and
 /// nothing else moves much: the truth and a pose 0.3 m off at the band's middle fit alike.
 /// The precision check now also turns the pose about each end of the band; the merge must
-/// not be made wrong (it is refused as imprecise). Since the thirty-ninth session the
+/// not be made wrong (it was refused as imprecise). Since the thirty-ninth session the
 /// maps' long walls hold the heading ([`realms_merge::lines`]), the swing is gone, and the
-/// merge is made, right to the centimetre.
+/// merge is made, right to the centimetre. Since the forty-first, the returns the lidar
+/// missed inside the lander no longer line it with surfaces facing inwards (pockets of
+/// free cells walled in all round are unknown, [`realms_merge::level`]); compared on its
+/// true outline, the swung pose fits clearly worse even without the walls' heading.
 #[test]
 fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
     let pair = common::lunar_bench_pair("lunar-very-sparse", 1, 10, 9);
@@ -413,8 +416,11 @@ fn a_band_swung_about_the_lander_at_its_end_is_not_merged_wrong() {
         ..Params::default()
     };
     let est = estimate_maps(&pair.a, &pair.b, &unheld);
-    common::accepted_and_right(&est, &pair, "seed 1 very sparse 10 % pair 9");
-    assert_refused_as_imprecise(&est);
+    assert_merged_right(
+        &est,
+        &pair,
+        "seed 1 very sparse 10 % pair 9, walls not held",
+    );
     let est = estimate_maps(&pair.a, &pair.b, &Params::default());
     assert_merged_right(&est, &pair, "seed 1 very sparse 10 % pair 9, walls held");
     let (err_m, err_rad) = common::error(&est.a_from_b.expect("merged"), &pair.a_from_b, &pair.b);
