@@ -180,6 +180,66 @@ fn solve3(m: &[[f64; 3]; 3], v: &[f64; 3]) -> Option<[f64; 3]> {
     }))
 }
 
+/// Whether two landmarks are of like size ([`SIZE_SLACK_M`], [`SIZE_SLACK_SHARE`]).
+fn alike(la: &Landmark, lb: &Landmark) -> bool {
+    let slack = SIZE_SLACK_M + SIZE_SLACK_SHARE * la.radius_m.max(lb.radius_m);
+    (la.radius_m - lb.radius_m).abs() <= slack
+}
+
+/// A slide along the walls is put on a landmark pair only where the pair asks for at most
+/// this much across them, metres: the walls fix that offset to a cell or two.
+const SLIDE_ACROSS_M: f64 = 0.3;
+/// ... and for at least this much along them (less is the pose itself).
+const SLIDE_ALONG_M: f64 = 0.5;
+
+/// Poses `pose` slid along its walls (direction `along_rad`, grid-local in `a`) to lay a
+/// landmark of `b` on a like-sized one of `a`: at most `max`, those whose pairs ask least
+/// across the walls first.
+///
+/// A band from wall to wall with a single rock in it is held across the walls and in
+/// heading by them, and along them by the rock alone. The global search, on cells too
+/// coarse for a small rock, finds the band slid along the walls to where its points fall
+/// on other structure; one rock proposes nothing in [`hypotheses`], which needs three
+/// votes. Chance pairs ask for offsets across the walls spread over the whole hall, so
+/// few pass the gate, and the verification judges those that do.
+pub fn slides(
+    a: &[Landmark],
+    b: &[Landmark],
+    pose: &Pose2,
+    along_rad: f64,
+    max: usize,
+) -> Vec<Pose2> {
+    let (s, c) = pose.yaw_rad.sin_cos();
+    let (us, uc) = along_rad.sin_cos();
+    let mut found: Vec<(f64, Pose2)> = Vec::new();
+    for la in a {
+        for lb in b.iter().filter(|lb| alike(la, lb)) {
+            let dx = la.c.x_m - (c * lb.c.x_m - s * lb.c.y_m + pose.x_m);
+            let dy = la.c.y_m - (s * lb.c.x_m + c * lb.c.y_m + pose.y_m);
+            let along = dx * uc + dy * us;
+            let across = -dx * us + dy * uc;
+            if across.abs() <= SLIDE_ACROSS_M && along.abs() >= SLIDE_ALONG_M {
+                let slid = Pose2::new(pose.x_m + along * uc, pose.y_m + along * us, pose.yaw_rad);
+                found.push((across.abs(), slid));
+            }
+        }
+    }
+    found.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut kept: Vec<Pose2> = Vec::with_capacity(max);
+    for (_, p) in found {
+        if kept.len() >= max {
+            break;
+        }
+        if !kept
+            .iter()
+            .any(|q| (q.x_m - p.x_m).hypot(q.y_m - p.y_m) < DISTINCT_M)
+        {
+            kept.push(p);
+        }
+    }
+    kept
+}
+
 /// At most `max` poses per heading (grid-local, of `b` in `a`) that several landmark pairs
 /// of like size agree on, at the headings `yaws_rad`, the most voted first at each.
 pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) -> Vec<Pose2> {
@@ -189,8 +249,7 @@ pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) 
         let mut votes: Vec<(Bin, usize, f64, f64)> = Vec::new();
         for la in a {
             for lb in b {
-                let slack = SIZE_SLACK_M + SIZE_SLACK_SHARE * la.radius_m.max(lb.radius_m);
-                if (la.radius_m - lb.radius_m).abs() > slack {
+                if !alike(la, lb) {
                     continue;
                 }
                 let tx = la.c.x_m - (c * lb.c.x_m - s * lb.c.y_m);
@@ -332,6 +391,51 @@ mod tests {
             "{crater:?}"
         );
         assert!((crater.radius_m - 2.0).abs() < 0.1, "{crater:?}");
+    }
+
+    #[test]
+    fn a_band_slid_along_its_walls_is_put_back_on_its_one_rock() {
+        // Rocks across a 50 x 36 m hall; the second map holds one of them, seen from a
+        // frame turned a quarter and shifted, and two of its own. The pose to slide is the
+        // truth moved 6 m along the walls running along x (and 5 cm across them, as a
+        // coarse search leaves it).
+        let a: Vec<Landmark> = (0..30)
+            .map(|k| Landmark {
+                c: Point2::new(1.7 * k as f64 % 50.0, (5.3 * k as f64) % 36.0),
+                radius_m: 0.15 + 0.01 * (k % 5) as f64,
+            })
+            .collect();
+        let truth = Pose2::new(20.0, 8.0, std::f64::consts::FRAC_PI_2);
+        let shared = a[7];
+        let mut b = vec![Landmark {
+            c: truth.inverse().transform_point(shared.c),
+            ..shared
+        }];
+        b.push(Landmark {
+            c: Point2::new(3.0, -2.0),
+            radius_m: 0.16,
+        });
+        b.push(Landmark {
+            c: Point2::new(-4.0, 1.5),
+            radius_m: 0.9,
+        });
+        let slid = Pose2::new(truth.x_m + 6.0, truth.y_m + 0.05, truth.yaw_rad);
+        let found = slides(&a, &b, &slid, 0.0, 4);
+        assert!(
+            found.iter().any(|p| (p.x_m - truth.x_m).abs() < 1e-9
+                && (p.y_m - slid.y_m).abs() < 1e-9
+                && p.yaw_rad == truth.yaw_rad),
+            "{found:?}"
+        );
+        // Along the other walls (y) the rock asks for a slide across them: nothing from it.
+        let found = slides(&a, &b[..1], &slid, std::f64::consts::FRAC_PI_2, 4);
+        assert!(
+            found.iter().all(|p| (p.x_m - truth.x_m).abs() > 1.0),
+            "{found:?}"
+        );
+        // Chance pairs pass the gate only where they happen to lie across the walls as the
+        // pose does: never more than asked for.
+        assert!(slides(&a, &b, &slid, 0.0, 2).len() <= 2);
     }
 
     #[test]

@@ -389,6 +389,32 @@ fn choose_best(verified: &[(Pose2, Evidence)], centre: Point2, params: &Params) 
         .unwrap_or(first)
 }
 
+/// Parallel walls of the two maps, within this much at a pose, say which way it could slide.
+const SLIDE_WALLS_PARALLEL_RAD: f64 = 0.02;
+
+/// The directions (grid-local in `a`) of `a`'s walls that some wall of `b` lies parallel to
+/// at `pose`, one for each way they run (a band may slide along either pair of a
+/// rectangular hall's walls).
+fn walls_along_rad(a: &Prepared, b: &Prepared, pose: &Pose2) -> Vec<f64> {
+    let mut along: Vec<f64> = Vec::new();
+    for wa in &a.walls {
+        let parallel =
+            crate::lines::parallel_offset_rad(std::slice::from_ref(wa), &b.walls, pose.yaw_rad)
+                .is_some_and(|d| d <= SLIDE_WALLS_PARALLEL_RAD);
+        let new_way = along.iter().all(|d| {
+            let apart = (wa.direction_rad - d).rem_euclid(PI);
+            apart.min(PI - apart) > SLIDE_WALLS_DISTINCT_RAD
+        });
+        if parallel && new_way {
+            along.push(wa.direction_rad);
+        }
+    }
+    along
+}
+
+/// Walls whose directions differ by more than this run different ways.
+const SLIDE_WALLS_DISTINCT_RAD: f64 = 0.2;
+
 /// The search score the landmarks' proposals are listed with in [`Estimate::hypotheses`]:
 /// none of the search's, which are never negative.
 const LANDMARK_SEARCH_SCORE: i32 = -1;
@@ -623,7 +649,31 @@ fn run(
             &yaws,
             params.landmark_hypotheses,
         );
-        for p in proposed {
+        // And each heading group's best, where the walls lie parallel at it, slid along
+        // them onto a landmark pair ([`crate::constellation::slides`]).
+        let slid: Vec<Pose2> = (0..groups_seen)
+            .filter_map(|g| {
+                screened
+                    .iter()
+                    .filter(|(hg, _, _)| *hg == g)
+                    .max_by(|x, y| x.2.total_cmp(&y.2))
+            })
+            .flat_map(|(_, p, _)| {
+                walls_along_rad(a, b, p)
+                    .into_iter()
+                    .map(move |along| (p, along))
+            })
+            .flat_map(|(p, along)| {
+                crate::constellation::slides(
+                    &a.landmarks,
+                    &b.landmarks,
+                    p,
+                    along,
+                    params.landmark_hypotheses,
+                )
+            })
+            .collect();
+        for p in proposed.into_iter().chain(slid) {
             let score = verify::score(a, b, &p, params.conflict_weight, On::Search);
             screened.push((LANDMARK_GROUP, p, score));
             hypotheses.push((to_frames(&p), LANDMARK_SEARCH_SCORE, score));
