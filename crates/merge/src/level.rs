@@ -500,8 +500,14 @@ pub struct Despeckled {
 }
 
 impl Despeckled {
-    /// Despeckles `map`.
+    /// Despeckles `map`, free pockets included.
     pub fn of(map: &Map) -> Despeckled {
+        Despeckled::cleaned(map, true)
+    }
+
+    /// Despeckles `map`; its walled-in free pockets ([`MAX_FREE_POCKET_CELLS`]) are made
+    /// unknown only if `free_pockets` is set.
+    pub fn cleaned(map: &Map, free_pockets: bool) -> Despeckled {
         let g = map.geometry();
         let (w, h) = (g.width, g.height);
         let src = map.cells.cells();
@@ -525,7 +531,9 @@ impl Despeckled {
                 }
             }
         }
-        unknown_free_pockets(&mut out, w, h);
+        if free_pockets {
+            unknown_free_pockets(&mut out, w, h);
+        }
         Despeckled {
             geometry: *g,
             cells: out,
