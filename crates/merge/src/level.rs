@@ -732,6 +732,10 @@ mod tests {
         for (x, y) in [(0, 3), (11, 2), (12, 4), (5, 6)] {
             assert_eq!(at(x, y), MapCell::Free, "ground at ({x}, {y})");
         }
+        // Asked to keep them (the rovers' maps), the holes stay free.
+        let kept = Despeckled::cleaned(&map, false);
+        assert_eq!(kept.cells[(6 - 2) * 15 + 2], MapCell::Free);
+        assert_eq!(kept.cells[(6 - 3) * 15 + 4], MapCell::Free);
         // Only the block's outer faces are surface now: no cell inside has a normal.
         let o = Outline::of(&d, 0.05);
         let normal = |x: usize, y: usize| o.normal[(6 - y) * 15 + x];
