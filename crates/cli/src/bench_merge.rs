@@ -477,6 +477,13 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
     );
     overlaps.sort_unstable();
     overlaps.dedup();
+    // Walls a quarter turn or more apart would be laid parallel the wrong way round.
+    if let Some(deg) = args.wall_pin_deg {
+        anyhow::ensure!(
+            (0.0..45.0).contains(&deg),
+            "--wall-pin-deg: {deg} is not a turn in [0, 45) degrees"
+        );
+    }
     let maps_dir = args
         .maps
         .clone()
@@ -522,13 +529,6 @@ pub fn run(args: BenchMergeArgs) -> Result<()> {
                 .map_or(params.wall_pin_rad, f64::to_radians),
             ..params
         };
-        // Walls a quarter turn or more apart would be laid parallel the wrong way round.
-        if !(0.0..45.0).contains(&params.wall_pin_rad.to_degrees()) {
-            anyhow::bail!(
-                "--wall-pin-deg: {} is not a turn in [0, 45) degrees",
-                params.wall_pin_rad.to_degrees()
-            );
-        }
         for (o, &overlap_pct) in overlaps.iter().enumerate() {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
                 args.seed ^ (u64::from(overlap_pct) << 32) ^ kind.len() as u64,

@@ -225,25 +225,13 @@ pub fn slides(
         }
     }
     found.sort_by(|x, y| x.0.total_cmp(&y.0));
-    let mut kept: Vec<Pose2> = Vec::with_capacity(max);
-    for (_, p) in found {
-        if kept.len() >= max {
-            break;
-        }
-        if !kept
-            .iter()
-            .any(|q| (q.x_m - p.x_m).hypot(q.y_m - p.y_m) < DISTINCT_M)
-        {
-            kept.push(p);
-        }
-    }
-    kept
+    first_distinct(found.into_iter().map(|(_, p)| p), max)
 }
 
 /// At most `max` poses per heading (grid-local, of `b` in `a`) that several landmark pairs
 /// of like size agree on, at the headings `yaws_rad`, the most voted first at each.
 pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) -> Vec<Pose2> {
-    let mut proposals: Vec<(usize, Pose2)> = Vec::new();
+    let mut proposals: Vec<Pose2> = Vec::new();
     for &yaw in yaws_rad {
         let (s, c) = yaw.sin_cos();
         let mut votes: Vec<(Bin, usize, f64, f64)> = Vec::new();
@@ -302,21 +290,29 @@ pub fn hypotheses(a: &[Landmark], b: &[Landmark], yaws_rad: &[f64], max: usize) 
                 .then(x.1.y_m.total_cmp(&y.1.y_m))
         });
         // The `max` most voted distinct ones at this heading.
-        let mut kept: Vec<(usize, Pose2)> = Vec::with_capacity(max);
-        for (n, p) in found {
-            if kept.len() >= max {
-                break;
-            }
-            let near = |(_, q): &(usize, Pose2)| (q.x_m - p.x_m).hypot(q.y_m - p.y_m) < DISTINCT_M;
-            if !kept.iter().any(near) {
-                kept.push((n, p));
-            }
-        }
-        proposals.extend(kept);
+        proposals.extend(first_distinct(found.into_iter().map(|(_, p)| p), max));
     }
     // Heading by heading: a crater votes as well for its own pose turned half a turn, and
     // which of the two is right is for the screening to say.
-    proposals.into_iter().map(|(_, p)| p).collect()
+    proposals
+}
+
+/// The first `max` of `poses` (all at one heading) that lie [`DISTINCT_M`] or more from
+/// every one kept before them.
+fn first_distinct(poses: impl Iterator<Item = Pose2>, max: usize) -> Vec<Pose2> {
+    let mut kept: Vec<Pose2> = Vec::with_capacity(max);
+    for p in poses {
+        if kept.len() >= max {
+            break;
+        }
+        if !kept
+            .iter()
+            .any(|q| (q.x_m - p.x_m).hypot(q.y_m - p.y_m) < DISTINCT_M)
+        {
+            kept.push(p);
+        }
+    }
+    kept
 }
 
 #[cfg(test)]

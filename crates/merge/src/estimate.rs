@@ -401,9 +401,8 @@ fn walls_along_rad(a: &Prepared, b: &Prepared, pose: &Pose2) -> Vec<f64> {
         let parallel =
             crate::lines::parallel_offset_rad(std::slice::from_ref(wa), &b.walls, pose.yaw_rad)
                 .is_some_and(|d| d <= SLIDE_WALLS_PARALLEL_RAD);
-        let new_way = along.iter().all(|d| {
-            let apart = (wa.direction_rad - d).rem_euclid(PI);
-            apart.min(PI - apart) > SLIDE_WALLS_DISTINCT_RAD
+        let new_way = along.iter().all(|&d| {
+            crate::lines::directions_apart_rad(wa.direction_rad, d) > SLIDE_WALLS_DISTINCT_RAD
         });
         if parallel && new_way {
             along.push(wa.direction_rad);

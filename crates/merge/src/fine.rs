@@ -511,9 +511,8 @@ pub fn compare(a: &Surfaces, b: &Surfaces, overlap: &Overlap, p: &Pose2, q: &Pos
     let (cp, cq) = (costs(p), costs(q));
     // Between two poses at one heading (any shift: a restart where the walls hold the
     // heading, a rival, a neighbour) only the points the shift moves across their surface
-    // are compared. A turn moves the
-    // short wall pieces at a band's ends mostly along themselves too, yet their turning is
-    // what tells it: there every point counts.
+    // are compared. A turn moves the short wall pieces at a band's ends mostly along
+    // themselves too, yet their turning is what tells it: there every point counts.
     let shifted =
         realms_core::geometry::normalize_angle_rad(q.yaw_rad - p.yaw_rad).abs() < SAME_HEADING_RAD;
     let informative = if shifted {

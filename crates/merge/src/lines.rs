@@ -220,16 +220,20 @@ pub fn turn_to_parallel_rad(a: &[Wall], b: &[Wall], yaw_rad: f64, max_rad: f64) 
     (weight > 0.0).then(|| sum / weight)
 }
 
+/// How far apart two directions of lines are (each taken modulo pi), radians in `[0, pi/2]`.
+pub fn directions_apart_rad(a_rad: f64, b_rad: f64) -> f64 {
+    let d = (a_rad - b_rad).rem_euclid(PI);
+    d.min(PI - d)
+}
+
 /// How far heading `yaw_rad` (of `b`'s grid-local frame in `a`'s) is from laying some wall
 /// of `b` parallel to some wall of `a`: the least difference of direction over every pair,
 /// radians in `[0, pi/2]`; `None` if either map has no wall.
 pub fn parallel_offset_rad(a: &[Wall], b: &[Wall], yaw_rad: f64) -> Option<f64> {
     a.iter()
         .flat_map(|wa| {
-            b.iter().map(move |wb| {
-                let d = (wb.direction_rad + yaw_rad - wa.direction_rad).rem_euclid(PI);
-                d.min(PI - d)
-            })
+            b.iter()
+                .map(move |wb| directions_apart_rad(wb.direction_rad + yaw_rad, wa.direction_rad))
         })
         .min_by(f64::total_cmp)
 }
