@@ -335,6 +335,21 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
+        name: "gyro-turns-2pct",
+        what: "each match's heading the gyro's turn moved 2 % of the way towards the match's, the match redone with the heading held there",
+        apply: |c| c.mapper.heading_map_share = Some(0.02),
+    },
+    Variant {
+        name: "gyro-turns-10pct",
+        what: "gyro-turns-2pct with 10 %",
+        apply: |c| c.mapper.heading_map_share = Some(0.1),
+    },
+    Variant {
+        name: "gyro-turns-30pct",
+        what: "gyro-turns-2pct with 30 %",
+        apply: |c| c.mapper.heading_map_share = Some(0.3),
+    },
+    Variant {
         name: "heading-anchor-2deg",
         what: "a match whose heading strays from the gyro's since the pose was last set (an optimisation, a relocalisation, the first scan) by more than 2 deg plus 3 sigma of the gyro's drift redone with the heading held to the gyro's",
         apply: |c| c.mapper.heading_anchor_rad = Some(2f64.to_radians()),

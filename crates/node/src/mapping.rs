@@ -133,6 +133,11 @@ pub fn rover_mapper_config() -> MapperConfig {
     // gyro's since the pose was set left the replays about even and one mission worse
     // (BENCHMARKS.md, "A heading held to the gyro's since the pose was set"): not yet.
     cfg.heading_anchor_rad = None;
+    // Nor does the gyro carry every turn with the map taking 2 % of each match's heading:
+    // far from the walls the tracked heading drifted less than half as fast, but the final
+    // maps swung both ways as before, even on average (BENCHMARKS.md, "The gyro carries
+    // the turns").
+    cfg.heading_map_share = None;
     // And the wheels' standstill holds the position of a rover turning in place: beside a
     // lone wall the matches slid along it 0.3 m in two seconds. On the default mission's
     // length over the radio (seeds 1-2) the final error fell from 0.089 to 0.070 m per
