@@ -16,7 +16,7 @@ use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LocalisationState, Message};
-use realms_core::{Point2, Pose2, RoverId, Time};
+use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
@@ -170,6 +170,7 @@ const VARIANTS: &[Variant] = &[
             c.mapper.still_hold = Some(realms_slam::mapper::StillHold {
                 below_m: 0.002,
                 translation_weight: 30.0,
+                hold_heading: false,
             })
         },
     },
@@ -333,6 +334,30 @@ const VARIANTS: &[Variant] = &[
         name: "relief",
         what: "each depth frame fitted onto an earlier one's relief (measured only: the SLAM does not use it yet)",
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
+    },
+    Variant {
+        name: "wall-headings",
+        what: "long straight runs of a keyframe's scan along a direction the first scan saw measure its heading in the graph",
+        apply: |c| c.mapper.wall_headings = Some(realms_slam::walls::WallHeadingConfig::default()),
+    },
+    Variant {
+        name: "wall-headings-1deg",
+        what: "wall-headings with each keyframe's measured heading trusted to 1 deg at most, not 0.5",
+        apply: |c| {
+            c.mapper.wall_headings = Some(realms_slam::walls::WallHeadingConfig {
+                floor_sigma_rad: 1f64.to_radians(),
+                ..realms_slam::walls::WallHeadingConfig::default()
+            })
+        },
+    },
+    Variant {
+        name: "still-turn-on-gyro",
+        what: "a rover turning in place takes its heading from the gyro's turn, not the match, as it takes its position from the wheels",
+        apply: |c| {
+            if let Some(hold) = &mut c.mapper.still_hold {
+                hold.hold_heading = true;
+            }
+        },
     },
     Variant {
         name: "gyro-turns-2pct",
@@ -595,6 +620,31 @@ fn perfect_wheels(input: &mut [CapturedInput]) {
     }
 }
 
+/// Shifts the gyro's rates after the start-up calibration in `input` by what the
+/// calibration (the mean rate while the rover stood for `calibration`) measured beyond the
+/// true `bias_rad_s`, so the bias the rover removes is the true one (`--exact-gyro-bias`).
+fn exact_gyro_bias(input: &mut [CapturedInput], bias_rad_s: f64, calibration: Duration) {
+    let end = Time::ZERO + calibration;
+    let (sum, n) = input
+        .iter()
+        .filter_map(|c| match &c.message {
+            Message::Imu(imu) if imu.header.stamp < end => Some(imu.angular_velocity.z),
+            _ => None,
+        })
+        .fold((0.0, 0u64), |(s, n), z| (s + z, n + 1));
+    if n == 0 {
+        return;
+    }
+    let leftover = sum / n as f64 - bias_rad_s;
+    for c in input.iter_mut() {
+        if let Message::Imu(imu) = &mut c.message
+            && imu.header.stamp >= end
+        {
+            imu.angular_velocity.z += leftover;
+        }
+    }
+}
+
 /// Each relief fit with the true travel between its two frames (the truth as each frame was
 /// published, in the reference frame's rover frame).
 fn relief_against_truth(hops: &[ReliefHop], input: &[CapturedInput]) -> Vec<(ReliefHop, Pose2)> {
@@ -731,6 +781,9 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     if args.perfect_wheels {
         println!("wheels: perfect (the odometry replaced by the truth's motion)");
     }
+    if args.exact_gyro_bias {
+        println!("gyro: the calibration's leftover bias removed");
+    }
     for v in &variants {
         println!("variant {}: {}", v.name, v.what);
     }
@@ -750,6 +803,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         let truth = world.truth().clone();
         let cfg = rover_mapping_config(&world, &options);
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
+        let biases: Vec<f64> = world.rovers().map(|b| b.gyro_bias_rad_s).collect();
         let mut mission = Mission::with_options(world, options);
         mission.capture_slam_inputs();
         mission.run_until(Time::from_secs_f64(limit_s));
@@ -758,6 +812,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         if args.perfect_wheels {
             for input in &mut capture {
                 perfect_wheels(input);
+            }
+        }
+        if args.exact_gyro_bias {
+            for (input, bias) in capture.iter_mut().zip(&biases) {
+                exact_gyro_bias(input, *bias, options.gyro_calibration);
             }
         }
         let mut replays = Vec::new();

@@ -231,6 +231,11 @@ pub struct BenchSlamArgs {
     /// neither slip nor drift), to see what the wheels' errors cost.
     #[arg(long)]
     pub perfect_wheels: bool,
+    /// Remove what the rovers' start-up calibration leaves of each gyro's bias before the
+    /// replays (the IMU's rates after the calibration shifted so the bias it measured is
+    /// the true one), to see what the gyro's leftover bias costs.
+    #[arg(long)]
+    pub exact_gyro_bias: bool,
     /// Seeds run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,

@@ -147,6 +147,7 @@ pub fn rover_mapper_config() -> MapperConfig {
     cfg.still_hold = Some(realms_slam::mapper::StillHold {
         below_m: 0.002,
         translation_weight: 1e7,
+        hold_heading: false,
     });
     // The rover turns at most 6 degrees between scans (1 rad/s), and the gyro's heading
     // holds a match anyway: no search over headings in fast turns.

@@ -17,6 +17,7 @@
 //! - [`relief`]: the travel between two depth frames, from the relief of the ground they see.
 //! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
+//! - [`walls`]: long straight walls along directions seen from the start, as a heading reference.
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
 //! - [`assembly`]: the whole map from the submaps, kept current incrementally.
 
@@ -38,3 +39,4 @@ pub mod relief;
 pub mod slip;
 pub mod trajectory;
 pub mod traversability;
+pub mod walls;

@@ -28,9 +28,10 @@ use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::ndt::{NdtConfig, NdtMap};
 use crate::occupancy::CellState;
 use crate::odometry::{OdomPredictor, OdomSample};
-use crate::posegraph::{Edge, GraphSolver, PoseGraph, RobustLoss};
+use crate::posegraph::{Edge, GraphSolver, HeadingPrior, PoseGraph, RobustLoss};
 use crate::slip::{SlipCalibration, WheelScale};
 use crate::trajectory::StampedPose;
+use crate::walls::{WallHeadingConfig, WallHeadings};
 use realms_core::geometry::normalize_angle_rad;
 use realms_core::{Cell, Point2, Pose2};
 
@@ -315,6 +316,11 @@ pub struct MapperConfig {
     /// [`Mapper::redraw_finished_submaps`]). Closures are then searched against cells that
     /// agree with the graph.
     pub redraw_bent_submaps: Option<SubmapBend>,
+    /// Long straight runs of a keyframe's scan along a direction the first keyframe's
+    /// scan saw (from the start pose, known exactly) measure its heading absolutely, as a
+    /// [`HeadingPrior`] in the graph ([`crate::walls`]; `None`: no such measurement). In a
+    /// hall the maps' errors are mostly a slow turn of the whole map.
+    pub wall_headings: Option<WallHeadingConfig>,
     /// Loop closures whose refined match pins the position less firmly than this in some
     /// direction (the smaller eigenvalue of the match's translation information) are not
     /// taken (`None`: no such floor). See [`ClosureWeighting`] for what the weak ones were.
@@ -356,6 +362,11 @@ pub struct StillHold {
     pub below_m: f64,
     /// The translation prior's weight then.
     pub translation_weight: f64,
+    /// The heading is then held to the prediction's too, the odometry's turn (a gyro's,
+    /// [`MapperConfig::gyro_heading`]): over a turn in place far from the walls a match on a
+    /// few rocks under-turned by a degree a second (BENCHMARKS.md, "The gyro carries the
+    /// turns"), while the gyro's turn is good to a few hundredths of a degree.
+    pub hold_heading: bool,
 }
 
 /// Odometry that stalls while the robot turns (the readings stop for most of a second, then
@@ -540,6 +551,7 @@ impl Default for MapperConfig {
             closure_weighting: None,
             closure_min_information: None,
             redraw_bent_submaps: None,
+            wall_headings: None,
         }
     }
 }
@@ -700,6 +712,10 @@ pub struct Mapper {
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
     wheel_scale: Option<WheelScale>,
+    /// The wall directions the first keyframe saw (with `wall_headings`).
+    walls: Option<WallHeadings>,
+    /// Keyframes whose walls measured their heading ([`MapperConfig::wall_headings`]).
+    pub wall_heading_keyframes: usize,
 }
 
 impl Mapper {
@@ -746,6 +762,8 @@ impl Mapper {
             assembly: Assembly::new(cfg.frontend.resolution_m)
                 .with_miss_rule(cfg.frontend.miss_rule),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
+            walls: cfg.wall_headings.map(WallHeadings::new),
+            wall_heading_keyframes: 0,
         }
     }
 
@@ -890,6 +908,11 @@ impl Mapper {
                     let matcher = match still {
                         Some(hold) => MatcherConfig {
                             prior_translation_weight: hold.translation_weight,
+                            prior_rotation_weight: if hold.hold_heading {
+                                HELD_HEADING_WEIGHT
+                            } else {
+                                self.cfg.frontend.matcher.prior_rotation_weight
+                            },
                             ..self.cfg.frontend.matcher
                         },
                         None => self.cfg.frontend.matcher,
@@ -1221,6 +1244,18 @@ impl Mapper {
     fn add_keyframe(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>, dense: &[Point2]) {
         let node = self.graph.nodes.len();
         self.graph.nodes.push(self.pose);
+        if let Some(walls) = &mut self.walls {
+            if node == 0 {
+                walls.set_references(self.pose.yaw_rad, &points);
+            } else if let Some((yaw_rad, information)) = walls.measure(self.pose.yaw_rad, &points) {
+                self.graph.heading_priors.push(HeadingPrior {
+                    node,
+                    yaw_rad,
+                    information,
+                });
+                self.wall_heading_keyframes += 1;
+            }
+        }
         self.keyframe_points.push(points);
         self.keyframe_odom.push((time_s, odom));
         let unmatched_m = std::mem::take(&mut self.unmatched_m);
@@ -2157,6 +2192,38 @@ mod tests {
             fast > 2.0 && fast < unchecked / 2.0,
             "{fast:.2} / {unchecked:.2} deg"
         );
+    }
+
+    #[test]
+    fn keyframes_that_see_the_start_walls_measure_their_heading_against_them() {
+        // Driving east 3 m off the south wall, tracked from odometry that turns 0.2
+        // degrees a scan the rover does not: each keyframe's walls say where it truly faces.
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        cfg.wall_headings = Some(WallHeadingConfig::default());
+        let mut mapper = Mapper::new(cfg);
+        for k in 0..60 {
+            let truth = Pose2::new(-6.0 + 0.1 * k as f64, -7.0, 0.0);
+            let odom = Pose2::new(truth.x_m, truth.y_m, (0.2 * k as f64).to_radians());
+            mapper.add_points(0.1 * k as f64, odom, sparse_hall_scan(truth));
+        }
+        let walls = mapper.walls.as_ref().expect("configured");
+        // The south wall and the west wall.
+        assert_eq!(walls.references().len(), 2, "{:?}", walls.references());
+        let keyframes = mapper.graph.nodes.len();
+        let measured = &mapper.graph.heading_priors;
+        assert!(
+            keyframes > 10 && measured.len() + 1 == keyframes,
+            "{} of {keyframes}",
+            measured.len()
+        );
+        assert_eq!(mapper.wall_heading_keyframes, measured.len());
+        for prior in measured {
+            let off = normalize_angle_rad(prior.yaw_rad).to_degrees();
+            assert!(off.abs() < 0.05, "node {}: {off:.3} deg", prior.node);
+        }
     }
 
     /// Drives east 20 m through the sparse hall with exact odometry, a path 3 m off the

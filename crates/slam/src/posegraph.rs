@@ -32,6 +32,20 @@ pub struct Edge {
     pub robust: bool,
 }
 
+/// A heading measured for one node against a fixed reference, not against another node
+/// (a wall along a direction seen from the start, [`crate::walls`]). Weighted by the graph's
+/// robust loss, as loop closures are: a run that is not the wall it seemed cannot drag the
+/// map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeadingPrior {
+    /// The node.
+    pub node: usize,
+    /// Its measured heading, radians.
+    pub yaw_rad: f64,
+    /// Information (inverse variance) of that heading, 1 / rad^2.
+    pub information: f64,
+}
+
 /// The graph.
 #[derive(Clone, Debug, Default)]
 pub struct PoseGraph {
@@ -39,6 +53,8 @@ pub struct PoseGraph {
     pub nodes: Vec<Pose2>,
     /// Constraints.
     pub edges: Vec<Edge>,
+    /// Headings measured node by node against a fixed reference.
+    pub heading_priors: Vec<HeadingPrior>,
     /// How each Gauss-Newton step's linear system is solved.
     pub solver: GraphSolver,
     /// How loop closures that disagree with the rest of the graph are discounted.
@@ -269,19 +285,38 @@ impl PoseGraph {
         before - self.edges.len()
     }
 
-    /// The total weighted squared error (robust edges Huber-weighted).
+    /// The total weighted squared error (robust edges and heading priors Huber-weighted).
     pub fn chi2(&self) -> f64 {
-        self.edges
+        let huber = |m2: f64| {
+            if m2.sqrt() > HUBER_K {
+                2.0 * HUBER_K * m2.sqrt() - HUBER_K * HUBER_K
+            } else {
+                m2
+            }
+        };
+        let edges: f64 = self
+            .edges
             .iter()
             .map(|e| {
                 let m2 = self.edge_error2(e);
-                if e.robust && m2.sqrt() > HUBER_K {
-                    2.0 * HUBER_K * m2.sqrt() - HUBER_K * HUBER_K
-                } else {
-                    m2
-                }
+                if e.robust { huber(m2) } else { m2 }
             })
-            .sum()
+            .sum();
+        let priors: f64 = self
+            .heading_priors
+            .iter()
+            .filter_map(|p| self.heading_prior_error2(p))
+            .map(huber)
+            .sum();
+        edges + priors
+    }
+
+    /// The squared Mahalanobis error of `prior` at its node's heading now (`None` if the
+    /// node does not exist).
+    pub fn heading_prior_error2(&self, prior: &HeadingPrior) -> Option<f64> {
+        let node = self.nodes.get(prior.node)?;
+        let r = normalize_angle_rad(node.yaw_rad - prior.yaw_rad);
+        Some(r * r * prior.information)
     }
 
     /// Runs up to `iterations` Gauss-Newton steps; stops early when a step changes nothing.
@@ -321,6 +356,15 @@ impl PoseGraph {
                     g[e.from][c] += (0..3).map(|k| a[k][c] * w[k] * r[k]).sum::<f64>();
                     g[e.to][c] += (0..3).map(|k| b[k][c] * w[k] * r[k]).sum::<f64>();
                 }
+            }
+            for p in &self.heading_priors {
+                if p.node >= n {
+                    continue;
+                }
+                let r = normalize_angle_rad(self.nodes[p.node].yaw_rad - p.yaw_rad);
+                let w = p.information * self.loss.weight(r * r * p.information);
+                diag[p.node][2][2] += w;
+                g[p.node][2] += w * r;
             }
             // Hold node 0 where it is.
             for (k, row) in diag[0].iter_mut().enumerate() {
@@ -646,6 +690,61 @@ mod tests {
         assert_eq!(graph.path_length_within(0, 11, 100.0, hop), None);
     }
 
+    #[test]
+    fn heading_priors_hold_a_drifting_chain_and_a_wrong_one_is_discounted() {
+        // A straight chain of 40 steps whose odometry turns 0.2 degrees a step that the
+        // robot did not: by the end it faces 7.8 degrees off. Its heading information is a
+        // gyro's over a second (the rovers' keyframe edges).
+        let drift = 0.2f64.to_radians();
+        let mut graph = PoseGraph {
+            nodes: vec![Pose2::IDENTITY],
+            ..PoseGraph::default()
+        };
+        for k in 0..40 {
+            let measured = Pose2::new(1.0, 0.0, drift);
+            let last = *graph.nodes.last().expect("seeded");
+            graph.nodes.push(last * measured);
+            graph.edges.push(Edge {
+                information: [100.0, 100.0, 1e5],
+                ..odometry_edge(k, measured)
+            });
+        }
+        let heading_error = |g: &PoseGraph| {
+            g.nodes
+                .iter()
+                .map(|p| normalize_angle_rad(p.yaw_rad).abs())
+                .fold(0.0, f64::max)
+        };
+        let mut free = graph.clone();
+        free.optimize(5);
+        assert!(heading_error(&free) > 7f64.to_radians());
+        // Every fourth node's true heading (0) measured to 0.1 degree.
+        let sigma = 0.1f64.to_radians();
+        for node in (4..=40).step_by(4) {
+            graph.heading_priors.push(HeadingPrior {
+                node,
+                yaw_rad: 0.0,
+                information: 1.0 / (sigma * sigma),
+            });
+        }
+        let mut held = graph.clone();
+        held.optimize(5);
+        let err = heading_error(&held);
+        assert!(err < 0.5f64.to_radians(), "{}", err.to_degrees());
+        assert!(held.chi2().is_finite());
+        // One more, 3 degrees off at node 22 (a run that was not the wall it seemed): the
+        // loss caps its pull, so it turns its node by far less than it claims.
+        graph.heading_priors.push(HeadingPrior {
+            node: 22,
+            yaw_rad: 3f64.to_radians(),
+            information: 1.0 / (sigma * sigma),
+        });
+        graph.optimize(5);
+        let turned = normalize_angle_rad(graph.nodes[22].yaw_rad).abs();
+        assert!(turned < 1f64.to_radians(), "{}", turned.to_degrees());
+        assert!(heading_error(&graph) < 1f64.to_radians());
+    }
+
     /// A square loop of 4 x 10 steps of 1 m, odometry turning 2 % too little at each corner
     /// and stretching 3 % along each side.
     fn drifting_square() -> (Vec<Pose2>, PoseGraph) {
@@ -857,6 +956,7 @@ mod tests {
                 edges: graph.edges.clone(),
                 solver,
                 loss: RobustLoss::DynamicCovarianceScaling { phi: 5.0 },
+                ..PoseGraph::default()
             };
             dcs.optimize(20);
             let moved_dcs = max_error(&good.nodes, &dcs.nodes);

@@ -363,6 +363,7 @@ fn a_rover_turning_in_place_is_held_where_its_wheels_stood() {
     let held = position_after(Some(StillHold {
         below_m: 0.002,
         translation_weight: 1e7,
+        hold_heading: false,
     }));
     assert!(held < 0.002, "held where the wheels stood: {held}");
 }

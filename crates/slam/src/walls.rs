@@ -1,0 +1,308 @@
+//! Long straight walls as a heading reference: the directions of the walls the first scan
+//! sees, from a pose known exactly, stay fixed, so a later scan that sees a long straight
+//! run of points along one of those directions measures the robot's heading absolutely.
+//!
+//! In a hall the maps' errors are mostly a slow turn of the whole map: a rover's final map
+//! agreed with the truth in proportion to its heading error (BENCHMARKS.md, "Walls that hold
+//! the heading"). Structural regularities of built environments are a standard anchor for
+//! that drift (e.g. Peasley, Birchfield, Cunningham & Fisher, "Accurate On-line 3D Occupancy
+//! Grids Using Manhattan World Constraints", IROS 2012); here only directions actually seen
+//! from the start are trusted, not an assumed grid of right angles.
+
+use realms_core::Point2;
+use realms_core::geometry::normalize_angle_rad;
+
+/// How runs of a scan count as walls, and how far from a reference direction one may lie.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallHeadingConfig {
+    /// Shortest run that counts as a wall, metres (a boulder's face is shorter).
+    pub min_length_m: f64,
+    /// Fewest points in a run.
+    pub min_points: usize,
+    /// Largest distance of a point from the run's line, metres.
+    pub max_offset_m: f64,
+    /// Largest gap between neighbouring points of a run, metres.
+    pub max_gap_m: f64,
+    /// A run whose direction (by the tracked heading) lies within this of a reference
+    /// direction measures the heading; farther off it is another structure, radians.
+    pub gate_rad: f64,
+    /// Standard deviation a keyframe's measured heading is never trusted beyond (walls are
+    /// not perfectly straight, and the scan plane tilts with the rover), radians. It is
+    /// added to what the runs' fits give, so a keyframe's heading is held gently: a firm
+    /// hold turned single keyframes, and the submaps drawn from them, by its noise.
+    pub floor_sigma_rad: f64,
+}
+
+impl Default for WallHeadingConfig {
+    fn default() -> Self {
+        WallHeadingConfig {
+            min_length_m: 3.0,
+            min_points: 12,
+            max_offset_m: 0.05,
+            max_gap_m: 0.6,
+            gate_rad: 3f64.to_radians(),
+            floor_sigma_rad: 0.5f64.to_radians(),
+        }
+    }
+}
+
+/// A straight run of a scan: its direction (modulo half a turn) and how well that is known.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallRun {
+    /// Direction of the run in the scan's frame, in (-pi/2, pi/2].
+    pub direction_rad: f64,
+    /// Standard deviation of that direction, radians (the fit's alone, no floor).
+    pub sigma_rad: f64,
+    /// Length between its end points, metres.
+    pub length_m: f64,
+    /// Points in the run.
+    pub points: usize,
+}
+
+/// A line fitted through `points` by total least squares: (direction in (-pi/2, pi/2],
+/// largest distance of a point from it, the spread along it (sum of squared positions),
+/// the residual variance across it).
+fn fit_line(points: &[Point2]) -> (f64, f64, f64, f64) {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(x, y), p| (x + p.x_m, y + p.y_m));
+    let (mx, my) = (mx / n, my / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p.x_m - mx, p.y_m - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let direction = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let (s, c) = direction.sin_cos();
+    let mut worst = 0.0f64;
+    let (mut along, mut across) = (0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p.x_m - mx, p.y_m - my);
+        let d = -s * dx + c * dy;
+        worst = worst.max(d.abs());
+        along += (c * dx + s * dy).powi(2);
+        across += d * d;
+    }
+    let variance = if n > 2.0 { across / (n - 2.0) } else { 0.0 };
+    (half_turn(direction), worst, along, variance)
+}
+
+/// `a` folded into (-pi/2, pi/2]: a line's direction has no sense.
+fn half_turn(a: f64) -> f64 {
+    let mut d = normalize_angle_rad(a);
+    if d > std::f64::consts::FRAC_PI_2 {
+        d -= std::f64::consts::PI;
+    } else if d <= -std::f64::consts::FRAC_PI_2 {
+        d += std::f64::consts::PI;
+    }
+    d
+}
+
+/// The long straight runs of a scan's points, taken in beam order: a run grows point by
+/// point while the points stay within `max_offset_m` of its line and `max_gap_m` of each
+/// other, and is kept if it is long enough.
+pub fn wall_runs(points: &[Point2], cfg: &WallHeadingConfig) -> Vec<WallRun> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start + cfg.min_points <= points.len() {
+        let mut end = start + 1;
+        // Grow while the next point is near and the run still fits a line; the fit is
+        // checked every few points, since a full refit per point is quadratic.
+        while end < points.len() && points[end].distance_m(points[end - 1]) <= cfg.max_gap_m {
+            let candidate = end + 1;
+            if candidate - start >= 3 && (candidate - start) % 4 == 0 {
+                let (_, worst, _, _) = fit_line(&points[start..candidate]);
+                if worst > cfg.max_offset_m {
+                    break;
+                }
+            }
+            end = candidate;
+        }
+        // Trim the tail until the whole run fits (the check above skipped some points).
+        while end - start >= 3 && fit_line(&points[start..end]).1 > cfg.max_offset_m {
+            end -= 1;
+        }
+        let run = &points[start..end];
+        let length = run[0].distance_m(run[run.len() - 1]);
+        if run.len() >= cfg.min_points && length >= cfg.min_length_m {
+            let (direction, _, along, variance) = fit_line(run);
+            runs.push(WallRun {
+                direction_rad: direction,
+                sigma_rad: (variance / along.max(1e-12)).sqrt(),
+                length_m: length,
+                points: run.len(),
+            });
+            start = end;
+        } else {
+            start += 1;
+        }
+    }
+    runs
+}
+
+/// The wall directions seen from the start, and the heading measurements later scans give.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WallHeadings {
+    cfg: WallHeadingConfig,
+    /// Directions in the map frame, in (-pi/2, pi/2].
+    references: Vec<f64>,
+}
+
+impl WallHeadings {
+    /// No reference yet.
+    pub fn new(cfg: WallHeadingConfig) -> Self {
+        WallHeadings {
+            cfg,
+            references: Vec::new(),
+        }
+    }
+
+    /// The reference directions, map frame.
+    pub fn references(&self) -> &[f64] {
+        &self.references
+    }
+
+    /// Takes the long runs of `points` (robot frame, beam order), seen at a heading known
+    /// exactly, as the reference directions; runs within the gate of one already taken
+    /// are the same direction.
+    pub fn set_references(&mut self, yaw_rad: f64, points: &[Point2]) {
+        for run in wall_runs(points, &self.cfg) {
+            let direction = half_turn(yaw_rad + run.direction_rad);
+            if self
+                .references
+                .iter()
+                .all(|r| half_turn(direction - r).abs() > self.cfg.gate_rad)
+            {
+                self.references.push(direction);
+            }
+        }
+    }
+
+    /// The heading `points` (robot frame, beam order) measure for a robot tracked at
+    /// `yaw_rad`: the heading its wall runs along reference directions say, and its
+    /// information (1 / rad^2); `None` if no run lies along a reference.
+    pub fn measure(&self, yaw_rad: f64, points: &[Point2]) -> Option<(f64, f64)> {
+        if self.references.is_empty() {
+            return None;
+        }
+        let (mut weighted, mut information) = (0.0, 0.0);
+        for run in wall_runs(points, &self.cfg) {
+            let direction = yaw_rad + run.direction_rad;
+            let Some(off) = self
+                .references
+                .iter()
+                .map(|r| half_turn(direction - r))
+                .filter(|d| d.abs() <= self.cfg.gate_rad)
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+            else {
+                continue;
+            };
+            // A run of perfectly placed points would claim an exact direction.
+            let w = 1.0 / run.sigma_rad.max(1e-5).powi(2);
+            weighted += w * off;
+            information += w;
+        }
+        (information > 0.0).then(|| {
+            let variance = information.recip() + self.cfg.floor_sigma_rad.powi(2);
+            (yaw_rad - weighted / information, variance.recip())
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points along the segment from `a` to `b`, `n` of them, each pushed `jitter(i)`
+    /// across it.
+    fn along(a: Point2, b: Point2, n: usize, jitter: impl Fn(usize) -> f64) -> Vec<Point2> {
+        let (dx, dy) = (b.x_m - a.x_m, b.y_m - a.y_m);
+        let len = dx.hypot(dy);
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / (n - 1) as f64;
+                let j = jitter(i);
+                Point2::new(a.x_m + t * dx - j * dy / len, a.y_m + t * dy + j * dx / len)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_wall_and_a_boulder_give_one_run_along_the_wall() {
+        let cfg = WallHeadingConfig::default();
+        // A wall 6 m long at 20 degrees, then a boulder's face 0.5 m across.
+        let angle = 20f64.to_radians();
+        let a = Point2::new(2.0, -3.0);
+        let b = Point2::new(2.0 + 6.0 * angle.cos(), -3.0 + 6.0 * angle.sin());
+        let mut points = along(a, b, 40, |i| if i % 2 == 0 { 0.01 } else { -0.01 });
+        points.extend(along(
+            Point2::new(9.0, 3.0),
+            Point2::new(9.3, 3.4),
+            6,
+            |_| 0.0,
+        ));
+        let runs = wall_runs(&points, &cfg);
+        assert_eq!(runs.len(), 1, "{runs:?}");
+        assert!((runs[0].direction_rad - angle).abs() < 1e-3, "{runs:?}");
+        assert_eq!(runs[0].points, 40);
+        assert!(
+            runs[0].sigma_rad > 0.0 && runs[0].sigma_rad < 0.005,
+            "{runs:?}"
+        );
+    }
+
+    #[test]
+    fn a_corner_splits_into_two_runs() {
+        let cfg = WallHeadingConfig::default();
+        let mut points = along(Point2::new(5.0, -4.0), Point2::new(5.0, 4.0), 40, |_| 0.0);
+        points.extend(along(
+            Point2::new(4.8, 4.0),
+            Point2::new(-3.0, 4.0),
+            40,
+            |_| 0.0,
+        ));
+        let runs = wall_runs(&points, &cfg);
+        assert_eq!(runs.len(), 2, "{runs:?}");
+        let vertical = runs[0].direction_rad.abs();
+        assert!(
+            (vertical - std::f64::consts::FRAC_PI_2).abs() < 0.02,
+            "{runs:?}"
+        );
+        assert!(runs[1].direction_rad.abs() < 0.02, "{runs:?}");
+    }
+
+    #[test]
+    fn a_turned_robot_seeing_the_start_walls_measures_its_heading() {
+        let cfg = WallHeadingConfig::default();
+        // From the start (heading 0) a wall along x at y = 4 and one along y at x = 6.
+        let mut walls = along(Point2::new(6.0, -3.0), Point2::new(6.0, 3.9), 50, |_| 0.0);
+        walls.extend(along(
+            Point2::new(5.9, 4.0),
+            Point2::new(-2.0, 4.0),
+            50,
+            |_| 0.0,
+        ));
+        let mut headings = WallHeadings::new(cfg);
+        headings.set_references(0.0, &walls);
+        assert_eq!(headings.references().len(), 2);
+        // Later the robot truly faces 30 degrees; the same walls in its frame.
+        let truth = 30f64.to_radians();
+        let (s, c) = truth.sin_cos();
+        let seen: Vec<Point2> = walls
+            .iter()
+            .map(|p| Point2::new(c * p.x_m + s * p.y_m, -s * p.x_m + c * p.y_m))
+            .collect();
+        // Tracked 1.5 degrees off: the walls say where it truly faces.
+        let tracked = truth + 1.5f64.to_radians();
+        let (yaw, information) = headings.measure(tracked, &seen).expect("walls seen");
+        assert!((yaw - truth).abs() < 1e-6, "{}", yaw.to_degrees());
+        let floor = cfg.floor_sigma_rad;
+        assert!(information <= 1.0 / (floor * floor) + 1e-6, "{information}");
+        assert!(information > 0.5 / (floor * floor), "{information}");
+        // Tracked 5 degrees off, beyond the gate: the runs may be other structures.
+        assert!(headings.measure(truth + 5f64.to_radians(), &seen).is_none());
+    }
+}
