@@ -365,7 +365,9 @@ pub struct StillHold {
     /// The heading is then held to the prediction's too, the odometry's turn (a gyro's,
     /// [`MapperConfig::gyro_heading`]): over a turn in place far from the walls a match on a
     /// few rocks under-turned by a degree a second (BENCHMARKS.md, "The gyro carries the
-    /// turns"), while the gyro's turn is good to a few hundredths of a degree.
+    /// turns"), while the gyro's turn is good to a few hundredths of a degree. Off for the
+    /// rovers: their maps came out worse with it (BENCHMARKS.md, "The gyro's leftover bias
+    /// measured out, and the gyro alone through turns in place").
     pub hold_heading: bool,
 }
 
