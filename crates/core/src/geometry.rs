@@ -193,9 +193,89 @@ impl Quaternion {
     }
 }
 
+/// A line fitted through points by total least squares: the main axis of their spread.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LineFit {
+    /// The points' centroid, on the line.
+    pub centre: Point2,
+    /// The line's direction, in (-pi/2, pi/2]: a line has no sense.
+    pub direction_rad: f64,
+    /// How many points it was fitted to.
+    pub points: usize,
+}
+
+impl LineFit {
+    /// Fits the line through `points`; `None` for fewer than `min_points` (at least 2).
+    pub fn through<'a>(
+        points: impl Iterator<Item = &'a Point2> + Clone,
+        min_points: usize,
+    ) -> Option<LineFit> {
+        let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+        for p in points.clone() {
+            n += 1;
+            sx += p.x_m;
+            sy += p.y_m;
+        }
+        if n < min_points.max(2) {
+            return None;
+        }
+        let (cx, cy) = (sx / n as f64, sy / n as f64);
+        let (mut vxx, mut vxy, mut vyy) = (0.0, 0.0, 0.0);
+        for p in points {
+            let (dx, dy) = (p.x_m - cx, p.y_m - cy);
+            vxx += dx * dx;
+            vxy += dx * dy;
+            vyy += dy * dy;
+        }
+        Some(LineFit {
+            centre: Point2::new(cx, cy),
+            direction_rad: 0.5 * (2.0 * vxy).atan2(vxx - vyy),
+            points: n,
+        })
+    }
+
+    /// Where `p` lies from the centre, along the line and across it (left positive).
+    pub fn along_across(&self, p: Point2) -> (f64, f64) {
+        let (s, c) = self.direction_rad.sin_cos();
+        let (dx, dy) = (p.x_m - self.centre.x_m, p.y_m - self.centre.y_m);
+        (dx * c + dy * s, -dx * s + dy * c)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_line_through_noisy_points_along_30_degrees() {
+        let a = 30f64.to_radians();
+        let (s, c) = a.sin_cos();
+        let points: Vec<Point2> = (0..20)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                // Symmetric about the middle, so the noise has no trend along the line.
+                let off = if matches!(i % 4, 0 | 3) { 0.01 } else { -0.01 };
+                Point2::new(1.0 + t * c - off * s, 2.0 + t * s + off * c)
+            })
+            .collect();
+        let fit = LineFit::through(points.iter(), 3).expect("enough points");
+        assert!(
+            (fit.direction_rad - a).abs() < 1e-9,
+            "{}",
+            fit.direction_rad
+        );
+        assert_eq!(fit.points, 20);
+        let (along, across) = fit.along_across(points[0]);
+        assert!(
+            (along + 0.95).abs() < 1e-9 && (across - 0.01).abs() < 1e-9,
+            "{along} {across}"
+        );
+        // Folded to (-pi/2, pi/2]: the same line from the other end.
+        let reversed: Vec<Point2> = points.iter().rev().copied().collect();
+        let back = LineFit::through(reversed.iter(), 3).expect("enough points");
+        assert!((back.direction_rad - a).abs() < 1e-9);
+        assert!(LineFit::through(points[..2].iter(), 3).is_none());
+    }
     use proptest::prelude::*;
 
     fn close(a: &Pose2, b: &Pose2) -> bool {

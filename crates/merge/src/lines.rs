@@ -154,40 +154,20 @@ impl Line {
 
 /// Total least squares through `points`: the main axis of their spread.
 fn line_through<'a>(points: impl Iterator<Item = &'a realms_core::Point2> + Clone) -> Option<Line> {
-    let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
-    for p in points.clone() {
-        n += 1.0;
-        sx += p.x_m;
-        sy += p.y_m;
-    }
-    if n < 3.0 {
-        return None;
-    }
-    let (cx, cy) = (sx / n, sy / n);
-    let (mut vxx, mut vxy, mut vyy) = (0.0, 0.0, 0.0);
-    for p in points.clone() {
-        let (dx, dy) = (p.x_m - cx, p.y_m - cy);
-        vxx += dx * dx;
-        vxy += dx * dy;
-        vyy += dy * dy;
-    }
-    let direction_rad = 0.5 * (2.0 * vxy).atan2(vxx - vyy);
-    let (s, c) = direction_rad.sin_cos();
+    let fit = realms_core::geometry::LineFit::through(points.clone(), 3)?;
     let (mut lo, mut hi, mut across) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
     for p in points {
-        let (dx, dy) = (p.x_m - cx, p.y_m - cy);
-        let along = dx * c + dy * s;
+        let (along, off) = fit.along_across(*p);
         lo = f64::min(lo, along);
         hi = f64::max(hi, along);
-        let off = -dx * s + dy * c;
         across += off * off;
     }
     Some(Line {
-        cx,
-        cy,
-        direction_rad,
+        cx: fit.centre.x_m,
+        cy: fit.centre.y_m,
+        direction_rad: fit.direction_rad,
         length_m: hi - lo,
-        rms_m: (across / n).sqrt(),
+        rms_m: (across / fit.points as f64).sqrt(),
     })
 }
 

@@ -10,7 +10,7 @@
 //! from the start are trusted, not an assumed grid of right angles.
 
 use realms_core::Point2;
-use realms_core::geometry::normalize_angle_rad;
+use realms_core::geometry::{LineFit, normalize_angle_rad};
 
 /// How runs of a scan count as walls, and how far from a reference direction one may lie.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,31 +65,19 @@ pub struct WallRun {
 /// largest distance of a point from it, the spread along it (sum of squared positions),
 /// the residual variance across it).
 fn fit_line(points: &[Point2]) -> (f64, f64, f64, f64) {
-    let n = points.len() as f64;
-    let (mx, my) = points
-        .iter()
-        .fold((0.0, 0.0), |(x, y), p| (x + p.x_m, y + p.y_m));
-    let (mx, my) = (mx / n, my / n);
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    let Some(fit) = LineFit::through(points.iter(), 2) else {
+        return (0.0, 0.0, 0.0, 0.0);
+    };
+    let (mut worst, mut along, mut across) = (0.0f64, 0.0, 0.0);
     for p in points {
-        let (dx, dy) = (p.x_m - mx, p.y_m - my);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    let direction = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let (s, c) = direction.sin_cos();
-    let mut worst = 0.0f64;
-    let (mut along, mut across) = (0.0, 0.0);
-    for p in points {
-        let (dx, dy) = (p.x_m - mx, p.y_m - my);
-        let d = -s * dx + c * dy;
+        let (a, d) = fit.along_across(*p);
         worst = worst.max(d.abs());
-        along += (c * dx + s * dy).powi(2);
+        along += a * a;
         across += d * d;
     }
+    let n = points.len() as f64;
     let variance = if n > 2.0 { across / (n - 2.0) } else { 0.0 };
-    (half_turn(direction), worst, along, variance)
+    (fit.direction_rad, worst, along, variance)
 }
 
 /// `a` folded into (-pi/2, pi/2]: a line's direction has no sense.
