@@ -714,10 +714,9 @@ pub struct Mapper {
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
     wheel_scale: Option<WheelScale>,
-    /// The wall directions the first keyframe saw (with `wall_headings`).
+    /// The wall directions the first keyframe saw (with `wall_headings`); the headings they
+    /// measured are the graph's heading priors.
     walls: Option<WallHeadings>,
-    /// Keyframes whose walls measured their heading ([`MapperConfig::wall_headings`]).
-    pub wall_heading_keyframes: usize,
 }
 
 impl Mapper {
@@ -765,7 +764,6 @@ impl Mapper {
                 .with_miss_rule(cfg.frontend.miss_rule),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
             walls: cfg.wall_headings.map(WallHeadings::new),
-            wall_heading_keyframes: 0,
         }
     }
 
@@ -1255,7 +1253,6 @@ impl Mapper {
                     yaw_rad,
                     information,
                 });
-                self.wall_heading_keyframes += 1;
             }
         }
         self.keyframe_points.push(points);
@@ -2221,7 +2218,6 @@ mod tests {
             "{} of {keyframes}",
             measured.len()
         );
-        assert_eq!(mapper.wall_heading_keyframes, measured.len());
         for prior in measured {
             let off = normalize_angle_rad(prior.yaw_rad).to_degrees();
             assert!(off.abs() < 0.05, "node {}: {off:.3} deg", prior.node);

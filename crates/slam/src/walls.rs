@@ -61,23 +61,41 @@ pub struct WallRun {
     pub points: usize,
 }
 
-/// A line fitted through `points` by total least squares: (direction in (-pi/2, pi/2],
-/// largest distance of a point from it, the spread along it (sum of squared positions),
-/// the residual variance across it).
-fn fit_line(points: &[Point2]) -> (f64, f64, f64, f64) {
-    let Some(fit) = LineFit::through(points.iter(), 2) else {
-        return (0.0, 0.0, 0.0, 0.0);
+/// A line fitted through a run's points by total least squares, with what the run's
+/// growth and weight need of it.
+struct RunFit {
+    /// Direction, in (-pi/2, pi/2].
+    direction_rad: f64,
+    /// Largest distance of a point from the line, metres.
+    worst_offset_m: f64,
+    /// Sum of the points' squared positions along the line, m^2.
+    spread_along_m2: f64,
+    /// Residual variance across the line, m^2.
+    variance_across_m2: f64,
+}
+
+fn fit_run(points: &[Point2]) -> RunFit {
+    let mut fit = RunFit {
+        direction_rad: 0.0,
+        worst_offset_m: 0.0,
+        spread_along_m2: 0.0,
+        variance_across_m2: 0.0,
     };
-    let (mut worst, mut along, mut across) = (0.0f64, 0.0, 0.0);
+    let Some(line) = LineFit::through(points.iter(), 2) else {
+        return fit;
+    };
+    fit.direction_rad = line.direction_rad;
+    let mut across = 0.0;
     for p in points {
-        let (a, d) = fit.along_across(*p);
-        worst = worst.max(d.abs());
-        along += a * a;
+        let (a, d) = line.along_across(*p);
+        fit.worst_offset_m = fit.worst_offset_m.max(d.abs());
+        fit.spread_along_m2 += a * a;
         across += d * d;
     }
-    let n = points.len() as f64;
-    let variance = if n > 2.0 { across / (n - 2.0) } else { 0.0 };
-    (fit.direction_rad, worst, along, variance)
+    if points.len() > 2 {
+        fit.variance_across_m2 = across / (points.len() - 2) as f64;
+    }
+    fit
 }
 
 /// `a` folded into (-pi/2, pi/2]: a line's direction has no sense.
@@ -103,25 +121,25 @@ pub fn wall_runs(points: &[Point2], cfg: &WallHeadingConfig) -> Vec<WallRun> {
         // checked every few points, since a full refit per point is quadratic.
         while end < points.len() && points[end].distance_m(points[end - 1]) <= cfg.max_gap_m {
             let candidate = end + 1;
-            if candidate - start >= 3 && (candidate - start) % 4 == 0 {
-                let (_, worst, _, _) = fit_line(&points[start..candidate]);
-                if worst > cfg.max_offset_m {
-                    break;
-                }
+            if candidate - start >= 3
+                && (candidate - start) % 4 == 0
+                && fit_run(&points[start..candidate]).worst_offset_m > cfg.max_offset_m
+            {
+                break;
             }
             end = candidate;
         }
         // Trim the tail until the whole run fits (the check above skipped some points).
-        while end - start >= 3 && fit_line(&points[start..end]).1 > cfg.max_offset_m {
+        while end - start >= 3 && fit_run(&points[start..end]).worst_offset_m > cfg.max_offset_m {
             end -= 1;
         }
         let run = &points[start..end];
         let length = run[0].distance_m(run[run.len() - 1]);
         if run.len() >= cfg.min_points && length >= cfg.min_length_m {
-            let (direction, _, along, variance) = fit_line(run);
+            let fit = fit_run(run);
             runs.push(WallRun {
-                direction_rad: direction,
-                sigma_rad: (variance / along.max(1e-12)).sqrt(),
+                direction_rad: fit.direction_rad,
+                sigma_rad: (fit.variance_across_m2 / fit.spread_along_m2.max(1e-12)).sqrt(),
                 length_m: length,
                 points: run.len(),
             });
