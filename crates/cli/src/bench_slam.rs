@@ -336,18 +336,34 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
-        name: "wall-headings",
-        what: "long straight runs of a keyframe's scan along a direction the first scan saw measure its heading in the graph",
-        apply: |c| c.mapper.wall_headings = Some(realms_slam::walls::WallHeadingConfig::default()),
+        name: "no-walls",
+        what: "neither the walls' heading measurements (nor their closure check) nor the closures widened across unpinned travel: the rovers' SLAM before the forty-fourth session",
+        apply: |c| {
+            c.mapper.wall_headings = None;
+            c.mapper.weak_travel = None;
+        },
+    },
+    Variant {
+        name: "no-weak-travel",
+        what: "closures searched and allowed as far as the path can have drifted, unpinned travel counted like any other",
+        apply: |c| c.mapper.weak_travel = None,
+    },
+    Variant {
+        name: "no-wall-gate",
+        what: "closures not checked against the turn the walls measured between their two keyframes",
+        apply: |c| {
+            if let Some(walls) = &mut c.mapper.wall_headings {
+                walls.closure_gate_sigmas = None;
+            }
+        },
     },
     Variant {
         name: "wall-headings-1deg",
-        what: "wall-headings with each keyframe's measured heading trusted to 1 deg at most, not 0.5",
+        what: "each keyframe's heading the walls measured trusted to 1 deg at most, not 0.5",
         apply: |c| {
-            c.mapper.wall_headings = Some(realms_slam::walls::WallHeadingConfig {
-                floor_sigma_rad: 1f64.to_radians(),
-                ..realms_slam::walls::WallHeadingConfig::default()
-            })
+            if let Some(walls) = &mut c.mapper.wall_headings {
+                walls.floor_sigma_rad = 1f64.to_radians();
+            }
         },
     },
     Variant {

@@ -31,13 +31,20 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
         merge_from_known_start(&[(RoverId(2), two), (RoverId(3), three)]).expect("two maps");
     let link = &merged.links[0];
     assert!(link.confirmed, "{link:?}");
-    // Both maps started in the arena's frame: the lander finds them within their drift of
-    // it, and keeps the known start.
-    assert!(!link.drifted, "{link:?}");
-    assert_eq!(link.reference_from_map, Some(Pose2::IDENTITY), "{link:?}");
-    // Asked for the precision of maps cut from one survey, the estimate itself is refused:
-    // the surfaces fit as closely 0.2 m away, where the two rovers' drifts disagree. Both
-    // fits lie within the drift tolerances, so they still confirm the known start.
+    // Both maps started in the arena's frame: the lander places rover 3's within their
+    // drift of it. Rover 2's map is up to 0.4 m off by its end at five minutes, so the two
+    // fit best a few decimetres apart. Within the lander's 0.3 m the known start stands;
+    // beyond it the map goes where it was found: since the walls hold the rovers'
+    // headings, 0.34 m at the overlap's centre, 0.54 m at the start (BENCHMARKS.md,
+    // "Closures searched as far as a rover can have slid along a wall").
+    let near_start = |placed: Option<Pose2>| {
+        placed.is_some_and(|p| p.x_m.hypot(p.y_m) < 0.6 && p.yaw_rad.abs() < 2f64.to_radians())
+    };
+    assert!(near_start(link.reference_from_map), "{link:?}");
+    assert!(link.drift_m < 0.5, "{link:?}");
+    // Asked for the precision of maps cut from one survey, the estimate may be refused as
+    // imprecise (so it was before the walls held the headings: the surfaces fit as closely
+    // 0.2 m away); either way it confirms rover 3 near its known start.
     let check_with = |params: &Params| {
         let prepare = |g: &realms_core::Grid<i8>| Prepared::new(&to_merge_map(g), params);
         estimate_with_prior(
@@ -49,19 +56,7 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
         )
     };
     let check = check_with(&Params::default());
-    assert!(
-        check
-            .estimate
-            .refusal
-            .as_deref()
-            .is_some_and(|r| r.starts_with("imprecise")),
-        "{:?}",
-        check.estimate
-    );
-    assert!(
-        check.confirmed && check.placed == Some(Pose2::IDENTITY),
-        "{check:?}"
-    );
+    assert!(check.confirmed && near_start(check.placed), "{check:?}");
     // With the settings for rovers' maps the estimate is accepted as it is.
     let check = check_with(&Params::for_rover_maps());
     assert!(check.estimate.accepted().is_some(), "{:?}", check.estimate);

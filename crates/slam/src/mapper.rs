@@ -266,6 +266,9 @@ pub struct MapperConfig {
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
     pub closure_drift: Option<ClosureDrift>,
+    /// Closures across travel the scans did not pin are searched wider and may correct more
+    /// (see [`WeakTravel`]; `None`: the path's drift alone). Needs `closure_drift`.
+    pub weak_travel: Option<WeakTravel>,
     /// Scale the wheels' translation by the share the scan matches found real (`None`: take
     /// the wheels at their word, as for a recorded log's calibrated odometry).
     pub slip_calibration: Option<SlipCalibration>,
@@ -476,6 +479,36 @@ pub struct ClosureDrift {
     pub per_m_rad: f64,
 }
 
+/// Travel the scans did not pin along the rover's heading (a bare wall beside it, nothing
+/// within range ahead or behind): the wheels carried the pose along it, and on loose ground
+/// they over-report by up to a fifth, so the map can have slid by that share of it. A
+/// closure across such a stretch is searched that much wider and may correct that much
+/// more than [`ClosureDrift`] allows for the path alone; without it a rover that slid
+/// metres along a wall can never be joined to the map it made before (BENCHMARKS.md,
+/// "Closures searched as far as a rover can have slid along a wall").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WeakTravel {
+    /// A match pins the travel if the map's information along the heading is at least this
+    /// many times the matcher's prior there. Beside a lone wall it is a few hundredths; in
+    /// a hall that shows a wall ahead or a few boulders, 5-20; in the simulated hall a
+    /// third of the rovers' travel is below 10, a few per cent below 2.
+    pub min_information_ratio: f64,
+    /// The share of the unpinned travel the pose may have slid by.
+    pub drift_share: f64,
+    /// The closure search's translation window grows by that slide up to this, metres.
+    pub max_window_m: f64,
+}
+
+impl Default for WeakTravel {
+    fn default() -> Self {
+        WeakTravel {
+            min_information_ratio: 5.0,
+            drift_share: 0.15,
+            max_window_m: 6.0,
+        }
+    }
+}
+
 /// Scans taken while the robot stands still carry nothing new, and matching them against a
 /// young, sparse submap lets the estimate wander (a degree of heading while parked in
 /// feature-poor terrain, then baked into every later keyframe). Standard practice (e.g.
@@ -528,6 +561,7 @@ impl Default for MapperConfig {
                 base_rad: 5f64.to_radians(),
                 per_m_rad: 1f64.to_radians(),
             }),
+            weak_travel: None,
             slip_calibration: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
@@ -660,6 +694,11 @@ pub struct Mapper {
     keyframe_unmatched_m: Vec<f64>,
     /// ... and since the latest keyframe.
     unmatched_m: f64,
+    /// Wheel travel the matches did not pin along the heading ([`WeakTravel`]), summed over
+    /// the keyframes up to each (so a stretch's is a difference of two).
+    keyframe_weak_total_m: Vec<f64>,
+    /// ... and since the latest keyframe.
+    weak_m: f64,
     submaps: Vec<Submap>,
     scans: Vec<ScanPose>,
     pose: Pose2,
@@ -733,6 +772,8 @@ impl Mapper {
             keyframe_odom: Vec::new(),
             keyframe_unmatched_m: Vec::new(),
             unmatched_m: 0.0,
+            keyframe_weak_total_m: Vec::new(),
+            weak_m: 0.0,
             submaps: Vec::new(),
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
@@ -1035,11 +1076,22 @@ impl Mapper {
                     }
                     score = Some(m.score);
                     self.last_information = m.information;
-                    trusted_along = self.wheel_scale.as_ref().is_some_and(|w| {
-                        let prior_weight =
-                            self.cfg.frontend.matcher.prior_translation_weight * dense.len() as f64;
-                        w.trusted(&m.information, prior_weight, m.pose.yaw_rad)
-                    });
+                    let prior_weight =
+                        self.cfg.frontend.matcher.prior_translation_weight * dense.len() as f64;
+                    trusted_along = self
+                        .wheel_scale
+                        .as_ref()
+                        .is_some_and(|w| w.trusted(&m.information, prior_weight, m.pose.yaw_rad));
+                    if let Some(weak) = self.cfg.weak_travel
+                        && !crate::slip::pinned_along(
+                            &m.information,
+                            prior_weight,
+                            m.pose.yaw_rad,
+                            weak.min_information_ratio,
+                        )
+                    {
+                        self.weak_m += odom_delta.x_m.hypot(odom_delta.y_m);
+                    }
                     origin * m.pose
                 }
                 _ => predicted,
@@ -1259,6 +1311,9 @@ impl Mapper {
         self.keyframe_odom.push((time_s, odom));
         let unmatched_m = std::mem::take(&mut self.unmatched_m);
         self.keyframe_unmatched_m.push(unmatched_m);
+        let weak_total_m = self.keyframe_weak_total_m.last().copied().unwrap_or(0.0)
+            + std::mem::take(&mut self.weak_m);
+        self.keyframe_weak_total_m.push(weak_total_m);
         if node > 0 {
             let mut measurement = self.graph.nodes[node - 1].inverse() * self.pose;
             // Travel the wheels alone carried may be all slip (a burst: 90 %).
@@ -1468,12 +1523,46 @@ impl Mapper {
                 .angular_rad
                 .min(bound.base_rad + bound.per_m_rad * path_m);
         }
+        if let Some(weak) = self.cfg.weak_travel {
+            window.linear_m = (window.linear_m + self.weak_slide_m(from, to))
+                .min(weak.max_window_m.max(window.linear_m));
+        }
         window
+    }
+
+    /// How far the map can have slid between keyframes `from` and `to` over the travel the
+    /// matches did not pin ([`WeakTravel`]): the least such travel on any path between them
+    /// through the graph. A closure that joined the two sides of a slide since has undone it;
+    /// the drift of the path's other travel is [`ClosureDrift`]'s to bound.
+    fn weak_slide_m(&self, from: usize, to: usize) -> f64 {
+        let Some(weak) = self.cfg.weak_travel else {
+            return 0.0;
+        };
+        let total = |k: usize| self.keyframe_weak_total_m.get(k).copied().unwrap_or(0.0);
+        let along_chain = (total(from.max(to)) - total(from.min(to))).abs();
+        if along_chain <= 0.0 {
+            return 0.0;
+        }
+        let unpinned_m = |e: &Edge| {
+            if !e.robust && e.to == e.from + 1 {
+                total(e.to) - total(e.from)
+            } else {
+                0.0
+            }
+        };
+        let least = self
+            .graph
+            .path_length_within(from, to, along_chain, unpinned_m)
+            .unwrap_or(along_chain);
+        weak.drift_share * least
     }
 
     /// Whether the correction `closure` asks for is one the map can have drifted by (see
     /// [`ClosureDrift`]); always true without a bound.
     fn within_drift(&self, closure: &Edge) -> bool {
+        if !self.walls_agree(closure) {
+            return false;
+        }
         let Some(bound) = self.cfg.closure_drift else {
             return true;
         };
@@ -1481,10 +1570,11 @@ impl Mapper {
         let asked_m = wanted
             .position()
             .distance_m(self.graph.nodes[closure.to].position());
-        if asked_m <= bound.base_m {
+        let always_m = bound.base_m + self.weak_slide_m(closure.from, closure.to);
+        if asked_m <= always_m {
             return true;
         }
-        let needed_m = (asked_m - bound.base_m) / bound.per_m;
+        let needed_m = (asked_m - always_m) / bound.per_m;
         self.graph
             .path_length_within(
                 closure.from,
@@ -1493,6 +1583,32 @@ impl Mapper {
                 self.drift_length(&bound),
             )
             .is_none()
+    }
+
+    /// Whether the turn `closure` measures between its two keyframes agrees with the one
+    /// the walls measured of them (see [`crate::walls::WallHeadingConfig::closure_gate_sigmas`]); true
+    /// where either keyframe's heading was not measured.
+    fn walls_agree(&self, closure: &Edge) -> bool {
+        let Some(sigmas) = self.cfg.wall_headings.and_then(|w| w.closure_gate_sigmas) else {
+            return true;
+        };
+        let priors = &self.graph.heading_priors;
+        // The first keyframe's heading is the start's, known exactly.
+        let measured = |node: usize| -> Option<(f64, f64)> {
+            if node == 0 {
+                return self.graph.nodes.first().map(|n| (n.yaw_rad, 0.0));
+            }
+            let i = priors.partition_point(|p| p.node < node);
+            let p = priors.get(i).filter(|p| p.node == node)?;
+            Some((p.yaw_rad, p.information.recip()))
+        };
+        let (Some((from_rad, from_var)), Some((to_rad, to_var))) =
+            (measured(closure.from), measured(closure.to))
+        else {
+            return true;
+        };
+        let differs = normalize_angle_rad(closure.measurement.yaw_rad - (to_rad - from_rad));
+        differs.abs() <= sigmas * (from_var + to_var).sqrt()
     }
 
     /// How far an edge counts towards the drift a path can have built up: its travel (a
@@ -2022,6 +2138,97 @@ mod tests {
         mapper.keyframe_unmatched_m[20] = 0.5;
         assert!(mapper.within_drift(&closure(&mapper, 0, 40, 1.2)));
         assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 1.4)));
+    }
+
+    #[test]
+    fn travel_the_matches_did_not_pin_widens_the_closure_search_and_its_bound() {
+        // 10 m of path allow 0.3 + 0.05 * 10 = 0.8 m. Of those, 4 m slid along a bare
+        // wall: 15 % of it, 0.6 m, more; the window grows by as much, to its 6 m cap.
+        let mut mapper = straight_drive(401);
+        mapper.cfg.weak_travel = Some(WeakTravel::default());
+        mapper.keyframe_weak_total_m = vec![0.0; 401];
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 1.2)));
+        assert!((mapper.closure_window(0, 40).linear_m - 0.8).abs() < 1e-9);
+        for k in 10..401 {
+            mapper.keyframe_weak_total_m[k] = 4.0f64.min(0.25 * (k - 10) as f64);
+        }
+        assert!(mapper.within_drift(&closure(&mapper, 0, 40, 1.2)));
+        assert!(!mapper.within_drift(&closure(&mapper, 0, 40, 1.5)));
+        assert!((mapper.closure_window(0, 40).linear_m - 1.4).abs() < 1e-9);
+        // Both ends past the stretch: nothing slid between them.
+        assert!((mapper.closure_window(30, 70).linear_m - 0.8).abs() < 1e-9);
+        // A closure across the stretch has undone its slide.
+        let mut joined = straight_drive(401);
+        joined.cfg.weak_travel = Some(WeakTravel::default());
+        joined.keyframe_weak_total_m = mapper.keyframe_weak_total_m.clone();
+        joined.graph.edges.push(closure(&joined, 5, 30, 0.0));
+        // (Its hop shortens the path to 1.25 + 2 + 2.5 m: 0.59 m.)
+        assert!((joined.closure_window(0, 40).linear_m - 0.5875).abs() < 1e-9);
+        assert!(!joined.within_drift(&closure(&joined, 0, 40, 1.2)));
+        // A stretch of 40 m would widen the configured 5 m window by 6 m: held to 6 m.
+        for k in 10..401 {
+            mapper.keyframe_weak_total_m[k] = 40.0f64.min(0.25 * (k - 10) as f64);
+        }
+        assert_eq!(mapper.closure_window(0, 400).linear_m, 6.0);
+    }
+
+    #[test]
+    fn a_closure_that_turns_two_wall_measured_keyframes_against_their_walls_is_refused() {
+        let mut mapper = straight_drive(41);
+        mapper.cfg.wall_headings = Some(crate::walls::WallHeadingConfig {
+            closure_gate_sigmas: Some(2.0),
+            ..crate::walls::WallHeadingConfig::default()
+        });
+        // Keyframe 40's walls measured it 0.3 degrees left of the graph, to 0.5 degrees.
+        let sigma = 0.5f64.to_radians();
+        mapper.graph.heading_priors.push(HeadingPrior {
+            node: 40,
+            yaw_rad: 0.3f64.to_radians(),
+            information: sigma.powi(2).recip(),
+        });
+        let turned = |deg: f64| {
+            let mut c = closure(&mapper, 0, 40, 0.0);
+            c.measurement.yaw_rad += deg.to_radians();
+            c
+        };
+        // The start's heading is exact: the closure may differ from the walls by 1 degree.
+        assert!(mapper.within_drift(&turned(1.2)));
+        assert!(mapper.within_drift(&turned(-0.6)));
+        assert!(!mapper.within_drift(&turned(1.4)));
+        assert!(!mapper.within_drift(&turned(-0.8)));
+        // A keyframe the walls did not measure: only the path's drift bound (3 + 0.2 * 10
+        // degrees, but the closure's rotation is not checked against it).
+        let mut c = closure(&mapper, 0, 39, 0.0);
+        c.measurement.yaw_rad += 2f64.to_radians();
+        assert!(mapper.within_drift(&c));
+    }
+
+    #[test]
+    fn travel_along_a_lone_wall_is_counted_as_unpinned_and_in_a_hall_not() {
+        let weak_after = |scan: &dyn Fn(Pose2) -> Vec<Point2>| {
+            let mut cfg = MapperConfig::default();
+            cfg.frontend.max_range_m = 12.0;
+            cfg.weak_travel = Some(WeakTravel::default());
+            let mut mapper = Mapper::new(cfg);
+            for k in 0..=60 {
+                let truth = Pose2::new(0.05 * k as f64, 0.0, 0.0);
+                mapper.add_points(0.1 * k as f64, truth, scan(truth));
+            }
+            mapper.keyframe_weak_total_m.last().copied().unwrap_or(0.0) + mapper.weak_m
+        };
+        // A wall 1.5 m to the left, running along the travel, 20 m long each way.
+        let lone_wall = |pose: Pose2| -> Vec<Point2> {
+            (0..800)
+                .map(|i| Point2::new(-20.0 + 0.05 * i as f64, 1.5))
+                .map(|p| pose.inverse().transform_point(p))
+                .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
+                .collect()
+        };
+        let along_wall = weak_after(&lone_wall);
+        let in_hall = weak_after(&sparse_hall_scan);
+        // 3 m driven; the first scan is not matched.
+        assert!(along_wall > 2.5, "along the wall {along_wall:.2} m");
+        assert!(in_hall < 0.3, "in the hall {in_hall:.2} m");
     }
 
     #[test]

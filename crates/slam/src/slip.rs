@@ -142,12 +142,30 @@ impl WheelScale {
         prior_weight: f64,
         heading_rad: f64,
     ) -> bool {
-        let (s, c) = heading_rad.sin_cos();
-        let along =
-            c * c * information[0][0] + 2.0 * c * s * information[0][1] + s * s * information[1][1]
-                - prior_weight;
-        prior_weight > 0.0 && along >= self.cfg.min_information_ratio * prior_weight
+        pinned_along(
+            information,
+            prior_weight,
+            heading_rad,
+            self.cfg.min_information_ratio,
+        )
     }
+}
+
+/// Whether a match with Gauss-Newton `information` (x, y, heading; the prior's share
+/// included) and a translation prior of `prior_weight` per axis holds the position along
+/// `heading_rad` (in the information's frame) with at least `min_ratio` times the prior's
+/// information from the map itself.
+pub fn pinned_along(
+    information: &[[f64; 3]; 3],
+    prior_weight: f64,
+    heading_rad: f64,
+    min_ratio: f64,
+) -> bool {
+    let (s, c) = heading_rad.sin_cos();
+    let along =
+        c * c * information[0][0] + 2.0 * c * s * information[0][1] + s * s * information[1][1]
+            - prior_weight;
+    prior_weight > 0.0 && along >= min_ratio * prior_weight
 }
 
 #[cfg(test)]

@@ -33,6 +33,13 @@ pub struct WallHeadingConfig {
     /// over many keyframes where the map as a whole faces (0.5 degrees did better than 0.1
     /// per run and than 1 degree, BENCHMARKS.md).
     pub floor_sigma_rad: f64,
+    /// A loop closure between two keyframes whose headings the walls measured is refused
+    /// where the turn it asks between them differs from the walls' by more than this many
+    /// standard deviations of the two measurements together (`None`: not checked). Walls
+    /// hold each heading to about half a degree, so a closure that turns the map two
+    /// degrees is a match that fitted the wrong way (BENCHMARKS.md, "Closures searched as
+    /// far as a rover can have slid along a wall").
+    pub closure_gate_sigmas: Option<f64>,
 }
 
 impl Default for WallHeadingConfig {
@@ -44,6 +51,7 @@ impl Default for WallHeadingConfig {
             max_gap_m: 0.6,
             gate_rad: 3f64.to_radians(),
             floor_sigma_rad: 0.5f64.to_radians(),
+            closure_gate_sigmas: None,
         }
     }
 }
