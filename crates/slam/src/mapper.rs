@@ -1539,7 +1539,7 @@ impl Mapper {
             return 0.0;
         };
         let total = |k: usize| self.keyframe_weak_total_m.get(k).copied().unwrap_or(0.0);
-        let along_chain = (total(from.max(to)) - total(from.min(to))).abs();
+        let along_chain = total(from.max(to)) - total(from.min(to));
         if along_chain <= 0.0 {
             return 0.0;
         }
@@ -1557,8 +1557,10 @@ impl Mapper {
         weak.drift_share * least
     }
 
-    /// Whether the correction `closure` asks for is one the map can have drifted by (see
-    /// [`ClosureDrift`]); always true without a bound.
+    /// Whether the correction `closure` asks for is one the map can have drifted by: its
+    /// turn agrees with the walls' ([`Mapper::walls_agree`]), and its shift is no more than
+    /// the path between its ends can have drifted ([`ClosureDrift`], widened by the slide
+    /// of [`WeakTravel`]; no bound without `closure_drift`).
     fn within_drift(&self, closure: &Edge) -> bool {
         if !self.walls_agree(closure) {
             return false;
@@ -1586,8 +1588,9 @@ impl Mapper {
     }
 
     /// Whether the turn `closure` measures between its two keyframes agrees with the one
-    /// the walls measured of them (see [`crate::walls::WallHeadingConfig::closure_gate_sigmas`]); true
-    /// where either keyframe's heading was not measured.
+    /// the walls measured of them (see
+    /// [`crate::walls::WallHeadingConfig::closure_gate_sigmas`]); true where either
+    /// keyframe's heading was not measured.
     fn walls_agree(&self, closure: &Edge) -> bool {
         let Some(sigmas) = self.cfg.wall_headings.and_then(|w| w.closure_gate_sigmas) else {
             return true;

@@ -4,10 +4,11 @@
 //!
 //! In a hall the maps' errors are mostly a slow turn of the whole map: over 45 replays a
 //! rover's final map agreed with the truth about as well as its final heading did (a
-//! correlation of -0.84; BENCHMARKS.md, "The gyro's leftover bias measured out"). Structural regularities of built environments are a standard anchor for
-//! that drift (e.g. Peasley, Birchfield, Cunningham & Fisher, "Accurate On-line 3D Occupancy
-//! Grids Using Manhattan World Constraints", IROS 2012); here only directions actually seen
-//! from the start are trusted, not an assumed grid of right angles.
+//! correlation of -0.84; BENCHMARKS.md, "The gyro's leftover bias measured out").
+//! Structural regularities of built environments are a standard anchor for that drift (e.g.
+//! Peasley, Birchfield, Cunningham & Fisher, "Accurate On-line 3D Occupancy Grids Using
+//! Manhattan World Constraints", IROS 2012); here only directions actually seen from the
+//! start are trusted, not an assumed grid of right angles.
 
 use realms_core::Point2;
 use realms_core::geometry::{LineFit, normalize_angle_rad};
