@@ -336,6 +336,21 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
+        name: "min-points-10",
+        what: "scans of fewer than 10 endpoints neither matched nor mapped, not 6: the rovers' SLAM before the forty-fifth session",
+        apply: |c| c.mapper.min_scan_points = 10,
+    },
+    Variant {
+        name: "min-points-4",
+        what: "scans of 4 endpoints or more matched and mapped, not 6",
+        apply: |c| c.mapper.min_scan_points = 4,
+    },
+    Variant {
+        name: "no-slow-window",
+        what: "odometry checked against scan matching over the last 2 s only, not also over 6 s",
+        apply: |c| c.mapper.health.slow_window_s = None,
+    },
+    Variant {
         name: "no-walls",
         what: "neither the walls' heading measurements (nor their closure check) nor the closures widened across unpinned travel: the rovers' SLAM before the forty-fourth session",
         apply: |c| {

@@ -22,8 +22,11 @@ pub use realms_core::msgs::LocalisationState;
 /// Thresholds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HealthConfig {
-    /// Odometry is compared with scan matching over this much time, seconds.
+    /// Odometry is compared with scan matching over this much time, seconds ...
     pub window_s: f64,
+    /// ... and over this much (`None`: not): a rover creeping through a burst at a few
+    /// centimetres a second slips less than the floor within the short window.
+    pub slow_window_s: Option<f64>,
     /// Odometry is unreliable when scan matching falls short of the wheels' travel by more
     /// than this (metres) ...
     pub slip_min_m: f64,
@@ -45,6 +48,7 @@ impl Default for HealthConfig {
     fn default() -> Self {
         HealthConfig {
             window_s: 2.0,
+            slow_window_s: Some(6.0),
             slip_min_m: 0.1,
             slip_fraction: 0.5,
             confirm_s: 0.3,
@@ -221,34 +225,42 @@ impl HealthMonitor {
                 shortfall_m,
             });
         }
+        let kept_s = self
+            .cfg
+            .slow_window_s
+            .map_or(self.cfg.window_s, |w| w.max(self.cfg.window_s));
         while self
             .recent
             .front()
-            .is_some_and(|m| m.time_s < scan.time_s - self.cfg.window_s)
+            .is_some_and(|m| m.time_s < scan.time_s - kept_s)
         {
             self.recent.pop_front();
         }
-        let (odom_m, short_m) = self
-            .recent
-            .iter()
-            .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
-        let matched_m = odom_m - short_m;
-        let disagree = short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m;
-        if !disagree {
+        let disagreement = std::iter::once(self.cfg.window_s)
+            .chain(self.cfg.slow_window_s)
+            .find_map(|window_s| {
+                let (odom_m, short_m) = self
+                    .recent
+                    .iter()
+                    .filter(|m| m.time_s >= scan.time_s - window_s)
+                    .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
+                (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
+                    .then_some((window_s, odom_m, odom_m - short_m))
+            });
+        if disagreement.is_none() {
             self.disagreeing_since_s = None;
         }
         // A disagreement must last a moment: single bumps and skids in turns are not slip.
-        let held = disagree
+        if let Some((window_s, odom_m, matched_m)) = disagreement
             && scan.time_s - *self.disagreeing_since_s.get_or_insert(scan.time_s)
-                >= self.cfg.confirm_s;
-        if held {
+                >= self.cfg.confirm_s
+        {
             self.agreeing_since_s = None;
             return self.go(
                 LocalisationState::OdometryUnreliable,
                 format!(
-                    "over the last {:.0} s the wheels drove {odom_m:.2} m but scan matching \
-                     saw {matched_m:.2} m",
-                    self.cfg.window_s
+                    "over the last {window_s:.0} s the wheels drove {odom_m:.2} m but scan \
+                     matching saw {matched_m:.2} m"
                 ),
             );
         }
@@ -328,6 +340,49 @@ mod tests {
         let (t_ok, s) = states[1];
         assert_eq!(s, LocalisationState::Tracking);
         assert!((15.0..19.0).contains(&t_ok), "all clear at {t_ok}");
+    }
+
+    /// A rover creeping at 5 cm/s whose wheels slip 90 % from 10 to 18 s: when the monitor
+    /// `cfg` first reports it.
+    fn creeping_burst_reported_at(cfg: HealthConfig) -> Option<f64> {
+        let mut m = HealthMonitor::new(cfg);
+        (0..250).find_map(|k| {
+            let t = k as f64 * 0.1;
+            // The motion filter matches every fourth scan (2 cm of wheel travel); the scans
+            // between follow the wheels, and the match takes back what they over-reported.
+            let truth_step = if (10.0..18.0).contains(&t) {
+                0.0005
+            } else {
+                0.005
+            };
+            let (matched, score) = if k % 4 == 0 {
+                (4.0 * truth_step - 3.0 * 0.005, Some(0.8))
+            } else {
+                (0.005, None)
+            };
+            m.observe(&TrackedScan {
+                time_s: t,
+                odom_delta: Pose2::new(0.005, 0.0, 0.0),
+                matched_delta: Pose2::new(matched, 0.0, 0.0),
+                score,
+                wheels_silent: false,
+            })
+            .filter(|tr| tr.state == LocalisationState::OdometryUnreliable)
+            .map(|_| t)
+        })
+    }
+
+    #[test]
+    fn a_creeping_rover_slipping_is_reported_over_the_longer_window() {
+        // The wheels are 0.1 m ahead of the truth 2.2 s into the burst: over the last 2 s
+        // they have driven 0.1 m, so the short window alone never reaches the floor.
+        let t = creeping_burst_reported_at(HealthConfig::default()).expect("reported");
+        assert!((12.2..14.5).contains(&t), "reported at {t:.1} s");
+        let short_only = HealthConfig {
+            slow_window_s: None,
+            ..HealthConfig::default()
+        };
+        assert_eq!(creeping_burst_reported_at(short_only), None);
     }
 
     #[test]

@@ -224,6 +224,10 @@ pub struct MapperConfig {
     /// Motion filter: a scan is matched only once odometry has moved this far since the last
     /// matched scan (`None`: match every scan).
     pub motion_filter: Option<MotionFilter>,
+    /// Scans with fewer endpoints than this are neither matched nor mapped. Far from the
+    /// walls a 12 m lidar may see one or two rocks and nothing else: a scan of a single
+    /// rock still pins the rover's position against it, with the gyro holding the heading.
+    pub min_scan_points: usize,
     /// With a gyro: a match that turns the pose more than this away from the odometry's
     /// heading is redone with the heading held to the odometry's (`None`: trust the match;
     /// right for wheel-only headings such as the recorded logs'), radians.
@@ -542,6 +546,7 @@ impl Default for MapperConfig {
             health: HealthConfig::default(),
             trim_radius_m: None,
             motion_filter: None,
+            min_scan_points: 10,
             max_heading_step_rad: None,
             heading_anchor_rad: None,
             heading_map_share: None,
@@ -639,8 +644,10 @@ const SEQUENTIAL_SIGMA_M: f64 = 0.05;
 const SEQUENTIAL_POSITION_INFORMATION: f64 = 400.0;
 /// Heading information of that edge as matched, 1 / rad^2 (a gyro's turn is firmer).
 const SEQUENTIAL_HEADING_INFORMATION: f64 = 2500.0;
-/// Scans with fewer endpoints than this are neither matched nor mapped.
-const MIN_POINTS: usize = 10;
+/// A closure or a relocalisation searches metres and degrees around a pose: a scan of fewer
+/// endpoints than this fits too many places there to be taken, though from a known pose it
+/// is still tracked ([`MapperConfig::min_scan_points`]).
+const SEARCH_MIN_POINTS: usize = 10;
 /// A finished submap is dropped for a newer one starting nearby only if the newer one knows
 /// at least this share of the cells it knows. Starting nearby is not enough: driving off the
 /// other way, the newer one never sees what the older saw ahead, and dropping the older would
@@ -931,12 +938,13 @@ impl Mapper {
                 }
                 _ => true,
             };
-            if self.cfg.blind_travel_uncertain && (tracking.is_none() || points.len() < MIN_POINTS)
+            if self.cfg.blind_travel_uncertain
+                && (tracking.is_none() || points.len() < self.cfg.min_scan_points)
             {
                 self.unmatched_m += odom_delta.x_m.hypot(odom_delta.y_m);
             }
             self.pose = match tracking {
-                Some(i) if points.len() >= MIN_POINTS && moved => {
+                Some(i) if points.len() >= self.cfg.min_scan_points && moved => {
                     self.last_matched_odom = Some(odom);
                     let origin = self.graph.nodes[self.submaps[i].origin_node];
                     let prior = origin.inverse() * predicted;
@@ -1139,7 +1147,7 @@ impl Mapper {
             }
         };
         // While lost nothing is written into the map.
-        let keyframe_added = new_keyframe && !lost && points.len() >= MIN_POINTS;
+        let keyframe_added = new_keyframe && !lost && points.len() >= self.cfg.min_scan_points;
         if keyframe_added {
             let dense = dense.into_owned();
             self.add_keyframe(time_s, odom, points, &dense);
@@ -1174,7 +1182,7 @@ impl Mapper {
     /// (odometry may have been wrong for a while), and take the pose only if it is
     /// unambiguous. Nothing is written until then.
     fn try_relocalise(&mut self, time_s: f64, points: &[Point2]) {
-        if points.len() < MIN_POINTS {
+        if points.len() < SEARCH_MIN_POINTS {
             return;
         }
         self.relocalise_searches += 1;
@@ -1431,6 +1439,9 @@ impl Mapper {
 
     /// Searches finished submaps near `node` for a closure; returns whether one was added.
     fn close_loops(&mut self, node: usize) -> bool {
+        if self.keyframe_points[node].len() < SEARCH_MIN_POINTS {
+            return false;
+        }
         let pose = self.graph.nodes[node];
         let mut added = false;
         // The nearest finished submaps that do not contain this keyframe's neighbourhood.
@@ -2290,6 +2301,16 @@ mod tests {
             (-5.0, -4.0, 0.3),
             (6.0, -2.0, 0.5),
         ];
+        ray_cast_scan(pose, &walls, &boulders)
+    }
+
+    /// A noise-free 1-degree, 12 m scan from `pose` of wall segments `(x1, y1, x2, y2)` and
+    /// round boulders `(x, y, radius)`.
+    fn ray_cast_scan(
+        pose: Pose2,
+        walls: &[(f64, f64, f64, f64)],
+        boulders: &[(f64, f64, f64)],
+    ) -> Vec<Point2> {
         (0..360)
             .filter_map(|i| {
                 let local = (i as f64).to_radians();
@@ -2576,6 +2597,49 @@ mod tests {
         }
         // The map frame is the odometry's at the first scan, which the truth has at x = -6.
         end.x_m + 6.0 / 0.88 - 6.0 - truth(275).x_m
+    }
+
+    /// A rover's wheels drive 4.5 m along x on open ground where its lidar sees one rock and
+    /// nothing else (5-9 endpoints); from 5 to 10 s they slip 90 %, over-reporting 1.35 m.
+    /// Returns when the mapper first reported the odometry unreliable, and its position
+    /// error at the end, metres.
+    fn slip_seen_on_one_rock(min_scan_points: usize) -> (Option<f64>, f64) {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.min_scan_points = min_scan_points;
+        let mut mapper = Mapper::new(cfg);
+        let rock = [(6.0, 2.5, 0.3)];
+        let (mut truth_x, mut wheels_x) = (0.0, 0.0);
+        let mut reported = None;
+        for k in 0..150 {
+            let t = 0.1 * k as f64;
+            let step = if k == 0 { 0.0 } else { 0.03 };
+            wheels_x += step;
+            truth_x += if (5.0..10.0).contains(&t) {
+                0.1 * step
+            } else {
+                step
+            };
+            let points = ray_cast_scan(Pose2::new(truth_x, 0.0, 0.0), &[], &rock);
+            let tracked = mapper.add_points(t, Pose2::new(wheels_x, 0.0, 0.0), points);
+            if tracked.state == LocalisationState::OdometryUnreliable {
+                reported.get_or_insert(t);
+            }
+        }
+        (reported, (mapper.pose.x_m - truth_x).abs())
+    }
+
+    #[test]
+    fn a_slip_burst_where_the_lidar_sees_one_rock_is_reported_and_most_of_it_kept_out() {
+        let (reported, error_m) = slip_seen_on_one_rock(5);
+        // The wheels are 0.1 m ahead of the truth 0.37 s into the burst.
+        let t = reported.expect("the burst reported");
+        assert!((5.0..7.5).contains(&t), "reported at {t:.1} s");
+        assert!(error_m < 0.45, "position {error_m:.2} m off");
+        // Scans of a rock's few endpoints left unmatched, the pose follows the wheels.
+        let (reported, error_m) = slip_seen_on_one_rock(10);
+        assert_eq!(reported, None);
+        assert!(error_m > 1.2, "position {error_m:.2} m off");
     }
 
     #[test]
