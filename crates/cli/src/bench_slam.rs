@@ -336,13 +336,13 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.relief_odometry = Some(realms_slam::relief::ReliefConfig::default()),
     },
     Variant {
-        name: "min-points-10",
-        what: "scans of fewer than 10 endpoints neither matched nor mapped, not 6: the rovers' SLAM before the forty-fifth session",
-        apply: |c| c.mapper.min_scan_points = 10,
+        name: "min-points-6",
+        what: "scans of 6 endpoints or more matched and mapped, not 10 (far from the walls the lidar may see a rock or two and nothing else); closures and relocalisation still from 10",
+        apply: |c| c.mapper.min_scan_points = 6,
     },
     Variant {
         name: "min-points-4",
-        what: "scans of 4 endpoints or more matched and mapped, not 6",
+        what: "min-points-6 at 4 endpoints",
         apply: |c| c.mapper.min_scan_points = 4,
     },
     Variant {

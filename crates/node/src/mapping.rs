@@ -126,11 +126,6 @@ pub fn rover_mapper_config() -> MapperConfig {
         translation_m: 0.02,
         rotation_rad: 0.5f64.to_radians(),
     });
-    // Far from the walls the lidar may see a rock or two and nothing else: their few
-    // endpoints still pin the position (the gyro holds the heading), and without them a slip
-    // burst there went unseen and carried the pose metres (BENCHMARKS.md, "A rock or two seen
-    // far from the walls").
-    cfg.min_scan_points = 6;
     // The hall's long walls, seen from the known start, measure each keyframe's heading that
     // sees them again; a closure that turns two such keyframes against their walls is a
     // wrong fit; and closures across travel the scans did not pin along the heading (the

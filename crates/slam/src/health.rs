@@ -2,8 +2,9 @@
 //! odometry without noticing, and the operator found out from a smeared map. This monitor
 //! watches every tracked scan and says, in a state the rover publishes, when
 //!
-//! - the wheel odometry disagrees with scan matching over the last couple of seconds (the
-//!   wheels slip or an encoder fails): SLAM goes on from the scans alone and says so;
+//! - the wheel odometry disagrees with scan matching over the last couple of seconds, or
+//!   over the last several for a rover creeping too slowly to slip far in two (the wheels
+//!   slip or an encoder fails): SLAM goes on from the scans alone and says so;
 //! - scan matching itself stops fitting the map (too few points, a poor match score, or a
 //!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
 //!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.
@@ -108,6 +109,10 @@ pub struct HealthMonitor {
     poor_in_a_row: usize,
     agreeing_since_s: Option<f64>,
     disagreeing_since_s: Option<f64>,
+    /// The odometry was called unreliable on the slow window alone: its all-clear waits for
+    /// that window too. Called so on the short window, the all-clear waits for the short
+    /// one only, as it did before there was a slow one.
+    slow_alarm: bool,
     last_time_s: Option<f64>,
     /// Since when the wheels have been silent.
     wheels_silent_since_s: Option<f64>,
@@ -125,6 +130,7 @@ impl HealthMonitor {
             wheels_silent_since_s: None,
             agreeing_since_s: None,
             disagreeing_since_s: None,
+            slow_alarm: false,
             last_time_s: None,
         }
     }
@@ -137,6 +143,9 @@ impl HealthMonitor {
     fn go(&mut self, state: LocalisationState, reason: String) -> Option<Transition> {
         (self.state != state).then(|| {
             self.state = state;
+            if state == LocalisationState::Tracking {
+                self.slow_alarm = false;
+            }
             Transition { state, reason }
         })
     }
@@ -236,8 +245,9 @@ impl HealthMonitor {
         {
             self.recent.pop_front();
         }
+        let slow_counts = self.state == LocalisationState::Tracking || self.slow_alarm;
         let disagreement = std::iter::once(self.cfg.window_s)
-            .chain(self.cfg.slow_window_s)
+            .chain(self.cfg.slow_window_s.filter(|_| slow_counts))
             .find_map(|window_s| {
                 let (odom_m, short_m) = self
                     .recent
@@ -256,6 +266,9 @@ impl HealthMonitor {
                 >= self.cfg.confirm_s
         {
             self.agreeing_since_s = None;
+            if self.state == LocalisationState::Tracking {
+                self.slow_alarm = window_s != self.cfg.window_s;
+            }
             return self.go(
                 LocalisationState::OdometryUnreliable,
                 format!(
@@ -383,6 +396,32 @@ mod tests {
             ..HealthConfig::default()
         };
         assert_eq!(creeping_burst_reported_at(short_only), None);
+    }
+
+    #[test]
+    fn a_burst_the_short_window_saw_is_cleared_as_soon_as_without_the_slow_one() {
+        let changes = |cfg: HealthConfig| -> Vec<(i32, LocalisationState)> {
+            let mut m = HealthMonitor::new(cfg);
+            // 0.3 m/s; the wheels slip 90 % from 10 to 16 s.
+            (0..300)
+                .filter_map(|k| {
+                    let t = k as f64 * 0.1;
+                    let matched = if (10.0..16.0).contains(&t) {
+                        0.003
+                    } else {
+                        0.03
+                    };
+                    m.observe(&scan(t, 0.03, matched, 0.8))
+                        .map(|tr| (k, tr.state))
+                })
+                .collect()
+        };
+        let without = changes(HealthConfig {
+            slow_window_s: None,
+            ..HealthConfig::default()
+        });
+        assert_eq!(without.len(), 2, "{without:?}");
+        assert_eq!(changes(HealthConfig::default()), without);
     }
 
     #[test]
