@@ -346,9 +346,9 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.min_scan_points = 4,
     },
     Variant {
-        name: "no-slow-window",
-        what: "odometry checked against scan matching over the last 2 s only, not also over 6 s",
-        apply: |c| c.mapper.health.slow_window_s = None,
+        name: "slow-window-6s",
+        what: "odometry checked against scan matching over the last 6 s as well as the last 2 s (a rover creeping through a burst)",
+        apply: |c| c.mapper.health.slow_window_s = Some(6.0),
     },
     Variant {
         name: "no-walls",
