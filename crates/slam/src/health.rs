@@ -2,9 +2,9 @@
 //! odometry without noticing, and the operator found out from a smeared map. This monitor
 //! watches every tracked scan and says, in a state the rover publishes, when
 //!
-//! - the wheel odometry disagrees with scan matching over the last couple of seconds (or,
-//!   where set, over the last several, for a rover creeping too slowly to slip far in two)
-//!   (the wheels slip or an encoder fails): SLAM goes on from the scans alone and says so;
+//! - the wheel odometry disagrees with scan matching over the last couple of seconds (the
+//!   wheels slip or an encoder fails; optionally also over several, for a rover creeping
+//!   too slowly to slip far in two): SLAM goes on from the scans alone and says so;
 //! - scan matching itself stops fitting the map (too few points, a poor match score, or a
 //!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
 //!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.

@@ -224,9 +224,10 @@ pub struct MapperConfig {
     /// Motion filter: a scan is matched only once odometry has moved this far since the last
     /// matched scan (`None`: match every scan).
     pub motion_filter: Option<MotionFilter>,
-    /// Scans with fewer endpoints than this are neither matched nor mapped. Far from the
-    /// walls a 12 m lidar may see one or two rocks and nothing else: a scan of a single
-    /// rock still pins the rover's position against it, with the gyro holding the heading.
+    /// Scans with fewer endpoints than this are neither matched nor mapped (10 by default
+    /// and on the rovers). Far from the walls a 12 m lidar may see one or two rocks and
+    /// nothing else, which still pin the position; 6 caught more slip bursts but left whole
+    /// missions' maps worse (BENCHMARKS.md, forty-fifth session), so it was not kept.
     pub min_scan_points: usize,
     /// With a gyro: a match that turns the pose more than this away from the odometry's
     /// heading is redone with the heading held to the odometry's (`None`: trust the match;
