@@ -161,6 +161,33 @@ fn towards_prediction_where_weak(
     )
 }
 
+/// `matched` with the matcher's own pull towards the prediction `predicted` taken back along
+/// the heading: the map's verdict on the travel, as the slip check needs it. A match whose
+/// map pins the travel `r` times as firmly as the matcher's prior (`prior_weight`, held in
+/// `information`) lands a share `1 / (r + 1)` of the way from the map's answer towards the
+/// prediction; slipping wheels pull it that far towards their over-report. `r` is taken as
+/// at least 1, so a weak match's noise is never amplified more than twice.
+fn without_prior_along_heading(
+    matched: Pose2,
+    predicted: Pose2,
+    information: &[[f64; 3]; 3],
+    prior_weight: f64,
+) -> Pose2 {
+    if prior_weight <= 0.0 {
+        return matched;
+    }
+    let (s, c) = matched.yaw_rad.sin_cos();
+    let i = information;
+    let along = c * c * i[0][0] + 2.0 * c * s * i[0][1] + s * s * i[1][1] - prior_weight;
+    let ratio = (along / prior_weight).max(1.0);
+    let off = ((matched.x_m - predicted.x_m) * c + (matched.y_m - predicted.y_m) * s) / ratio;
+    Pose2::new(
+        matched.x_m + off * c,
+        matched.y_m + off * s,
+        matched.yaw_rad,
+    )
+}
+
 /// `refined` with no part of its move from `matched` along the direction the occupancy
 /// match's `information` pins less firmly than `floor` (the matcher's prior `prior_weight`
 /// taken out): the refinement removes the grid's pull towards cell centres across what the
@@ -218,6 +245,11 @@ pub struct MapperConfig {
     pub loop_candidates: usize,
     /// When to call the estimate unreliable or lost.
     pub health: HealthConfig,
+    /// The slip check hears each match with the matcher's pull towards the wheels'
+    /// prediction taken back along the heading ([`without_prior_along_heading`]): where the
+    /// map pins the travel only a few times as firmly as that pull, slipping wheels drag the
+    /// match a quarter or more of the way towards their over-report.
+    pub slip_check_without_prior: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
     pub trim_radius_m: Option<f64>,
@@ -545,6 +577,7 @@ impl Default for MapperConfig {
             loop_ambiguity_margin: 0.08,
             loop_candidates: 3,
             health: HealthConfig::default(),
+            slip_check_without_prior: false,
             trim_radius_m: None,
             motion_filter: None,
             min_scan_points: 10,
@@ -1070,7 +1103,17 @@ impl Mapper {
                     }
                     // The scans' own verdict, for the odometry's health: it must not
                     // hear the wheels' claim back as the scans' agreement.
-                    matched_alone = Some(origin * m.pose);
+                    let verdict = if self.cfg.slip_check_without_prior && still.is_none() {
+                        without_prior_along_heading(
+                            m.pose,
+                            prior,
+                            &m.information,
+                            matcher.prior_translation_weight * matched_points,
+                        )
+                    } else {
+                        m.pose
+                    };
+                    matched_alone = Some(origin * verdict);
                     if let Some(floor) = self.cfg.weak_direction_floor
                         && still.is_none()
                         && self.health.state() == LocalisationState::Tracking
@@ -2533,6 +2576,56 @@ mod tests {
     }
 
     #[test]
+    fn the_slip_check_hears_the_map_without_the_matchers_pull_towards_the_wheels() {
+        // Heading 30 degrees; the map pins the travel 3 times as firmly as the matcher's
+        // prior (90 against 30) and across it firmly. The wheels predict 0.03 m of travel
+        // where the map says 0.003: a least-squares match lands at (90 * 0.003 + 30 * 0.03)
+        // / 120 = 0.00975 m along the heading.
+        let prior_weight = 30.0;
+        let heading = 30f64.to_radians();
+        let (s, c) = heading.sin_cos();
+        let (along, across) = (90.0, 2000.0);
+        let information = [
+            [
+                along * c * c + across * s * s + prior_weight,
+                (along - across) * c * s,
+                0.0,
+            ],
+            [
+                (along - across) * c * s,
+                along * s * s + across * c * c + prior_weight,
+                0.0,
+            ],
+            [0.0, 0.0, 50.0],
+        ];
+        let at =
+            |d: f64, side: f64| Pose2::new(1.0 + d * c - side * s, 2.0 + d * s + side * c, heading);
+        let predicted = at(0.03, 0.0);
+        let matched = at(0.00975, 0.004);
+        let heard = without_prior_along_heading(matched, predicted, &information, prior_weight);
+        let expected = at(0.003, 0.004);
+        assert!(
+            heard.position().distance_m(expected.position()) < 1e-12,
+            "{heard:?}"
+        );
+        assert_eq!(heard.yaw_rad, heading);
+        // Beside a bare wall (the map pins the travel a tenth as firmly as the prior) the
+        // match moves at most as far again: its noise is not blown up tenfold.
+        let weak = [
+            [3.0 + prior_weight, 0.0, 0.0],
+            [0.0, 2000.0 + prior_weight, 0.0],
+            [0.0, 0.0, 50.0],
+        ];
+        let heard = without_prior_along_heading(
+            Pose2::new(0.02, 0.0, 0.0),
+            Pose2::new(0.03, 0.0, 0.0),
+            &weak,
+            prior_weight,
+        );
+        assert!((heard.x_m - 0.01).abs() < 1e-12, "{heard:?}");
+    }
+
+    #[test]
     fn a_refinement_moves_nothing_along_a_direction_the_grid_barely_pins() {
         let prior_weight = 30.0;
         // The grid pins y firmly and x barely: a wall along x.
@@ -2628,6 +2721,53 @@ mod tests {
             }
         }
         (reported, (mapper.pose.x_m - truth_x).abs())
+    }
+
+    /// A rover driving east at 0.3 m/s a metre and a half from a long wall, with one small
+    /// rock in view; its wheels slip 90 % from 5 to 10 s. When the burst is first reported
+    /// (`None`: never), with the slip check hearing the matches `without_prior` or not.
+    fn slip_beside_a_wall_reported_at(without_prior: bool) -> Option<f64> {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.slip_check_without_prior = without_prior;
+        cfg.frontend.densify = Some(Densify {
+            max_gap_m: 0.3,
+            spacing_m: 0.05,
+        });
+        let mut mapper = Mapper::new(cfg);
+        let wall = [(-20.0, 1.5, 40.0, 1.5)];
+        let rocks = [(9.0, -6.0, 0.1)];
+        let (mut truth_x, mut wheels_x) = (0.0, 0.0);
+        let mut reported = None;
+        for k in 0..150 {
+            let t = 0.1 * k as f64;
+            let step = if k == 0 { 0.0 } else { 0.03 };
+            wheels_x += step;
+            truth_x += if (5.0..10.0).contains(&t) {
+                0.1 * step
+            } else {
+                step
+            };
+            let points = ray_cast_scan(Pose2::new(truth_x, 0.0, 0.0), &wall, &rocks);
+            let tracked = mapper.add_points(t, Pose2::new(wheels_x, 0.0, 0.0), points);
+            if tracked.state == LocalisationState::OdometryUnreliable {
+                reported.get_or_insert(t);
+            }
+        }
+        reported
+    }
+
+    #[test]
+    fn a_slip_burst_beside_a_wall_is_reported_once_the_matchers_pull_is_taken_back() {
+        // The rock alone pins the travel along the wall, a few times as firmly as the
+        // matcher's pull towards the wheels: the matches follow the wheels part of the way.
+        let t = slip_beside_a_wall_reported_at(true).expect("reported");
+        assert!((5.0..7.0).contains(&t), "reported at {t:.1} s");
+        let heard_with_the_pull = slip_beside_a_wall_reported_at(false);
+        assert!(
+            heard_with_the_pull.is_none_or(|t| t >= 7.0),
+            "reported at {heard_with_the_pull:?} s"
+        );
     }
 
     #[test]
