@@ -2523,6 +2523,31 @@ mod tests {
         worst
     }
 
+    /// A match's information pinning the direction `heading_rad` by `along` and the one
+    /// across it by `across` (per square metre), the matcher's prior `prior_weight` added to
+    /// both; its heading pinned by 50.
+    fn information_along(
+        heading_rad: f64,
+        along: f64,
+        across: f64,
+        prior_weight: f64,
+    ) -> [[f64; 3]; 3] {
+        let (s, c) = heading_rad.sin_cos();
+        [
+            [
+                along * c * c + across * s * s + prior_weight,
+                (along - across) * c * s,
+                0.0,
+            ],
+            [
+                (along - across) * c * s,
+                along * s * s + across * c * c + prior_weight,
+                0.0,
+            ],
+            [0.0, 0.0, 50.0],
+        ]
+    }
+
     #[test]
     fn a_match_follows_the_prediction_only_where_the_map_pins_it_weakly() {
         // A wall along x: the map pins y (1000) and barely x (2); the matcher's own pull
@@ -2544,24 +2569,7 @@ mod tests {
         );
         assert_eq!((moved.y_m, moved.yaw_rad), (2.0, 0.1));
         // The same wall running diagonally: moved along the wall only.
-        let (c, s) = (
-            std::f64::consts::FRAC_1_SQRT_2,
-            std::f64::consts::FRAC_1_SQRT_2,
-        );
-        let (weak, firm) = (2.0, 1000.0);
-        let info = [
-            [
-                weak * c * c + firm * s * s + prior_weight,
-                (weak - firm) * c * s,
-                0.0,
-            ],
-            [
-                (weak - firm) * c * s,
-                weak * s * s + firm * c * c + prior_weight,
-                0.0,
-            ],
-            [0.0, 0.0, 50.0],
-        ];
+        let info = information_along(std::f64::consts::FRAC_PI_4, 2.0, 1000.0, prior_weight);
         let predicted = Pose2::new(1.1, 2.1, 0.1);
         let moved = towards_prediction_where_weak(matched, predicted, &info, prior_weight, 100.0);
         let share = 98.0 / 130.0;
@@ -2584,20 +2592,7 @@ mod tests {
         let prior_weight = 30.0;
         let heading = 30f64.to_radians();
         let (s, c) = heading.sin_cos();
-        let (along, across) = (90.0, 2000.0);
-        let information = [
-            [
-                along * c * c + across * s * s + prior_weight,
-                (along - across) * c * s,
-                0.0,
-            ],
-            [
-                (along - across) * c * s,
-                along * s * s + across * c * c + prior_weight,
-                0.0,
-            ],
-            [0.0, 0.0, 50.0],
-        ];
+        let information = information_along(heading, 90.0, 2000.0, prior_weight);
         let at =
             |d: f64, side: f64| Pose2::new(1.0 + d * c - side * s, 2.0 + d * s + side * c, heading);
         let predicted = at(0.03, 0.0);
@@ -2611,11 +2606,7 @@ mod tests {
         assert_eq!(heard.yaw_rad, heading);
         // Beside a bare wall (the map pins the travel a tenth as firmly as the prior) the
         // match moves at most as far again: its noise is not blown up tenfold.
-        let weak = [
-            [3.0 + prior_weight, 0.0, 0.0],
-            [0.0, 2000.0 + prior_weight, 0.0],
-            [0.0, 0.0, 50.0],
-        ];
+        let weak = information_along(0.0, 3.0, 2000.0, prior_weight);
         let heard = without_prior_along_heading(
             Pose2::new(0.02, 0.0, 0.0),
             Pose2::new(0.03, 0.0, 0.0),
@@ -2693,16 +2684,15 @@ mod tests {
         end.x_m + 6.0 / 0.88 - 6.0 - truth(275).x_m
     }
 
-    /// A rover's wheels drive 4.5 m along x on open ground where its lidar sees one rock and
-    /// nothing else (5-9 endpoints); from 5 to 10 s they slip 90 %, over-reporting 1.35 m.
-    /// Returns when the mapper first reported the odometry unreliable, and its position
-    /// error at the end, metres.
-    fn slip_seen_on_one_rock(min_scan_points: usize) -> (Option<f64>, f64) {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.min_scan_points = min_scan_points;
+    /// A rover's wheels drive 4.5 m along x in 15 s among `walls` and `rocks`; from 5 to 10 s
+    /// they slip 90 %, over-reporting 1.35 m. Returns when `cfg`'s mapper first reported the
+    /// odometry unreliable, and its position error at the end, metres.
+    fn slip_burst_seen(
+        cfg: MapperConfig,
+        walls: &[(f64, f64, f64, f64)],
+        rocks: &[(f64, f64, f64)],
+    ) -> (Option<f64>, f64) {
         let mut mapper = Mapper::new(cfg);
-        let rock = [(6.0, 2.5, 0.3)];
         let (mut truth_x, mut wheels_x) = (0.0, 0.0);
         let mut reported = None;
         for k in 0..150 {
@@ -2714,7 +2704,7 @@ mod tests {
             } else {
                 step
             };
-            let points = ray_cast_scan(Pose2::new(truth_x, 0.0, 0.0), &[], &rock);
+            let points = ray_cast_scan(Pose2::new(truth_x, 0.0, 0.0), walls, rocks);
             let tracked = mapper.add_points(t, Pose2::new(wheels_x, 0.0, 0.0), points);
             if tracked.state == LocalisationState::OdometryUnreliable {
                 reported.get_or_insert(t);
@@ -2723,9 +2713,17 @@ mod tests {
         (reported, (mapper.pose.x_m - truth_x).abs())
     }
 
-    /// A rover driving east at 0.3 m/s a metre and a half from a long wall, with one small
-    /// rock in view; its wheels slip 90 % from 5 to 10 s. When the burst is first reported
-    /// (`None`: never), with the slip check hearing the matches `without_prior` or not.
+    /// [`slip_burst_seen`] on open ground where the lidar sees one rock and nothing else
+    /// (5-9 endpoints).
+    fn slip_seen_on_one_rock(min_scan_points: usize) -> (Option<f64>, f64) {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.min_scan_points = min_scan_points;
+        slip_burst_seen(cfg, &[], &[(6.0, 2.5, 0.3)])
+    }
+
+    /// [`slip_burst_seen`] a metre and a half from a long wall, with one small rock in view,
+    /// the slip check hearing the matches `without_prior` or not: when first reported.
     fn slip_beside_a_wall_reported_at(without_prior: bool) -> Option<f64> {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
@@ -2734,27 +2732,8 @@ mod tests {
             max_gap_m: 0.3,
             spacing_m: 0.05,
         });
-        let mut mapper = Mapper::new(cfg);
         let wall = [(-20.0, 1.5, 40.0, 1.5)];
-        let rocks = [(9.0, -6.0, 0.1)];
-        let (mut truth_x, mut wheels_x) = (0.0, 0.0);
-        let mut reported = None;
-        for k in 0..150 {
-            let t = 0.1 * k as f64;
-            let step = if k == 0 { 0.0 } else { 0.03 };
-            wheels_x += step;
-            truth_x += if (5.0..10.0).contains(&t) {
-                0.1 * step
-            } else {
-                step
-            };
-            let points = ray_cast_scan(Pose2::new(truth_x, 0.0, 0.0), &wall, &rocks);
-            let tracked = mapper.add_points(t, Pose2::new(wheels_x, 0.0, 0.0), points);
-            if tracked.state == LocalisationState::OdometryUnreliable {
-                reported.get_or_insert(t);
-            }
-        }
-        reported
+        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)]).0
     }
 
     #[test]
