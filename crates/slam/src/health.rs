@@ -4,7 +4,8 @@
 //!
 //! - the wheel odometry disagrees with scan matching over the last couple of seconds (the
 //!   wheels slip or an encoder fails; optionally also over several, for a rover creeping
-//!   too slowly to slip far in two): SLAM goes on from the scans alone and says so;
+//!   too slowly to slip far in two): SLAM says so and goes on matching its scans, still
+//!   predicted from the wheels, but no longer learns the wheels' slip from them;
 //! - scan matching itself stops fitting the map (too few points, a poor match score, or a
 //!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
 //!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.
