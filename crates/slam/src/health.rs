@@ -50,9 +50,10 @@ impl Default for HealthConfig {
     fn default() -> Self {
         HealthConfig {
             window_s: 2.0,
-            // Tried at 6 s, counted from the last all-clear: it reported 566 of 606 slip
-            // bursts where the short window alone reported 567 (BENCHMARKS.md, "The slip
-            // check without the matcher's pull towards the wheels").
+            // Tried at 6 s, counted from the last all-clear (before the slip check heard
+            // the matches without the matcher's pull): it reported 566 of 606 slip bursts
+            // where the short window alone reported 567 (BENCHMARKS.md, "The slip check
+            // without the matcher's pull towards the wheels").
             slow_window_s: None,
             slip_min_m: 0.1,
             slip_fraction: 0.5,
@@ -119,7 +120,7 @@ pub struct HealthMonitor {
     slow_alarm: bool,
     /// The slow window counts only matches after this time, seconds: the last all-clear. A
     /// burst the short window already reported and cleared would otherwise stay in the slow
-    /// window and raise the alarm again, after the rover stopped to wait for the all-clear.
+    /// window and raise the alarm again, where the rover travelled little since it.
     slow_from_s: f64,
     last_time_s: Option<f64>,
     /// Since when the wheels have been silent.
@@ -454,8 +455,8 @@ mod tests {
             ..HealthConfig::default()
         };
         let mut m = HealthMonitor::new(cfg);
-        // 0.3 m/s; the wheels slip 90 % from 10 to 14 s, then the rover stands still (as
-        // it does while its odometry is unreliable) until 30 s and drives on. The short
+        // 0.3 m/s; the wheels slip 90 % from 10 to 14 s, then the rover stands still (a
+        // planner's wait, say) until 30 s and drives on. The short
         // window clears the burst about 5 s after it ends; the slow window, 6 s long, still
         // holds a second of it then, on almost no other travel.
         let changes: Vec<(f64, LocalisationState)> = (0..400)

@@ -248,7 +248,8 @@ pub struct MapperConfig {
     /// The slip check hears each match with the matcher's pull towards the wheels'
     /// prediction taken back along the heading ([`without_prior_along_heading`]): where the
     /// map pins the travel only a few times as firmly as that pull, slipping wheels drag the
-    /// match a quarter or more of the way towards their over-report.
+    /// match a quarter or more of the way towards their over-report. Off by default: it was
+    /// measured on the rovers only, not on the recorded logs.
     pub slip_check_without_prior: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
@@ -1103,6 +1104,11 @@ impl Mapper {
                     }
                     // The scans' own verdict, for the odometry's health: it must not
                     // hear the wheels' claim back as the scans' agreement.
+                    // A parked rover's match is held to the prediction: nothing to take back.
+                    // With the refinement on the hits (the rovers'), `m.pose` is the refined
+                    // pose while `m.information` is the occupancy match's: the refinement's
+                    // own small shift is scaled with the rest (BENCHMARKS.md, forty-sixth
+                    // session).
                     let verdict = if self.cfg.slip_check_without_prior && still.is_none() {
                         without_prior_along_heading(
                             m.pose,
