@@ -142,9 +142,9 @@ pub fn rover_mapper_config() -> MapperConfig {
     // The slip check hears each match without the matcher's pull towards the wheels: where
     // the map pins the travel a few times as firmly as that pull, a burst's matches followed
     // the wheels far enough to stay under the alarm. `realms bench slip` (seeds 1-16): 94 ->
-    // 96 % of bursts reported within 2 s, 7 -> 8 false alarms in 27-28 rover-hours; sixteen
-    // whole missions' maps about even (BENCHMARKS.md, "The slip check without the matcher's
-    // pull towards the wheels").
+    // 96 % of bursts reported within 2 s, 7 -> 6 false alarms in 27-29 rover-hours; whole
+    // missions' maps about even (BENCHMARKS.md, "The slip check without the matcher's pull
+    // towards the wheels").
     cfg.slip_check_without_prior = true;
     // The gyro's heading, bias measured at the start, holds a match that would turn more.
     cfg.max_heading_step_rad = Some(1f64.to_radians());

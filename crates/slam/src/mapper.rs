@@ -1073,6 +1073,8 @@ impl Mapper {
                         m = match_scan(map, &dense, Pose2::new(m.pose.x_m, m.pose.y_m, yaw), &held);
                         refine_rotation_weight = HELD_HEADING_WEIGHT;
                     }
+                    // The pose the occupancy match's information describes.
+                    let occupancy_pose = m.pose;
                     if let Some(hits) = &self.submaps[i].hits {
                         let wheels = [(origin.inverse() * before).position(), prior.position()];
                         let with_features: Vec<Point2>;
@@ -1105,16 +1107,20 @@ impl Mapper {
                     // The scans' own verdict, for the odometry's health: it must not
                     // hear the wheels' claim back as the scans' agreement.
                     // A parked rover's match is held to the prediction: nothing to take back.
-                    // With the refinement on the hits (the rovers'), `m.pose` is the refined
-                    // pose while `m.information` is the occupancy match's: the refinement's
-                    // own small shift is scaled with the rest (BENCHMARKS.md, forty-sixth
-                    // session).
+                    // The pull is taken back from the occupancy match, which `m.information`
+                    // describes; the refinement on the hits (the rovers') pulls towards that
+                    // match, not the wheels, so its shift is added as it is.
                     let verdict = if self.cfg.slip_check_without_prior && still.is_none() {
-                        without_prior_along_heading(
-                            m.pose,
+                        let heard = without_prior_along_heading(
+                            occupancy_pose,
                             prior,
                             &m.information,
                             matcher.prior_translation_weight * matched_points,
+                        );
+                        Pose2::new(
+                            heard.x_m + m.pose.x_m - occupancy_pose.x_m,
+                            heard.y_m + m.pose.y_m - occupancy_pose.y_m,
+                            m.pose.yaw_rad,
                         )
                     } else {
                         m.pose
