@@ -257,33 +257,36 @@ impl HealthMonitor {
             self.recent.pop_front();
         }
         let slow_counts = self.state == LocalisationState::Tracking || self.slow_alarm;
-        let disagreement = std::iter::once(self.cfg.window_s)
-            .chain(self.cfg.slow_window_s.filter(|_| slow_counts))
-            .find_map(|window_s| {
-                let from_s = if window_s == self.cfg.window_s {
-                    scan.time_s - window_s
-                } else {
-                    (scan.time_s - window_s).max(self.slow_from_s)
-                };
-                let (odom_m, short_m) = self
-                    .recent
-                    .iter()
-                    .filter(|m| m.time_s >= from_s)
-                    .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
-                (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
-                    .then_some((window_s, odom_m, odom_m - short_m))
-            });
+        // (window, counted from, whether it is the slow one)
+        let short = (self.cfg.window_s, scan.time_s - self.cfg.window_s, false);
+        let slow = self
+            .cfg
+            .slow_window_s
+            .filter(|_| slow_counts)
+            .map(|w| (w, (scan.time_s - w).max(self.slow_from_s), true));
+        let disagreement =
+            std::iter::once(short)
+                .chain(slow)
+                .find_map(|(window_s, from_s, is_slow)| {
+                    let (odom_m, short_m) = self
+                        .recent
+                        .iter()
+                        .filter(|m| m.time_s >= from_s)
+                        .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
+                    (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
+                        .then_some((window_s, is_slow, odom_m, odom_m - short_m))
+                });
         if disagreement.is_none() {
             self.disagreeing_since_s = None;
         }
         // A disagreement must last a moment: single bumps and skids in turns are not slip.
-        if let Some((window_s, odom_m, matched_m)) = disagreement
+        if let Some((window_s, is_slow, odom_m, matched_m)) = disagreement
             && scan.time_s - *self.disagreeing_since_s.get_or_insert(scan.time_s)
                 >= self.cfg.confirm_s
         {
             self.agreeing_since_s = None;
             if self.state == LocalisationState::Tracking {
-                self.slow_alarm = window_s != self.cfg.window_s;
+                self.slow_alarm = is_slow;
             }
             return self.go(
                 LocalisationState::OdometryUnreliable,
