@@ -177,8 +177,7 @@ fn without_prior_along_heading(
         return matched;
     }
     let (s, c) = matched.yaw_rad.sin_cos();
-    let i = information;
-    let along = c * c * i[0][0] + 2.0 * c * s * i[0][1] + s * s * i[1][1] - prior_weight;
+    let along = crate::slip::map_information_along(information, prior_weight, matched.yaw_rad);
     let ratio = (along / prior_weight).max(1.0);
     let off = ((matched.x_m - predicted.x_m) * c + (matched.y_m - predicted.y_m) * s) / ratio;
     Pose2::new(

@@ -161,11 +161,20 @@ pub fn pinned_along(
     heading_rad: f64,
     min_ratio: f64,
 ) -> bool {
+    prior_weight > 0.0
+        && map_information_along(information, prior_weight, heading_rad) >= min_ratio * prior_weight
+}
+
+/// How firmly a match's translation `information` pins the direction `heading_rad`, with the
+/// matcher's own pull `prior_weight` (held in it) taken out, per square metre.
+pub(crate) fn map_information_along(
+    information: &[[f64; 3]; 3],
+    prior_weight: f64,
+    heading_rad: f64,
+) -> f64 {
     let (s, c) = heading_rad.sin_cos();
-    let along =
-        c * c * information[0][0] + 2.0 * c * s * information[0][1] + s * s * information[1][1]
-            - prior_weight;
-    prior_weight > 0.0 && along >= min_ratio * prior_weight
+    c * c * information[0][0] + 2.0 * c * s * information[0][1] + s * s * information[1][1]
+        - prior_weight
 }
 
 #[cfg(test)]
