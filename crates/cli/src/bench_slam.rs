@@ -149,6 +149,26 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "tilt-newest",
+        what: "the lidar's returns and the depth camera's points levelled by the newest accelerometer sample alone, not a 0.1 s average",
+        apply: |c| c.tilt_smoothing = 1.0,
+    },
+    Variant {
+        name: "tilt-half",
+        what: "the lidar's returns and the depth camera's points levelled by an average of the accelerometer taking half of each new sample",
+        apply: |c| c.tilt_smoothing = 0.5,
+    },
+    Variant {
+        name: "push-ahead-2cm",
+        what: "a refinement on the hits moving the match forward along the wheels' travel by more than 2 cm not taken (as one moving it back by more than 2 cm is not)",
+        apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.02)),
+    },
+    Variant {
+        name: "push-ahead-1cm",
+        what: "push-ahead-2cm with 1 cm forward",
+        apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.01)),
+    },
+    Variant {
         name: "no-ndt-refine",
         what: "tracking matches taken from the occupancy grid as they are, not refined on the submap's hits",
         apply: |c| c.mapper.ndt_refine = None,

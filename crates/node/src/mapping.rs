@@ -46,6 +46,10 @@ pub struct MappingConfig {
     /// Returns whose endpoint lies less than this above the ground under the rover (with
     /// the rover's pitch and roll undone) are taken for the floor, not an obstacle, metres.
     pub ground_clearance_m: f64,
+    /// The share of each accelerometer sample taken into the gravity that levels the
+    /// lidar's returns and the depth camera's points (1: the newest sample alone). A wheel
+    /// climbing a rock tilts the rover within one physics step; a smoothed tilt lags it.
+    pub tilt_smoothing: f64,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -452,8 +456,7 @@ impl Mapping {
         if imu.linear_acceleration_covariance[0][0] >= 0.0 {
             let a = imu.linear_acceleration;
             let g = &mut self.gravity;
-            // About 0.1 s of smoothing at 50 Hz: the noise goes, the tilt stays current.
-            let k = 0.2;
+            let k = self.cfg.tilt_smoothing.clamp(0.0, 1.0);
             *g = [
                 g[0] + k * (a.x - g[0]),
                 g[1] + k * (a.y - g[1]),
@@ -890,6 +893,7 @@ mod tests {
                 lidar_x_m: 0.1,
                 lidar_height_m: 0.3,
                 ground_clearance_m: 0.12,
+                tilt_smoothing: 0.2,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),
@@ -948,6 +952,30 @@ mod tests {
             let mut out = Vec::new();
             m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.34), &mut out);
             assert_eq!(m.floor_hits() == 1, expect_drop, "pitch {pitch_rad}");
+        }
+    }
+
+    #[test]
+    fn a_sudden_tilt_levels_the_next_scan_only_if_the_newest_sample_counts_in_full() {
+        // Level for 0.4 s, then a wheel climbs a rock: 5 degrees nose down from the last
+        // accelerometer sample before the scan on. Smoothed to a fifth, the levelling still
+        // holds the rover at 1 degree, and the floor ahead passes for a return 0.24 m up.
+        let pitch = 5f64.to_radians();
+        for (tilt_smoothing, expect_drop) in [(1.0, true), (0.2, false)] {
+            let mut m = mapping();
+            m.cfg.tilt_smoothing = tilt_smoothing;
+            for k in 0..=20 {
+                let pitch_rad = if k == 20 { pitch } else { 0.0 };
+                m.on_imu(&imu(Time::from_secs_f64(k as f64 * 0.02), 0.0, pitch_rad));
+            }
+            m.on_odometry(&odom(Time::from_secs_f64(0.4)));
+            let mut out = Vec::new();
+            m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.34), &mut out);
+            assert_eq!(
+                m.floor_hits() == 1,
+                expect_drop,
+                "smoothing {tilt_smoothing}"
+            );
         }
     }
 

@@ -361,6 +361,7 @@ mod tests {
                     lidar_x_m: 0.0,
                     lidar_height_m: 0.3,
                     ground_clearance_m: 0.12,
+                    tilt_smoothing: 0.2,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),

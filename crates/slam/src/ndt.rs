@@ -51,8 +51,13 @@ pub struct NdtConfig {
     pub outline_shift_per_height: f64,
     /// A refinement moving the start more than this is not taken, metres ...
     pub max_shift_m: f64,
-    /// ... nor one moving it back against the rover's travel by more than this, metres.
+    /// ... nor one moving it back against the rover's travel by more than this, metres ...
     pub max_hold_back_m: f64,
+    /// ... nor (if set) one moving it forward along the travel by more than this, metres.
+    /// Along a bare wall the bound above passes the refinement's forward pulls and stops
+    /// its backward ones, but on the rovers' replays this one cost more maps than it saved
+    /// (BENCHMARKS.md, "A refinement that runs ahead of the wheels").
+    pub max_push_ahead_m: Option<f64>,
     /// ... or turning it more than this, radians.
     pub max_turn_rad: f64,
     /// A scan point on a straight run of the scan (five neighbouring points, see
@@ -88,6 +93,7 @@ impl Default for NdtConfig {
             // by 2 cm at most, they raise none (BENCHMARKS.md, "Matches refined on the hits").
             max_shift_m: 0.04,
             max_hold_back_m: 0.02,
+            max_push_ahead_m: None,
             max_turn_rad: 0.5f64.to_radians(),
             max_surface_turn_rad: None,
         }
@@ -422,8 +428,9 @@ impl NdtMap {
         let moved = start.relative_to(&pose);
         (pose.position().distance_m(start.position()) <= self.cfg.max_shift_m
             && moved.yaw_rad.abs() <= self.cfg.max_turn_rad
-            && held_back_m(wheels[0], wheels[1], start, pose) <= self.cfg.max_hold_back_m)
-            .then_some(pose)
+            && (-self.cfg.max_push_ahead_m.unwrap_or(f64::INFINITY)..=self.cfg.max_hold_back_m)
+                .contains(&held_back_m(wheels[0], wheels[1], start, pose)))
+        .then_some(pose)
     }
 
     /// One Gauss-Newton step for the paired points, with a Cauchy weight on each pair's
@@ -678,6 +685,40 @@ mod tests {
         assert!((diagonal - 0.05).abs() < 1e-12, "{diagonal}");
         // A rover standing still holds nothing back.
         assert_eq!(held_back_m(from, from, matched, at(0.9, 2.0)), 0.0);
+    }
+
+    #[test]
+    fn a_refinement_pushing_the_match_ahead_of_the_wheels_is_taken_only_within_its_bound() {
+        let truth = Pose2::new(3.1, 2.2, 0.0);
+        let (map, scan) = room_and_scan_from(truth);
+        // The wheels drove 5 cm east; the match lies 3 cm short of the truth, so the
+        // refinement moves it 3 cm further along the travel.
+        let start = Pose2::new(truth.x_m - 0.03, truth.y_m, truth.yaw_rad);
+        let wheels = [Point2::new(3.0, 2.2), Point2::new(3.05, 2.2)];
+        let refined = map
+            .refine(&scan, start, wheels, 3.0, 3.0)
+            .expect("no bound ahead");
+        assert!(
+            refined.position().distance_m(truth.position()) < 0.002,
+            "{refined:?}"
+        );
+        let bounded = |ahead_m: f64| NdtMap {
+            cfg: NdtConfig {
+                max_push_ahead_m: Some(ahead_m),
+                ..NdtConfig::default()
+            },
+            ..map.clone()
+        };
+        assert!(
+            bounded(0.02)
+                .refine(&scan, start, wheels, 3.0, 3.0)
+                .is_none()
+        );
+        assert!(
+            bounded(0.035)
+                .refine(&scan, start, wheels, 3.0, 3.0)
+                .is_some()
+        );
     }
 
     /// A lone wall along x (no hold on x), and five hits on a rock's face across the beam
