@@ -39,7 +39,8 @@ pub struct TraversabilityConfig {
     /// `max_range_m`: reaching to the depth camera's 6 m marks more of the crater cells near
     /// their paths, but in whole missions the longer routes round the marked craters left
     /// worse maps (BENCHMARKS.md, "Hidden ground ended as far as the camera sees", and over
-    /// sixteen missions "The 6 m hidden-ground rule over sixteen whole missions").
+    /// sixteen missions "The 6 m hidden-ground rule over sixteen whole missions", and its
+    /// third time).
     pub gap_reach_m: f64,
     /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
     /// much lower than the ground before it (the rovers take their step limit), metres.
