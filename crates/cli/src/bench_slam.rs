@@ -164,6 +164,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.02)),
     },
     Variant {
+        name: "push-ahead-3cm",
+        what: "push-ahead-2cm with 3 cm forward",
+        apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.03)),
+    },
+    Variant {
         name: "push-ahead-1cm",
         what: "push-ahead-2cm with 1 cm forward",
         apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.01)),
