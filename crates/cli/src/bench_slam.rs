@@ -169,6 +169,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.03)),
     },
     Variant {
+        name: "push-ahead-weak-2cm",
+        what: "push-ahead-2cm only where the occupancy match pins the travel less than 5 times as firmly as the matcher's pull towards the wheels",
+        apply: |c| {
+            c.mapper.push_ahead_where_weak = Some(realms_slam::mapper::PushAheadWhereWeak {
+                min_ratio: 5.0,
+                max_ahead_m: 0.02,
+            })
+        },
+    },
+    Variant {
         name: "push-ahead-1cm",
         what: "push-ahead-2cm with 1 cm forward",
         apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.01)),

@@ -210,6 +210,26 @@ fn refined_only_where_pinned(
     )
 }
 
+/// How far `refined` moves `matched` forward along the wheels' travel from `wheels[0]` to
+/// `wheels[1]`, metres (0 when the wheels barely moved).
+fn ahead_along_travel_m(wheels: [Point2; 2], matched: Pose2, refined: Pose2) -> f64 {
+    let (tx, ty) = (wheels[1].x_m - wheels[0].x_m, wheels[1].y_m - wheels[0].y_m);
+    let travel = tx.hypot(ty);
+    if travel <= 1e-3 {
+        return 0.0;
+    }
+    ((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
+/// See [`MapperConfig::push_ahead_where_weak`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PushAheadWhereWeak {
+    /// Map information along the heading, as a multiple of the matcher's prior.
+    pub min_ratio: f64,
+    /// How far ahead a refinement may still move the match there, metres.
+    pub max_ahead_m: f64,
+}
+
 /// SLAM tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapperConfig {
@@ -299,6 +319,13 @@ pub struct MapperConfig {
     /// match back along the wall at every scan (BENCHMARKS.md, "A rover's drift along a bare
     /// wall").
     pub refine_only_where_pinned: Option<f64>,
+    /// Where the occupancy match pins the travel less than `min_ratio` times as firmly as
+    /// the matcher's own pull towards the wheels, a refinement moving the match more than
+    /// `max_ahead_m` further along the wheels' travel is not taken (`None`: bounded only by
+    /// the refinement's own limits). Along a bare wall the refinement's own bounds pass its
+    /// forward pulls and stop its backward ones (BENCHMARKS.md, "A refinement that runs
+    /// ahead of the wheels").
+    pub push_ahead_where_weak: Option<PushAheadWhereWeak>,
     /// A closure may correct the pose only as far as the map can have drifted between the
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
@@ -587,6 +614,7 @@ impl Default for MapperConfig {
             still_hold: None,
             weak_direction_floor: None,
             refine_only_where_pinned: None,
+            push_ahead_where_weak: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
             // between its ends, and is searched within a degree of turn a metre. On the
@@ -1091,6 +1119,21 @@ impl Mapper {
                             matcher.prior_translation_weight,
                             refine_rotation_weight,
                         ) {
+                            let pw = matcher.prior_translation_weight * matched_points;
+                            let refined = match self.cfg.push_ahead_where_weak {
+                                Some(weak)
+                                    if crate::slip::map_information_along(
+                                        &m.information,
+                                        pw,
+                                        m.pose.yaw_rad,
+                                    ) < weak.min_ratio * pw
+                                        && ahead_along_travel_m(wheels, m.pose, refined)
+                                            > weak.max_ahead_m =>
+                                {
+                                    m.pose
+                                }
+                                _ => refined,
+                            };
                             m.pose = match self.cfg.refine_only_where_pinned {
                                 Some(floor) => refined_only_where_pinned(
                                     m.pose,
@@ -2591,6 +2634,26 @@ mod tests {
         assert_eq!(
             towards_prediction_where_weak(matched, predicted, &firm_both, prior_weight, 100.0),
             matched
+        );
+    }
+
+    #[test]
+    fn a_refinement_ahead_of_the_wheels_is_measured_along_their_travel() {
+        // Wheels: 3 cm north-east at 45 degrees; the match at (1, 1).
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let wheels = [Point2::new(0.0, 0.0), Point2::new(0.03 * s, 0.03 * s)];
+        let matched = Pose2::new(1.0, 1.0, 0.0);
+        let ahead = |x: f64, y: f64| ahead_along_travel_m(wheels, matched, Pose2::new(x, y, 0.0));
+        // 2 cm east is 1.41 cm along the travel; 2 cm south-west is 2 cm back; across it,
+        // nothing.
+        assert!((ahead(1.02, 1.0) - 0.02 * s).abs() < 1e-12);
+        assert!((ahead(1.0 - 0.02 * s, 1.0 - 0.02 * s) + 0.02).abs() < 1e-12);
+        assert!(ahead(1.01, 0.99).abs() < 1e-12);
+        // Wheels that barely moved say nothing of ahead or back.
+        let still = [Point2::new(0.0, 0.0), Point2::new(0.0005, 0.0)];
+        assert_eq!(
+            ahead_along_travel_m(still, matched, Pose2::new(1.5, 1.0, 0.0)),
+            0.0
         );
     }
 
