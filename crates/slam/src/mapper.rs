@@ -210,17 +210,6 @@ fn refined_only_where_pinned(
     )
 }
 
-/// How far `refined` moves `matched` forward along the wheels' travel from `wheels[0]` to
-/// `wheels[1]`, metres (0 when the wheels barely moved).
-fn ahead_along_travel_m(wheels: [Point2; 2], matched: Pose2, refined: Pose2) -> f64 {
-    let (tx, ty) = (wheels[1].x_m - wheels[0].x_m, wheels[1].y_m - wheels[0].y_m);
-    let travel = tx.hypot(ty);
-    if travel <= 1e-3 {
-        return 0.0;
-    }
-    ((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
-}
-
 /// See [`MapperConfig::push_ahead_where_weak`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PushAheadWhereWeak {
@@ -1127,8 +1116,9 @@ impl Mapper {
                                         pw,
                                         m.pose.yaw_rad,
                                     ) < weak.min_ratio * pw
-                                        && ahead_along_travel_m(wheels, m.pose, refined)
-                                            > weak.max_ahead_m =>
+                                        && -crate::ndt::held_back_m(
+                                            wheels[0], wheels[1], m.pose, refined,
+                                        ) > weak.max_ahead_m =>
                                 {
                                     m.pose
                                 }
@@ -2634,26 +2624,6 @@ mod tests {
         assert_eq!(
             towards_prediction_where_weak(matched, predicted, &firm_both, prior_weight, 100.0),
             matched
-        );
-    }
-
-    #[test]
-    fn a_refinement_ahead_of_the_wheels_is_measured_along_their_travel() {
-        // Wheels: 3 cm north-east at 45 degrees; the match at (1, 1).
-        let s = std::f64::consts::FRAC_1_SQRT_2;
-        let wheels = [Point2::new(0.0, 0.0), Point2::new(0.03 * s, 0.03 * s)];
-        let matched = Pose2::new(1.0, 1.0, 0.0);
-        let ahead = |x: f64, y: f64| ahead_along_travel_m(wheels, matched, Pose2::new(x, y, 0.0));
-        // 2 cm east is 1.41 cm along the travel; 2 cm south-west is 2 cm back; across it,
-        // nothing.
-        assert!((ahead(1.02, 1.0) - 0.02 * s).abs() < 1e-12);
-        assert!((ahead(1.0 - 0.02 * s, 1.0 - 0.02 * s) + 0.02).abs() < 1e-12);
-        assert!(ahead(1.01, 0.99).abs() < 1e-12);
-        // Wheels that barely moved say nothing of ahead or back.
-        let still = [Point2::new(0.0, 0.0), Point2::new(0.0005, 0.0)];
-        assert_eq!(
-            ahead_along_travel_m(still, matched, Pose2::new(1.5, 1.0, 0.0)),
-            0.0
         );
     }
 

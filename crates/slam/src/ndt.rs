@@ -520,7 +520,7 @@ const STRAIGHT_WITHIN_M: f64 = 0.01;
 
 /// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
 /// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
-fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
+pub(crate) fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
     let (tx, ty) = (predicted.x_m - from.x_m, predicted.y_m - from.y_m);
     let travel = tx.hypot(ty);
     if travel <= 1e-3 {
