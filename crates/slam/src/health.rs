@@ -459,9 +459,9 @@ mod tests {
         };
         let mut m = HealthMonitor::new(cfg);
         // 0.3 m/s; the wheels slip 90 % from 10 to 14 s, then the rover stands still (a
-        // planner's wait, say) until 30 s and drives on. The short
-        // window clears the burst about 5 s after it ends; the slow window, 6 s long, still
-        // holds a second of it then, on almost no other travel.
+        // planner's wait, say) until 30 s and drives on. The short window clears the burst
+        // about 5 s after it ends; the slow window, 6 s long, still holds a second of it
+        // then, on almost no other travel.
         let changes: Vec<(f64, LocalisationState)> = (0..400)
             .filter_map(|k| {
                 let t = k as f64 * 0.1;

@@ -219,6 +219,29 @@ pub struct PushAheadWhereWeak {
     pub max_ahead_m: f64,
 }
 
+impl PushAheadWhereWeak {
+    /// `refined`, or `matched` where the occupancy match's `information` (the matcher's pull
+    /// `prior_weight` held in it) pins the travel weakly and the refinement moves the match
+    /// too far along the wheels' travel from `wheels[0]` to `wheels[1]`.
+    fn bound(
+        &self,
+        matched: Pose2,
+        refined: Pose2,
+        wheels: [Point2; 2],
+        information: &[[f64; 3]; 3],
+        prior_weight: f64,
+    ) -> Pose2 {
+        let weak = crate::slip::map_information_along(information, prior_weight, matched.yaw_rad)
+            < self.min_ratio * prior_weight;
+        let ahead_m = -crate::ndt::held_back_m(wheels[0], wheels[1], matched, refined);
+        if weak && ahead_m > self.max_ahead_m {
+            matched
+        } else {
+            refined
+        }
+    }
+}
+
 /// SLAM tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapperConfig {
@@ -1020,6 +1043,8 @@ impl Mapper {
                     let mut m = match_scan(map, &dense, prior, &matcher);
                     // The match's information sums over these points (floors are per point).
                     let matched_points = dense.len() as f64;
+                    // The matcher's pull towards the prediction, summed over the points.
+                    let prior_pull = matcher.prior_translation_weight * matched_points;
                     let turn_rad = normalize_angle_rad(predicted.yaw_rad - before.yaw_rad);
                     if let Some(fast) = self.cfg.fast_turn
                         && turn_rad.abs() > fast.turn_rad
@@ -1108,28 +1133,18 @@ impl Mapper {
                             matcher.prior_translation_weight,
                             refine_rotation_weight,
                         ) {
-                            let pw = matcher.prior_translation_weight * matched_points;
                             let refined = match self.cfg.push_ahead_where_weak {
-                                Some(weak)
-                                    if crate::slip::map_information_along(
-                                        &m.information,
-                                        pw,
-                                        m.pose.yaw_rad,
-                                    ) < weak.min_ratio * pw
-                                        && -crate::ndt::held_back_m(
-                                            wheels[0], wheels[1], m.pose, refined,
-                                        ) > weak.max_ahead_m =>
-                                {
-                                    m.pose
+                                Some(weak) => {
+                                    weak.bound(m.pose, refined, wheels, &m.information, prior_pull)
                                 }
-                                _ => refined,
+                                None => refined,
                             };
                             m.pose = match self.cfg.refine_only_where_pinned {
                                 Some(floor) => refined_only_where_pinned(
                                     m.pose,
                                     refined,
                                     &m.information,
-                                    matcher.prior_translation_weight * matched_points,
+                                    prior_pull,
                                     floor * matched_points,
                                 ),
                                 None => refined,
@@ -1147,7 +1162,7 @@ impl Mapper {
                             occupancy_pose,
                             prior,
                             &m.information,
-                            matcher.prior_translation_weight * matched_points,
+                            prior_pull,
                         );
                         Pose2::new(
                             heard.x_m + m.pose.x_m - occupancy_pose.x_m,
@@ -1166,7 +1181,7 @@ impl Mapper {
                             m.pose,
                             prior,
                             &m.information,
-                            matcher.prior_translation_weight * matched_points,
+                            prior_pull,
                             floor * matched_points,
                         );
                     }
