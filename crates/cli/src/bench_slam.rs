@@ -179,6 +179,21 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "occupied-above-1.8",
+        what: "a map cell counts as occupied only with the hits of more than one scan (summed log-odds above 1.8, not 0.5)",
+        apply: |c| c.mapper.map_occupied_above = 1.8,
+    },
+    Variant {
+        name: "occupied-above-1.0",
+        what: "a map cell counts as occupied only with summed log-odds above 1.0, not 0.5",
+        apply: |c| c.mapper.map_occupied_above = 1.0,
+    },
+    Variant {
+        name: "occupied-above-3.0",
+        what: "a map cell counts as occupied only with summed log-odds above 3.0, not 0.5 (the hits of two scans or more)",
+        apply: |c| c.mapper.map_occupied_above = 3.0,
+    },
+    Variant {
         name: "push-ahead-1cm",
         what: "push-ahead-2cm with 1 cm forward",
         apply: |c| on_refinement(c, |n| n.max_push_ahead_m = Some(0.01)),
@@ -915,14 +930,14 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         println!("poses scan by scan: {}", dir.display());
     }
     println!(
-        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures (wrong) | SLAM speed | scans per wall second (with the depth frames between them) | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right |"
+        "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures (wrong) | SLAM speed | scans per wall second (with the depth frames between them) | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right (cells) | obstacle faces marked | explorable area known |"
     );
     println!(
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for r in &all {
         println!(
-            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} ({}) | {:.0}x | {:.0} | {:.1} % ({}) | {:.1} % | {:.1} % |",
+            "| {} | {} | {} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.2} deg | {} | {} ({}) | {:.0}x | {:.0} | {:.1} % ({}) | {:.1} % | {:.1} % ({}) | {:.1} % | {:.1} % |",
             r.seed,
             r.rover,
             r.variant,
@@ -939,7 +954,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             100.0 * r.map.path_hazards_flagged,
             r.map.path_hazards,
             100.0 * r.map.hazard_correct,
-            100.0 * r.map.occupied_correct
+            100.0 * r.map.occupied_correct,
+            r.map.occupied_cells,
+            100.0 * r.map.obstacle_faces_marked,
+            100.0 * r.map.explorable_known
         );
     }
     println!();

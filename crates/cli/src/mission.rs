@@ -143,9 +143,10 @@ pub fn run(args: MissionArgs) -> Result<()> {
             e.odometry_error.rmse_m,
             e.localisation.len(),
             e.map.map_or(String::new(), |m| format!(
-                "; map: {:.1} % of occupied cells right, {:.0} % of the explorable area known, \
-                 {} ({:.0} % of hazard cells right)",
+                "; map: {:.1} % of occupied cells right, {:.1} % of the obstacles seen kept, \
+                 {:.0} % of the explorable area known, {} ({:.0} % of hazard cells right)",
                 100.0 * m.occupied_correct,
+                100.0 * m.obstacle_faces_marked,
                 100.0 * m.explorable_known,
                 if m.true_hazards_known == 0 {
                     "no true hazard in the ground it knows".to_string()

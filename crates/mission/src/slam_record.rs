@@ -218,6 +218,13 @@ pub struct MapGrade {
     /// same hazard a little off (the SLAM error, the hazard layer's coarser cells), though it
     /// may be a neighbouring one, such as a marked rim beside an unmarked interior.
     pub path_hazards_flagged_nearby: f64,
+    /// Obstacle faces the map looked at: true lidar-visible obstacle cells beside a truly
+    /// open cell the map knows (free, occupied or hazard).
+    pub obstacle_faces_seen: usize,
+    /// Of those, the fraction with an occupied map cell within one map cell: the obstacles
+    /// the rover looked at that its map keeps. [`occupied_correct`](Self::occupied_correct)
+    /// grades what the map marks; this grades what it leaves out.
+    pub obstacle_faces_marked: f64,
 }
 
 /// How near a true hazard a marked cell must lie for
@@ -314,6 +321,9 @@ pub fn grade_grid(grid: &Grid<i8>, truth: &GroundTruth, path: &[Point2]) -> MapG
     }
     g.explorable_known = known as f64 / explorable.max(1) as f64;
     g.hazard_correct = hazard_ok as f64 / g.hazard_cells.max(1) as f64;
+    let (seen, marked) = obstacle_faces(grid, truth);
+    g.obstacle_faces_seen = seen;
+    g.obstacle_faces_marked = marked as f64 / seen.max(1) as f64;
     // One pass over the true hazards grades both: those the map knows anywhere, and all of
     // those near the path.
     let near = near_path(truth.traversability.geometry(), path, PATH_REACH_M);
@@ -349,6 +359,42 @@ pub fn grade_grid(grid: &Grid<i8>, truth: &GroundTruth, path: &[Point2]) -> MapG
     g.path_hazards_flagged = path_flagged as f64 / g.path_hazards.max(1) as f64;
     g.path_hazards_flagged_nearby = path_nearby as f64 / g.path_hazards.max(1) as f64;
     g
+}
+
+/// The true obstacle faces `grid` looked at, and how many of them it marks occupied within
+/// one of its cells (see [`MapGrade::obstacle_faces_seen`]).
+fn obstacle_faces(grid: &Grid<i8>, truth: &GroundTruth) -> (usize, usize) {
+    let obstacles = &truth.lidar_obstacles;
+    let geo = obstacles.geometry();
+    let known_open = |x: i64, y: i64| {
+        x >= 0
+            && y >= 0
+            && obstacles.get(x as usize, y as usize) == Some(&false)
+            && grid
+                .at_world(geo.cell_center(realms_core::Cell {
+                    x: x as usize,
+                    y: y as usize,
+                }))
+                .is_some_and(|v| *v != OccupancyGrid::UNKNOWN)
+    };
+    let (mut seen, mut marked) = (0usize, 0usize);
+    for (cell, obstacle) in obstacles.iter() {
+        if !*obstacle {
+            continue;
+        }
+        let (x, y) = (cell.x as i64, cell.y as i64);
+        let face = (-1..=1).any(|dy| (-1..=1).any(|dx| known_open(x + dx, y + dy)));
+        if face {
+            seen += 1;
+            marked += usize::from(any_within(
+                grid,
+                geo.cell_center(cell),
+                grid.resolution_m(),
+                |v| *v == OccupancyGrid::OCCUPIED,
+            ));
+        }
+    }
+    (seen, marked)
 }
 
 /// Per cell of `geo`, whether it lies within `reach_m` of a point of `path`. Points closer
@@ -537,6 +583,50 @@ mod tests {
         let g = grade_map(&msg, &truth, &[Point2::new(0.5, 0.5)]);
         assert_eq!(g.occupied_cells, 20);
         assert!((g.occupied_correct - 0.5).abs() < 1e-12, "{g:?}");
+        // The map knows column 18 free beside all 20 wall cells. It keeps rows 0..10 of the
+        // wall, and row 10 too through the marked cell diagonal to it, at (20, 9); rows
+        // 11..20 are drawn two cells off and left out.
+        assert_eq!(g.obstacle_faces_seen, 20);
+        assert!(
+            (g.obstacle_faces_marked - 11.0 / 20.0).abs() < 1e-12,
+            "{g:?}"
+        );
+    }
+
+    #[test]
+    fn obstacle_faces_count_only_where_the_map_knows_the_open_cell_beside_them() {
+        let geo = GridGeometry {
+            width: 10,
+            height: 10,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        // A wall along row 5, open on both sides. The map knows only the rows below it,
+        // and only in columns 0..4; it marks the wall in columns 0..2.
+        let mut lidar_obstacles = Grid::new(geo, false);
+        for x in 0..10 {
+            *lidar_obstacles.get_mut(x, 5).expect("inside") = true;
+        }
+        let truth = GroundTruth {
+            traversability: Grid::new(geo, TruthCell::Free),
+            lidar_obstacles,
+            explorable: Grid::new(geo, true),
+            explorable_area_m2: 1.0,
+        };
+        let mut data = vec![OccupancyGrid::UNKNOWN; 100];
+        for y in 0..5 {
+            for x in 0..4 {
+                data[y * 10 + x] = OccupancyGrid::FREE;
+            }
+        }
+        for x in 0..2 {
+            data[50 + x] = OccupancyGrid::OCCUPIED;
+        }
+        let g = grade_map(&map_msg(10, 10, data), &truth, &[Point2::new(0.1, 0.1)]);
+        // Wall cells 0..5 touch a known open cell (cell 4 diagonally); of those, 0..3 have
+        // a marked cell within one cell.
+        assert_eq!(g.obstacle_faces_seen, 5);
+        assert!((g.obstacle_faces_marked - 3.0 / 5.0).abs() < 1e-12, "{g:?}");
     }
 
     #[test]

@@ -35,6 +35,8 @@ const FIXED_BITS: u32 = 32;
 const FIXED_ONE: f64 = (1u64 << FIXED_BITS) as f64;
 /// Cells added on each side when the assembly grows.
 const GROW_MARGIN_CELLS: usize = 64;
+/// Summed log-odds above which a cell counts as occupied by default: as in one submap.
+const OCCUPIED_ABOVE: f32 = 0.5;
 
 /// Log-odds evidence summed over submaps on one growable grid.
 #[derive(Clone, Debug)]
@@ -50,6 +52,8 @@ pub struct Assembly {
     weigh: Weigh,
     /// How traced scans clear cells: as the submaps do.
     miss_rule: MissRule,
+    /// Summed log-odds above which a cell counts as occupied.
+    occupied_above: f32,
     /// The live map, once asked for.
     live: Option<Live>,
 }
@@ -80,6 +84,8 @@ struct Live {
     tile_version: Vec<u64>,
     /// The version changes are stamped with now: one more than the last handed out.
     version: u64,
+    /// Summed log-odds above which a cell counts as occupied.
+    occupied_above: f32,
 }
 
 /// The live map as it is now, and where it changed ([`Assembly::live_states`]).
@@ -119,12 +125,12 @@ struct Shadow {
 
 impl Live {
     /// No shadows over the finished submaps' sum `finished` (`width` x `height` cells).
-    fn new(finished: &[f32], width: usize, height: usize) -> Self {
+    fn new(finished: &[f32], width: usize, height: usize, occupied_above: f32) -> Self {
         let tiles_wide = width.div_ceil(LIVE_TILE_CELLS);
         Live {
             states: finished
                 .iter()
-                .map(|&l| CellState::from_log_odds(l))
+                .map(|&l| summed_state(l, occupied_above))
                 .collect(),
             shadow_sum: vec![0.0; finished.len()],
             shadows: Vec::new(),
@@ -132,6 +138,7 @@ impl Live {
             tiles_wide,
             tile_version: vec![1; tiles_wide * height.div_ceil(LIVE_TILE_CELLS)],
             version: 1,
+            occupied_above,
         }
     }
 
@@ -150,6 +157,7 @@ impl Live {
             &mut self.tile_version,
             [self.width, self.tiles_wide],
             self.version,
+            self.occupied_above,
             i,
         );
     }
@@ -163,9 +171,10 @@ fn restate(
     tile_version: &mut [u64],
     shape: [usize; 2],
     version: u64,
+    occupied_above: f32,
     i: usize,
 ) {
-    let state = CellState::from_log_odds(sums[0][i] + sums[1][i]);
+    let state = summed_state(sums[0][i] + sums[1][i], occupied_above);
     if state != states[i] {
         states[i] = state;
         let [width, tiles_wide] = shape;
@@ -192,6 +201,17 @@ impl Assembly {
         self
     }
 
+    /// The assembly counting a cell occupied only once its summed log-odds exceed
+    /// `occupied_above` (by default 0.5, as [`CellState::from_log_odds`]); cells between
+    /// 0.5 and that are unknown. Each scan goes into two submaps, so one scan's hit sums to
+    /// twice a submap's, and a single stray scan can draw a wall that nothing later clears
+    /// when it lies behind a real one.
+    pub fn with_occupied_above(mut self, occupied_above: f32) -> Self {
+        self.occupied_above = occupied_above;
+        self.live = None;
+        self
+    }
+
     fn weighing(resolution_m: f64, weigh: Weigh) -> Self {
         Assembly {
             resolution_m,
@@ -202,6 +222,7 @@ impl Assembly {
             placed: Vec::new(),
             weigh,
             miss_rule: MissRule::default(),
+            occupied_above: OCCUPIED_ABOVE,
             live: None,
         }
     }
@@ -475,6 +496,7 @@ impl Assembly {
             shadows,
             tile_version,
             version,
+            occupied_above,
             ..
         } = live;
         let mut targets: Vec<&mut Vec<f32>> = shadows
@@ -505,6 +527,7 @@ impl Assembly {
                         tile_version,
                         shape,
                         *version,
+                        *occupied_above,
                         i,
                     );
                 }
@@ -524,7 +547,12 @@ impl Assembly {
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
         }
         if self.live.is_none() {
-            self.live = Some(Live::new(&self.sum, self.width, self.height));
+            self.live = Some(Live::new(
+                &self.sum,
+                self.width,
+                self.height,
+                self.occupied_above,
+            ));
         }
         let stale: Vec<usize> = self
             .live
@@ -581,8 +609,21 @@ impl Assembly {
         for (grid, pose) in active {
             self.draw(grid, *pose, |i, v| sum[i] += v);
         }
-        let cells = sum.iter().map(|&l| CellState::from_log_odds(l)).collect();
+        let cells = sum
+            .iter()
+            .map(|&l| summed_state(l, self.occupied_above))
+            .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
+    }
+}
+
+/// The state of a cell whose submaps' log-odds sum to `l`: occupied above `occupied_above`
+/// (at least 0.5), free below -0.5, unknown between.
+fn summed_state(l: f32, occupied_above: f32) -> CellState {
+    if l > occupied_above {
+        CellState::Occupied
+    } else {
+        CellState::from_log_odds(l.min(0.5))
     }
 }
 
@@ -729,6 +770,35 @@ mod tests {
         w.sort_by_key(|(x, y, _)| (*y, *x));
         assert!(w.len() > 1000, "the rooms were drawn: {}", w.len());
         assert_eq!(g, w);
+    }
+
+    #[test]
+    fn a_cell_counts_as_occupied_only_once_its_summed_hits_pass_the_threshold() {
+        // One beam ending in a hit: its end cell holds one hit's log-odds (0.847) in a
+        // submap, twice that with the same scan in two submaps.
+        let end = Point2::new(1.0123, 0.0271);
+        let mut sub = OccupancyGrid::new(0.05);
+        sub.insert(Point2::new(0.0123, 0.0271), &[(end, true)]);
+        let state_at = |occupied_above: f32, submaps: usize| {
+            let mut asm = Assembly::new(0.05).with_occupied_above(occupied_above);
+            for i in 0..submaps {
+                asm.place(i, &sub, Pose2::IDENTITY);
+            }
+            let whole = asm.states(&[]);
+            let view = asm.live_states(&[]);
+            let live = Grid::from_cells(view.geometry, view.states.to_vec()).expect("cells");
+            let at = |g: &Grid<CellState>| {
+                let c = g.geometry().world_to_cell(end).expect("inside");
+                g.cells()[c.y * g.geometry().width + c.x]
+            };
+            assert_eq!(at(&whole), at(&live), "{occupied_above} {submaps}");
+            at(&whole)
+        };
+        assert_eq!(state_at(0.5, 1), CellState::Occupied);
+        assert_eq!(state_at(1.0, 1), CellState::Unknown);
+        assert_eq!(state_at(1.0, 2), CellState::Occupied);
+        assert_eq!(state_at(1.8, 2), CellState::Unknown);
+        assert_eq!(state_at(1.8, 3), CellState::Occupied);
     }
 
     /// 360 beams from `sensor` to the walls of a square room 2 m out.

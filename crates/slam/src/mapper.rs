@@ -338,6 +338,10 @@ pub struct MapperConfig {
     /// forward pulls and stop its backward ones (BENCHMARKS.md, "A refinement that runs
     /// ahead of the wheels").
     pub push_ahead_where_weak: Option<PushAheadWhereWeak>,
+    /// A cell of the map counts as occupied once the log-odds of the submaps holding it sum
+    /// to more than this (0.5: as in a submap). A scan goes into two submaps, so above
+    /// about 1.7 a cell needs the hits of more than one scan.
+    pub map_occupied_above: f32,
     /// A closure may correct the pose only as far as the map can have drifted between the
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
@@ -627,6 +631,7 @@ impl Default for MapperConfig {
             weak_direction_floor: None,
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
+            map_occupied_above: 0.5,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
             // between its ends, and is searched within a degree of turn a metre. On the
@@ -883,7 +888,8 @@ impl Mapper {
             stall_turn_taken: 0,
             last_matched_delta: None,
             assembly: Assembly::new(cfg.frontend.resolution_m)
-                .with_miss_rule(cfg.frontend.miss_rule),
+                .with_miss_rule(cfg.frontend.miss_rule)
+                .with_occupied_above(cfg.map_occupied_above),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
             walls: cfg.wall_headings.map(WallHeadings::new),
         }
