@@ -179,6 +179,31 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "clamp-hold-back",
+        what: "a refinement holding the match back more than 2 cm against the wheels' travel is brought back to 2 cm along the travel, keeping its turn and its move across the travel, instead of being dropped",
+        apply: |c| on_refinement(c, |n| n.clamp_along_travel = true),
+    },
+    Variant {
+        name: "clamp-2cm",
+        what: "clamp-hold-back, and a refinement moving the match more than 2 cm ahead of the wheels' travel is brought back to 2 cm the same way",
+        apply: |c| {
+            on_refinement(c, |n| {
+                n.clamp_along_travel = true;
+                n.max_push_ahead_m = Some(0.02);
+            })
+        },
+    },
+    Variant {
+        name: "clamp-3cm",
+        what: "clamp-2cm with 3 cm ahead",
+        apply: |c| {
+            on_refinement(c, |n| {
+                n.clamp_along_travel = true;
+                n.max_push_ahead_m = Some(0.03);
+            })
+        },
+    },
+    Variant {
         name: "occupied-above-1.8",
         what: "a map cell counts as occupied only with the hits of more than one scan (summed log-odds above 1.8, not 0.5)",
         apply: |c| c.mapper.map_occupied_above = 1.8,

@@ -58,6 +58,11 @@ pub struct NdtConfig {
     /// its backward ones, but on the rovers' replays this one cost more maps than it saved
     /// (BENCHMARKS.md, "A refinement that runs ahead of the wheels").
     pub max_push_ahead_m: Option<f64>,
+    /// A refinement past the two bounds along the travel is brought back to the bound it
+    /// passed, along the travel only, instead of being dropped: its turn and its move
+    /// across the travel are kept. Dropped whole, a refinement that the map pulls back along
+    /// a bare wall loses the heading the wall gives it too.
+    pub clamp_along_travel: bool,
     /// ... or turning it more than this, radians.
     pub max_turn_rad: f64,
     /// A scan point on a straight run of the scan (five neighbouring points, see
@@ -94,6 +99,7 @@ impl Default for NdtConfig {
             max_shift_m: 0.04,
             max_hold_back_m: 0.02,
             max_push_ahead_m: None,
+            clamp_along_travel: false,
             max_turn_rad: 0.5f64.to_radians(),
             max_surface_turn_rad: None,
         }
@@ -425,12 +431,19 @@ impl NdtMap {
                 }
             }
         }
+        let along = -self.cfg.max_push_ahead_m.unwrap_or(f64::INFINITY)..=self.cfg.max_hold_back_m;
+        let held_back = held_back_m(wheels[0], wheels[1], start, pose);
+        let mut within_along = along.contains(&held_back);
+        if self.cfg.clamp_along_travel && !within_along {
+            let bound = held_back.clamp(*along.start(), *along.end());
+            pose = along_travel_to(wheels, pose, held_back, bound);
+            within_along = true;
+        }
         let moved = start.relative_to(&pose);
         (pose.position().distance_m(start.position()) <= self.cfg.max_shift_m
             && moved.yaw_rad.abs() <= self.cfg.max_turn_rad
-            && (-self.cfg.max_push_ahead_m.unwrap_or(f64::INFINITY)..=self.cfg.max_hold_back_m)
-                .contains(&held_back_m(wheels[0], wheels[1], start, pose)))
-        .then_some(pose)
+            && within_along)
+            .then_some(pose)
     }
 
     /// One Gauss-Newton step for the paired points, with a Cauchy weight on each pair's
@@ -527,6 +540,23 @@ pub(crate) fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refin
         return 0.0;
     }
     -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
+/// `refined`, held back `held_back_m` against the wheels' travel from `wheels[0]` to
+/// `wheels[1]` (as [`held_back_m`] measures it), moved along that travel so it is held back
+/// `to_m` instead; its heading and its place across the travel stay.
+fn along_travel_to(wheels: [Point2; 2], refined: Pose2, held_back_m: f64, to_m: f64) -> Pose2 {
+    let (tx, ty) = (wheels[1].x_m - wheels[0].x_m, wheels[1].y_m - wheels[0].y_m);
+    let travel = tx.hypot(ty);
+    if travel <= 1e-3 {
+        return refined;
+    }
+    let forward = held_back_m - to_m;
+    Pose2::new(
+        refined.x_m + forward * tx / travel,
+        refined.y_m + forward * ty / travel,
+        refined.yaw_rad,
+    )
 }
 
 /// The eigenvalues of the symmetric 2 x 2 matrix `[[a, b], [b, c]]`, smaller (at least 0)
@@ -719,6 +749,25 @@ mod tests {
                 .refine(&scan, start, wheels, 3.0, 3.0)
                 .is_some()
         );
+        // Clamped instead of dropped: 2 cm of the 3 cm along the travel are taken, and the
+        // refinement's own correction across it and of the heading stay.
+        let turned = Pose2::new(start.x_m, start.y_m + 0.01, 0.004);
+        let clamped = NdtMap {
+            cfg: NdtConfig {
+                max_push_ahead_m: Some(0.02),
+                clamp_along_travel: true,
+                ..NdtConfig::default()
+            },
+            ..map.clone()
+        }
+        .refine(&scan, turned, wheels, 3.0, 3.0)
+        .expect("clamped, not dropped");
+        assert!(
+            (clamped.x_m - (truth.x_m - 0.01)).abs() < 0.002,
+            "{clamped:?}"
+        );
+        assert!((clamped.y_m - truth.y_m).abs() < 0.002, "{clamped:?}");
+        assert!(clamped.yaw_rad.abs() < 0.0005, "{clamped:?}");
     }
 
     /// A lone wall along x (no hold on x), and five hits on a rock's face across the beam
