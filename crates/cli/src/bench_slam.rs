@@ -38,6 +38,14 @@ fn on_refinement(c: &mut MappingConfig, change: impl FnOnce(&mut realms_slam::nd
     }
 }
 
+/// The refinement clamped to its bounds along the wheels' travel, `ahead_m` the one ahead.
+fn clamped_along_travel(c: &mut MappingConfig, ahead_m: Option<f64>) {
+    on_refinement(c, |n| {
+        n.clamp_along_travel = true;
+        n.max_push_ahead_m = ahead_m;
+    });
+}
+
 /// The variants `--variant` may name (the setup as it is, `baseline`, always runs).
 const VARIANTS: &[Variant] = &[
     Variant {
@@ -181,27 +189,32 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "clamp-hold-back",
         what: "a refinement holding the match back more than 2 cm against the wheels' travel is brought back to 2 cm along the travel, keeping its turn and its move across the travel, instead of being dropped",
-        apply: |c| on_refinement(c, |n| n.clamp_along_travel = true),
+        apply: |c| clamped_along_travel(c, None),
     },
     Variant {
         name: "clamp-2cm",
         what: "clamp-hold-back, and a refinement moving the match more than 2 cm ahead of the wheels' travel is brought back to 2 cm the same way",
-        apply: |c| {
-            on_refinement(c, |n| {
-                n.clamp_along_travel = true;
-                n.max_push_ahead_m = Some(0.02);
-            })
-        },
+        apply: |c| clamped_along_travel(c, Some(0.02)),
     },
     Variant {
         name: "clamp-3cm",
         what: "clamp-2cm with 3 cm ahead",
-        apply: |c| {
-            on_refinement(c, |n| {
-                n.clamp_along_travel = true;
-                n.max_push_ahead_m = Some(0.03);
-            })
-        },
+        apply: |c| clamped_along_travel(c, Some(0.03)),
+    },
+    Variant {
+        name: "final-hits-within-6m",
+        what: "the final map draws every finished submap again with hits out to 6 m only (free space out to 6 m beyond)",
+        apply: |c| c.mapper.final_map_hit_range_m = Some(6.0),
+    },
+    Variant {
+        name: "final-hits-within-8m",
+        what: "final-hits-within-6m at 8 m",
+        apply: |c| c.mapper.final_map_hit_range_m = Some(8.0),
+    },
+    Variant {
+        name: "final-hits-within-12m",
+        what: "final-hits-within-6m at 12 m (the lidar's reach): every finished submap drawn again, every hit",
+        apply: |c| c.mapper.final_map_hit_range_m = Some(12.0),
     },
     Variant {
         name: "occupied-above-1.8",

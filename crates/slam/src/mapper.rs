@@ -342,6 +342,12 @@ pub struct MapperConfig {
     /// to more than this (0.5: as in a submap). A scan goes into two submaps, so above
     /// about 1.7 a cell needs the hits of more than one scan.
     pub map_occupied_above: f32,
+    /// The final map (see [`Mapper::redraw_finished_submaps`]) draws every finished submap
+    /// again with a keyframe's hits only out to this range, and free space out to it beyond
+    /// (`None`: every hit, and only the submaps the graph bent). A heading a fraction of a
+    /// degree off moves a wall 10 m away by 10 cm, where later scans' misses may never
+    /// clear it (BENCHMARKS.md, "Why a trajectory can improve while its map worsens").
+    pub final_map_hit_range_m: Option<f64>,
     /// A closure may correct the pose only as far as the map can have drifted between the
     /// two places it joins, and is searched only that far (`None`: any correction the
     /// search window allows).
@@ -632,6 +638,7 @@ impl Default for MapperConfig {
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
             map_occupied_above: 0.5,
+            final_map_hit_range_m: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
             // between its ends, and is searched within a degree of turn a metre. On the
@@ -901,11 +908,33 @@ impl Mapper {
     }
 
     fn insert(&mut self, submap: usize, node: usize, dense: &[Point2]) {
+        self.insert_within(submap, node, dense, None);
+    }
+
+    /// [`insert`](Self::insert) with hits only out to `hit_range_m` from the keyframe, if
+    /// set: a point farther off clears the cells out to that range and marks none.
+    fn insert_within(
+        &mut self,
+        submap: usize,
+        node: usize,
+        dense: &[Point2],
+        hit_range_m: Option<f64>,
+    ) {
         let origin = self.graph.nodes[self.submaps[submap].origin_node];
         let local = origin.inverse() * self.graph.nodes[node];
+        let within = |p: Point2| -> (Point2, bool) {
+            let range = p.x_m.hypot(p.y_m);
+            match hit_range_m {
+                Some(r) if range > r => (Point2::new(p.x_m * r / range, p.y_m * r / range), false),
+                _ => (p, true),
+            }
+        };
         let world: Vec<(Point2, bool)> = dense
             .iter()
-            .map(|p| (local.transform_point(*p), true))
+            .map(|p| {
+                let (p, hit) = within(*p);
+                (local.transform_point(p), hit)
+            })
             .collect();
         // Filled-in points are hits only: free space along the beams themselves.
         let rays: Option<Vec<Point2>> =
@@ -1531,7 +1560,7 @@ impl Mapper {
                 move_as_block(&mut self.graph.nodes[first..], &drawn);
             }
             if let Some(bend) = self.cfg.redraw_bent_submaps {
-                self.redraw_submaps_bent_beyond(bend);
+                self.redraw_submaps_bent_beyond(bend, None);
             }
             // Where a stall began moves with the pose, into the optimised frame.
             self.odometry
@@ -1966,12 +1995,22 @@ impl Mapper {
     /// Costs one keyframe's tracing per keyframe kept: for a final map, not for every
     /// optimisation.
     pub fn redraw_finished_submaps(&mut self) {
-        self.redraw_submaps_bent_beyond(FINAL_REDRAW_BEND);
+        match self.cfg.final_map_hit_range_m {
+            Some(range) => self.redraw_submaps_bent_beyond(
+                SubmapBend {
+                    translation_m: -1.0,
+                    rotation_rad: -1.0,
+                },
+                Some(range),
+            ),
+            None => self.redraw_submaps_bent_beyond(FINAL_REDRAW_BEND, None),
+        }
     }
 
     /// Draws again every finished submap whose keyframes the graph has moved, relative to
-    /// its first, farther than `bend` from where they were drawn.
-    fn redraw_submaps_bent_beyond(&mut self, bend: SubmapBend) {
+    /// its first, farther than `bend` from where they were drawn, with hits out to
+    /// `hit_range_m` (if set).
+    fn redraw_submaps_bent_beyond(&mut self, bend: SubmapBend, hit_range_m: Option<f64>) {
         let f = self.cfg.frontend;
         let mut redrawn = false;
         for s in 0..self.submaps.len() {
@@ -2000,7 +2039,7 @@ impl Mapper {
                     Some(d) => crate::frontend::densify(&self.keyframe_points[node], d),
                     None => self.keyframe_points[node].clone(),
                 };
-                self.insert(s, node, &dense);
+                self.insert_within(s, node, &dense, hit_range_m);
             }
         }
         if redrawn {
@@ -2959,6 +2998,59 @@ mod tests {
         mapper.redraw_finished_submaps();
         let (wall, beside) = ((-8.85, -8.65), (-9.1, -8.9));
         assert!(strongest(&mapper, wall.0, wall.1) > strongest(&mapper, beside.0, beside.1));
+    }
+
+    #[test]
+    fn the_final_map_draws_hits_only_within_its_range() {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.final_map_hit_range_m = Some(4.0);
+        let mut mapper = Mapper::new(cfg);
+        for k in 0..=80 {
+            let truth = Pose2::new(-6.0 + 0.1 * k as f64, -1.0, 0.0);
+            mapper.add_points(0.1 * k as f64, truth, sparse_hall_scan(truth));
+        }
+        let s = (mapper.submaps.iter())
+            .position(|s| s.finished)
+            .expect("a finished submap");
+        // The farthest occupied cell of the submap from its nearest keyframe, and how many
+        // cells it knows free.
+        let farthest_hit_and_free = |m: &Mapper| {
+            let grid = m.submaps[s].map.finest();
+            let geo = grid.geometry();
+            let keyframes = &m.submaps[s].drawn;
+            let mut farthest = 0.0f64;
+            let mut free = 0;
+            for (i, l) in grid.log_odds().iter().enumerate() {
+                match CellState::from_log_odds(*l) {
+                    CellState::Occupied => {
+                        let c = geo.cell_center(Cell {
+                            x: i % geo.width,
+                            y: i / geo.width,
+                        });
+                        let near = keyframes
+                            .iter()
+                            .map(|k| k.position().distance_m(c))
+                            .fold(f64::INFINITY, f64::min);
+                        farthest = farthest.max(near);
+                    }
+                    CellState::Free => free += 1,
+                    CellState::Unknown => {}
+                }
+            }
+            (farthest, free)
+        };
+        // As tracked, the west wall 3-4 m off and the south wall 9 m off are drawn.
+        let (before, free_before) = farthest_hit_and_free(&mapper);
+        assert!(before > 8.5, "{before}");
+        mapper.redraw_finished_submaps();
+        let (after, free_after) = farthest_hit_and_free(&mapper);
+        // Within 4 m and the half diagonal of a cell; the beams still clear out to 4 m.
+        assert!((3.0..=4.0 + 0.036).contains(&after), "{after}");
+        assert!(
+            free_after > free_before / 4,
+            "{free_after} of {free_before}"
+        );
     }
 
     #[test]
