@@ -218,7 +218,7 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "occupied-above-1.8",
-        what: "a map cell counts as occupied only with the hits of more than one scan (summed log-odds above 1.8, not 0.5)",
+        what: "a map cell counts as occupied only with summed log-odds above 1.8, not 0.5 (one hit of one keyframe in two submaps sums to 1.69)",
         apply: |c| c.mapper.map_occupied_above = 1.8,
     },
     Variant {
@@ -228,7 +228,7 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "occupied-above-3.0",
-        what: "a map cell counts as occupied only with summed log-odds above 3.0, not 0.5 (the hits of two scans or more)",
+        what: "a map cell counts as occupied only with summed log-odds above 3.0, not 0.5",
         apply: |c| c.mapper.map_occupied_above = 3.0,
     },
     Variant {

@@ -602,7 +602,8 @@ mod tests {
             origin: Point2::new(0.0, 0.0),
         };
         // A wall along row 5, open on both sides. The map knows only the rows below it,
-        // and only in columns 0..4; it marks the wall in columns 0..2.
+        // and only in columns 0..4; it marks the wall in columns 0..2, and at column 7,
+        // where it knows no open cell beside it.
         let mut lidar_obstacles = Grid::new(geo, false);
         for x in 0..10 {
             *lidar_obstacles.get_mut(x, 5).expect("inside") = true;
@@ -619,7 +620,7 @@ mod tests {
                 data[y * 10 + x] = OccupancyGrid::FREE;
             }
         }
-        for x in 0..2 {
+        for x in [0, 1, 7] {
             data[50 + x] = OccupancyGrid::OCCUPIED;
         }
         let g = grade_map(&map_msg(10, 10, data), &truth, &[Point2::new(0.1, 0.1)]);

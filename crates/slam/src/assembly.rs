@@ -35,8 +35,9 @@ const FIXED_BITS: u32 = 32;
 const FIXED_ONE: f64 = (1u64 << FIXED_BITS) as f64;
 /// Cells added on each side when the assembly grows.
 const GROW_MARGIN_CELLS: usize = 64;
-/// Summed log-odds above which a cell counts as occupied by default: as in one submap.
-const OCCUPIED_ABOVE: f32 = 0.5;
+/// Summed log-odds above which a cell counts as occupied by default: as in one submap
+/// ([`CellState::from_log_odds`]).
+pub const OCCUPIED_ABOVE: f32 = 0.5;
 
 /// Log-odds evidence summed over submaps on one growable grid.
 #[derive(Clone, Debug)]
@@ -202,13 +203,12 @@ impl Assembly {
     }
 
     /// The assembly counting a cell occupied only once its summed log-odds exceed
-    /// `occupied_above` (by default 0.5, as [`CellState::from_log_odds`]); cells between
-    /// 0.5 and that are unknown. Each scan goes into two submaps, so one scan's hit sums to
-    /// twice a submap's, and a single stray scan can draw a wall that nothing later clears
-    /// when it lies behind a real one.
+    /// `occupied_above` (by default [`OCCUPIED_ABOVE`]); cells between that and 0.5 are
+    /// unknown. A stray hit drawn where no later beam passes stays otherwise. Set before
+    /// the live map is first asked for: its states and versions are not redone.
     pub fn with_occupied_above(mut self, occupied_above: f32) -> Self {
+        debug_assert!(self.live.is_none(), "set before the live map exists");
         self.occupied_above = occupied_above;
-        self.live = None;
         self
     }
 
@@ -617,13 +617,15 @@ impl Assembly {
     }
 }
 
-/// The state of a cell whose submaps' log-odds sum to `l`: occupied above `occupied_above`
-/// (at least 0.5), free below -0.5, unknown between.
+/// The state of a cell whose submaps' log-odds sum to `l`: occupied above `occupied_above`,
+/// free below -0.5 (as [`CellState::from_log_odds`]), unknown between.
 fn summed_state(l: f32, occupied_above: f32) -> CellState {
     if l > occupied_above {
         CellState::Occupied
+    } else if l < -0.5 {
+        CellState::Free
     } else {
-        CellState::from_log_odds(l.min(0.5))
+        CellState::Unknown
     }
 }
 
@@ -781,6 +783,8 @@ mod tests {
         sub.insert(Point2::new(0.0123, 0.0271), &[(end, true)]);
         let state_at = |occupied_above: f32, submaps: usize| {
             let mut asm = Assembly::new(0.05).with_occupied_above(occupied_above);
+            // The live map from the start, so each submap placed goes through its update.
+            asm.live_states(&[]);
             for i in 0..submaps {
                 asm.place(i, &sub, Pose2::IDENTITY);
             }

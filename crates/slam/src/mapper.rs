@@ -53,6 +53,11 @@ const FINAL_REDRAW_BEND: SubmapBend = SubmapBend {
     translation_m: 0.02,
     rotation_rad: 0.4 * std::f64::consts::PI / 180.0,
 };
+/// Bent beyond this: every submap, bent or not.
+const EVERY_SUBMAP: SubmapBend = SubmapBend {
+    translation_m: -1.0,
+    rotation_rad: -1.0,
+};
 
 /// A loop closure's information (x, y, heading) where its match pins the pose firmly.
 pub const CLOSURE_INFORMATION: [f64; 3] = [400.0, 400.0, 2500.0];
@@ -338,9 +343,11 @@ pub struct MapperConfig {
     /// forward pulls and stop its backward ones (BENCHMARKS.md, "A refinement that runs
     /// ahead of the wheels").
     pub push_ahead_where_weak: Option<PushAheadWhereWeak>,
-    /// A cell of the map counts as occupied once the log-odds of the submaps holding it sum
-    /// to more than this (0.5: as in a submap). A scan goes into two submaps, so above
-    /// about 1.7 a cell needs the hits of more than one scan.
+    /// A cell of the live map ([`Mapper::map_states`], what a rover publishes) counts as
+    /// occupied once the log-odds of the submaps holding it sum to more than this (0.5: as
+    /// in a submap). A keyframe goes into each active submap (two, mostly), so a cell one
+    /// hit of one keyframe sums to about 1.7. [`Mapper::render_map`] keeps the log-odds and
+    /// leaves the threshold to its reader.
     pub map_occupied_above: f32,
     /// The final map (see [`Mapper::redraw_finished_submaps`]) draws every finished submap
     /// again with a keyframe's hits only out to this range, and free space out to it beyond
@@ -637,7 +644,7 @@ impl Default for MapperConfig {
             weak_direction_floor: None,
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
-            map_occupied_above: 0.5,
+            map_occupied_above: crate::assembly::OCCUPIED_ABOVE,
             final_map_hit_range_m: None,
             // Wheel odometry with the scans matched in between drifts by a few per cent of
             // the path: a closure may move a keyframe by 0.3 m plus a tenth of the path
@@ -936,12 +943,13 @@ impl Mapper {
                 (local.transform_point(p), hit)
             })
             .collect();
-        // Filled-in points are hits only: free space along the beams themselves.
+        // Filled-in points are hits only: free space along the beams themselves, cut to the
+        // same range.
         let rays: Option<Vec<Point2>> =
             (!self.cfg.frontend.trace_filled && self.cfg.frontend.densify.is_some()).then(|| {
                 self.keyframe_points[node]
                     .iter()
-                    .map(|p| local.transform_point(*p))
+                    .map(|p| local.transform_point(within(*p).0))
                     .collect()
             });
         let s = &mut self.submaps[submap];
@@ -1986,23 +1994,17 @@ impl Mapper {
         }
     }
 
-    /// Optimises the whole graph once more (at the end of a log).
     /// Draws every finished submap again from its keyframes at their poses now, relative to
     /// its first. A submap's cells show its keyframes where tracking had them when they
     /// were drawn; the graph moves them later, and the final map should show the final
     /// trajectory (as Karto and slam_toolbox draw their maps from every scan at its
-    /// optimised pose). Only submaps bent more than [`FINAL_REDRAW_BEND`] are drawn again.
-    /// Costs one keyframe's tracing per keyframe kept: for a final map, not for every
-    /// optimisation.
+    /// optimised pose). Only submaps bent more than [`FINAL_REDRAW_BEND`] are drawn again,
+    /// unless [`MapperConfig::final_map_hit_range_m`] asks for every one with hits cut to a
+    /// range (the active submaps stay as they are). Costs one keyframe's tracing per
+    /// keyframe kept: for a final map, not for every optimisation.
     pub fn redraw_finished_submaps(&mut self) {
         match self.cfg.final_map_hit_range_m {
-            Some(range) => self.redraw_submaps_bent_beyond(
-                SubmapBend {
-                    translation_m: -1.0,
-                    rotation_rad: -1.0,
-                },
-                Some(range),
-            ),
+            Some(range) => self.redraw_submaps_bent_beyond(EVERY_SUBMAP, Some(range)),
             None => self.redraw_submaps_bent_beyond(FINAL_REDRAW_BEND, None),
         }
     }
@@ -3013,44 +3015,40 @@ mod tests {
         let s = (mapper.submaps.iter())
             .position(|s| s.finished)
             .expect("a finished submap");
-        // The farthest occupied cell of the submap from its nearest keyframe, and how many
-        // cells it knows free.
+        // The farthest occupied and free cells of the submap from their nearest keyframe.
         let farthest_hit_and_free = |m: &Mapper| {
             let grid = m.submaps[s].map.finest();
             let geo = grid.geometry();
             let keyframes = &m.submaps[s].drawn;
-            let mut farthest = 0.0f64;
-            let mut free = 0;
+            let (mut hit, mut free) = (0.0f64, 0.0f64);
             for (i, l) in grid.log_odds().iter().enumerate() {
+                let c = geo.cell_center(Cell {
+                    x: i % geo.width,
+                    y: i / geo.width,
+                });
+                let near = || {
+                    keyframes
+                        .iter()
+                        .map(|k| k.position().distance_m(c))
+                        .fold(f64::INFINITY, f64::min)
+                };
                 match CellState::from_log_odds(*l) {
-                    CellState::Occupied => {
-                        let c = geo.cell_center(Cell {
-                            x: i % geo.width,
-                            y: i / geo.width,
-                        });
-                        let near = keyframes
-                            .iter()
-                            .map(|k| k.position().distance_m(c))
-                            .fold(f64::INFINITY, f64::min);
-                        farthest = farthest.max(near);
-                    }
-                    CellState::Free => free += 1,
+                    CellState::Occupied => hit = hit.max(near()),
+                    CellState::Free => free = free.max(near()),
                     CellState::Unknown => {}
                 }
             }
-            (farthest, free)
+            (hit, free)
         };
         // As tracked, the west wall 3-4 m off and the south wall 9 m off are drawn.
-        let (before, free_before) = farthest_hit_and_free(&mapper);
+        let (before, _) = farthest_hit_and_free(&mapper);
         assert!(before > 8.5, "{before}");
         mapper.redraw_finished_submaps();
-        let (after, free_after) = farthest_hit_and_free(&mapper);
-        // Within 4 m and the half diagonal of a cell; the beams still clear out to 4 m.
-        assert!((3.0..=4.0 + 0.036).contains(&after), "{after}");
-        assert!(
-            free_after > free_before / 4,
-            "{free_after} of {free_before}"
-        );
+        let (hit, free) = farthest_hit_and_free(&mapper);
+        // Hits within 4 m and the half diagonal of a cell; beams to farther points clear
+        // the cells out to 4 m (not dropped), and none beyond.
+        assert!((3.0..=4.0 + 0.036).contains(&hit), "{hit}");
+        assert!((3.9..=4.0 + 0.036).contains(&free), "{free}");
     }
 
     #[test]

@@ -58,13 +58,13 @@ pub struct NdtConfig {
     /// its backward ones, but on the rovers' replays this one cost more maps than it saved
     /// (BENCHMARKS.md, "A refinement that runs ahead of the wheels").
     pub max_push_ahead_m: Option<f64>,
-    /// A refinement past the two bounds along the travel is brought back to the bound it
+    /// ... or turning it more than this, radians.
+    pub max_turn_rad: f64,
+    /// A refinement past the two bounds along the travel above is brought back to the bound it
     /// passed, along the travel only, instead of being dropped: its turn and its move
     /// across the travel are kept. Dropped whole, a refinement that the map pulls back along
     /// a bare wall loses the heading the wall gives it too.
     pub clamp_along_travel: bool,
-    /// ... or turning it more than this, radians.
-    pub max_turn_rad: f64,
     /// A scan point on a straight run of the scan (five neighbouring points, see
     /// `surface_directions`) whose run turns from its line cell's line by more than this is
     /// not paired with that cell, radians (`None`: every point is). A line cell drawn where
@@ -435,9 +435,12 @@ impl NdtMap {
         let held_back = held_back_m(wheels[0], wheels[1], start, pose);
         let mut within_along = along.contains(&held_back);
         if self.cfg.clamp_along_travel && !within_along {
-            let bound = held_back.clamp(*along.start(), *along.end());
-            pose = along_travel_to(wheels, pose, held_back, bound);
-            within_along = true;
+            // Not `clamp`: bounds that cross or are NaN drop the refinement, as without it.
+            let bound = held_back.max(*along.start()).min(*along.end());
+            if along.contains(&bound) {
+                pose = along_travel_to(wheels, pose, held_back, bound);
+                within_along = true;
+            }
         }
         let moved = start.relative_to(&pose);
         (pose.position().distance_m(start.position()) <= self.cfg.max_shift_m
