@@ -484,6 +484,22 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.heading_map_share = Some(0.02),
     },
     Variant {
+        name: "gyro-turns-2pct-without-walls",
+        what: "gyro-turns-2pct only for scans in which no wall measures the heading",
+        apply: |c| {
+            c.mapper.heading_map_share = Some(0.02);
+            c.mapper.heading_map_share_without_walls = true;
+        },
+    },
+    Variant {
+        name: "gyro-turns-10pct-without-walls",
+        what: "gyro-turns-10pct only for scans in which no wall measures the heading",
+        apply: |c| {
+            c.mapper.heading_map_share = Some(0.1);
+            c.mapper.heading_map_share_without_walls = true;
+        },
+    },
+    Variant {
         name: "gyro-turns-10pct",
         what: "gyro-turns-2pct with 10 %",
         apply: |c| c.mapper.heading_map_share = Some(0.1),

@@ -319,6 +319,11 @@ pub struct MapperConfig {
     /// in whole missions the maps came out worse. Applied after `max_heading_step_rad` and
     /// `heading_anchor_rad`, whose held headings it then starts from.
     pub heading_map_share: Option<f64>,
+    /// `heading_map_share` only for scans in which no wall measures the heading (see
+    /// [`crate::walls`]): beside the walls the match's heading is firmer than the share
+    /// lets it be, far from them the gyro's is (BENCHMARKS.md, "The gyro carries the turns
+    /// where no wall holds the heading").
+    pub heading_map_share_without_walls: bool,
     /// Where the wheels report no travel over a scan (a rover turning in place), the match
     /// is held to the position the wheels predict (see [`StillHold`]; `None`: the usual
     /// pull, right for odometry that stalls, as the recorded logs' does).
@@ -640,6 +645,7 @@ impl Default for MapperConfig {
             max_heading_step_rad: None,
             heading_anchor_rad: None,
             heading_map_share: None,
+            heading_map_share_without_walls: false,
             still_hold: None,
             weak_direction_floor: None,
             refine_only_where_pinned: None,
@@ -1147,7 +1153,14 @@ impl Mapper {
                     }
                     // A refinement must not turn a heading the gyro holds.
                     let mut refine_rotation_weight = matcher.prior_rotation_weight;
-                    if let Some(share) = self.cfg.heading_map_share {
+                    let share = self.cfg.heading_map_share.filter(|_| {
+                        !self.cfg.heading_map_share_without_walls
+                            || self
+                                .walls
+                                .as_ref()
+                                .is_none_or(|w| w.measure(predicted.yaw_rad, &points).is_none())
+                    });
+                    if let Some(share) = share {
                         let yaw = prior.yaw_rad
                             + share * normalize_angle_rad(m.pose.yaw_rad - prior.yaw_rad);
                         let held = MatcherConfig {
@@ -2526,7 +2539,21 @@ mod tests {
         anchor_rad: Option<f64>,
         heading_map_share: Option<f64>,
     ) -> f64 {
+        heading_error_with_matches_straying_beside_walls(anchor_rad, heading_map_share, None)
+    }
+
+    /// [`heading_error_with_matches_straying`] with the walls measuring the keyframes'
+    /// headings, and the share applied only where they measure none, if `walls` says so.
+    fn heading_error_with_matches_straying_beside_walls(
+        anchor_rad: Option<f64>,
+        heading_map_share: Option<f64>,
+        walls: Option<bool>,
+    ) -> f64 {
         let mut cfg = MapperConfig::default();
+        if let Some(share_without_walls) = walls {
+            cfg.wall_headings = Some(WallHeadingConfig::default());
+            cfg.heading_map_share_without_walls = share_without_walls;
+        }
         cfg.frontend.max_range_m = 12.0;
         cfg.frontend.levels = 1;
         cfg.keyframe_translation_m = 0.3;
@@ -2572,6 +2599,20 @@ mod tests {
             fast > 2.0 && fast < unchecked / 2.0,
             "{fast:.2} / {unchecked:.2} deg"
         );
+    }
+
+    #[test]
+    fn the_gyro_carries_no_turn_where_walls_measure_the_heading_if_so_asked() {
+        // 3 m from the hall's south and 3-5 m from its west wall every scan has walls in
+        // view: with the share kept for scans without walls, the heading is the one the
+        // matches give without any share, to the last bit.
+        let matches = heading_error_with_matches_straying_beside_walls(None, None, Some(false));
+        let everywhere =
+            heading_error_with_matches_straying_beside_walls(None, Some(0.02), Some(false));
+        let without_walls =
+            heading_error_with_matches_straying_beside_walls(None, Some(0.02), Some(true));
+        assert!(everywhere != matches, "{everywhere} {matches}");
+        assert_eq!(without_walls, matches);
     }
 
     #[test]
