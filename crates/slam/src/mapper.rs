@@ -2997,10 +2997,9 @@ mod tests {
         assert_eq!(mapper.relocalise_searches, 1 + 3, "turning");
     }
 
-    #[test]
-    fn finished_submaps_are_redrawn_where_the_graph_puts_their_keyframes() {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
+    /// A mapper of `cfg` driven 8 m east through the sparse hall on exact odometry, and its
+    /// first finished submap.
+    fn driven_east_through_the_sparse_hall(cfg: MapperConfig) -> (Mapper, usize) {
         let mut mapper = Mapper::new(cfg);
         for k in 0..=80 {
             let truth = Pose2::new(-6.0 + 0.1 * k as f64, -1.0, 0.0);
@@ -3009,6 +3008,14 @@ mod tests {
         let s = (mapper.submaps.iter())
             .position(|s| s.finished)
             .expect("a finished submap");
+        (mapper, s)
+    }
+
+    #[test]
+    fn finished_submaps_are_redrawn_where_the_graph_puts_their_keyframes() {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        let (mut mapper, s) = driven_east_through_the_sparse_hall(cfg);
         let (first, n) = (mapper.submaps[s].origin_node, mapper.submaps[s].keyframes);
         assert_eq!(n, mapper.cfg.submap_keyframes);
         // The strongest evidence for an obstacle between two x (world frame) on the rover's
@@ -3048,14 +3055,7 @@ mod tests {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
         cfg.final_map_hit_range_m = Some(4.0);
-        let mut mapper = Mapper::new(cfg);
-        for k in 0..=80 {
-            let truth = Pose2::new(-6.0 + 0.1 * k as f64, -1.0, 0.0);
-            mapper.add_points(0.1 * k as f64, truth, sparse_hall_scan(truth));
-        }
-        let s = (mapper.submaps.iter())
-            .position(|s| s.finished)
-            .expect("a finished submap");
+        let (mut mapper, s) = driven_east_through_the_sparse_hall(cfg);
         // The farthest occupied and free cells of the submap from their nearest keyframe.
         let farthest_hit_and_free = |m: &Mapper| {
             let grid = m.submaps[s].map.finest();
