@@ -537,23 +537,27 @@ const STRAIGHT_WITHIN_M: f64 = 0.01;
 /// How far `refined` moves `matched` back against the travel the wheels predict, from `from`
 /// to `predicted`, metres (negative: forward along it; 0 when the wheels barely moved).
 pub(crate) fn held_back_m(from: Point2, predicted: Point2, matched: Pose2, refined: Pose2) -> f64 {
-    let (tx, ty) = (predicted.x_m - from.x_m, predicted.y_m - from.y_m);
-    let travel = tx.hypot(ty);
-    if travel <= 1e-3 {
+    let Some((tx, ty, travel)) = wheels_travel(from, predicted) else {
         return 0.0;
-    }
+    };
     -((refined.x_m - matched.x_m) * tx + (refined.y_m - matched.y_m) * ty) / travel
+}
+
+/// The wheels' travel from `from` to `to` and its length, metres; `None` when they barely
+/// moved (under a millimetre), with no direction to measure along.
+fn wheels_travel(from: Point2, to: Point2) -> Option<(f64, f64, f64)> {
+    let (tx, ty) = (to.x_m - from.x_m, to.y_m - from.y_m);
+    let length = tx.hypot(ty);
+    (length > 1e-3).then_some((tx, ty, length))
 }
 
 /// `refined`, held back `held_back_m` against the wheels' travel from `wheels[0]` to
 /// `wheels[1]` (as [`held_back_m`] measures it), moved along that travel so it is held back
 /// `to_m` instead; its heading and its place across the travel stay.
 fn along_travel_to(wheels: [Point2; 2], refined: Pose2, held_back_m: f64, to_m: f64) -> Pose2 {
-    let (tx, ty) = (wheels[1].x_m - wheels[0].x_m, wheels[1].y_m - wheels[0].y_m);
-    let travel = tx.hypot(ty);
-    if travel <= 1e-3 {
+    let Some((tx, ty, travel)) = wheels_travel(wheels[0], wheels[1]) else {
         return refined;
-    }
+    };
     let forward = held_back_m - to_m;
     Pose2::new(
         refined.x_m + forward * tx / travel,
