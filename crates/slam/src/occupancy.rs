@@ -433,88 +433,94 @@ pub(crate) fn trace_beams(
             }
         }
         MissRule::OncePerScan => {
-            // Cells already updated by this scan, one bit each over the scan's box of cells.
+            // The scan's box of cells as one byte each: the beams only mark the cells they
+            // cross (the box fits in the cache where the grid does not), and the misses are
+            // then applied row by row, in the grid's own order. Each cell's update depends
+            // on that cell alone, so the order changes nothing but the cost.
             let (min, max) = beams_box(sensor, endpoints);
             let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
-            let bw = tx - bx + 1;
-            let mut done = vec![0u64; ((bw * (ty - by + 1)) as usize).div_ceil(64)];
-            // A cell's bit in `done` and its index in the grid.
-            let indices = |(x, y): (i64, i64)| ((y - by) * bw + (x - bx), y * w + x);
-            let mut first_time = |k: i64| {
-                let (word, bit) = (k as usize / 64, 1u64 << (k % 64));
-                let fresh = done[word] & bit == 0;
-                done[word] |= bit;
-                fresh
-            };
+            let (box_w, rows) = ((tx - bx + 1) as usize, (ty - by + 1) as usize);
+            let mark_of = |(x, y): (i64, i64)| (y - by) * box_w as i64 + (x - bx);
             let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
             for (&end, (_, hit)) in ends.iter().zip(endpoints) {
                 if *hit {
-                    let (k, i) = indices(end);
-                    first_time(k);
-                    update(i as usize, HIT);
+                    update((end.1 * w + end.0) as usize, HIT);
                 }
             }
-            let mut miss = |k: i64, i: i64| {
-                if first_time(k) {
-                    update(i as usize, MISS);
+            SCAN_MARKS.with_borrow_mut(|marks| {
+                if marks.len() < box_w * rows {
+                    marks.resize(box_w * rows, 0);
                 }
-            };
-            let from = indices(start);
-            let rows = (bw, w);
-            match rays {
-                None => {
-                    for &end in &ends {
-                        walk_indexed(start, end, from, rows, &mut miss);
-                        let (k, i) = indices(end);
-                        miss(k, i);
+                let marks = &mut marks[..box_w * rows];
+                let from = mark_of(start);
+                let traced = match rays {
+                    None => ends.clone(),
+                    Some(rays) => rays.iter().map(|p| to_cell(*p)).collect(),
+                };
+                for end in traced {
+                    walk_marking(start, end, from, box_w as i64, marks);
+                }
+                for &end in &ends {
+                    marks[mark_of(end) as usize] = CROSSED;
+                }
+                for (&end, (_, hit)) in ends.iter().zip(endpoints) {
+                    if *hit {
+                        marks[mark_of(end) as usize] = ENDS_A_HIT;
                     }
                 }
-                Some(rays) => {
-                    for &end in &ends {
-                        let (k, i) = indices(end);
-                        miss(k, i);
-                    }
-                    for p in rays {
-                        walk_indexed(start, to_cell(*p), from, rows, &mut miss);
+                // The sweep leaves every mark at zero again for the next scan. Most of the
+                // box is outside the scan's fan: eight marks at a time are passed over.
+                for (row, marks) in marks.chunks_exact_mut(box_w).enumerate() {
+                    let first = (by + row as i64) * w + bx;
+                    for (chunk, eight) in marks.chunks_mut(8).enumerate() {
+                        if let Ok(word) = <[u8; 8]>::try_from(&*eight)
+                            && u64::from_ne_bytes(word) == 0
+                        {
+                            continue;
+                        }
+                        for (x, mark) in eight.iter_mut().enumerate() {
+                            if *mark == CROSSED {
+                                update((first + (chunk * 8 + x) as i64) as usize, MISS);
+                            }
+                            *mark = 0;
+                        }
                     }
                 }
-            }
+            });
         }
     }
 }
 
-/// [`walk`], handing `visit` each cell's index in two row-major layouts instead of its
-/// coordinates: rows `rows.0` and `rows.1` long, with cell `from` at `at.0` and `at.1`.
-/// The indices move by strides, with no multiplication per cell: a keyframe's beams cross
-/// a hundred thousand cells.
-fn walk_indexed(
-    from: (i64, i64),
-    (ex, ey): (i64, i64),
-    at: (i64, i64),
-    rows: (i64, i64),
-    mut visit: impl FnMut(i64, i64),
-) {
+/// A cell of the scan being traced that a beam crosses or a clipped beam ends in.
+const CROSSED: u8 = 1;
+/// A cell of the scan being traced that a hit ends in (whatever beams cross it).
+const ENDS_A_HIT: u8 = 2;
+
+std::thread_local! {
+    /// Scratch marks for [`trace_beams`]'s once-a-scan rule, all zero between scans: kept
+    /// from scan to scan because a fresh box of a quarter of a megabyte is a fresh set of
+    /// zeroed pages each time.
+    static SCAN_MARKS: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// [`walk`], marking each cell [`CROSSED`] in `marks` instead of calling a visitor, where a
+/// cell's mark lies at `at` plus its column's offset from `from`'s plus `row` per row. The
+/// steps are counted and taken by arithmetic rather than branches: along a diagonal beam
+/// which axis a step moves on is a coin toss to a branch predictor, and a keyframe's beams
+/// cross a hundred thousand cells.
+fn walk_marking(from: (i64, i64), (ex, ey): (i64, i64), at: i64, row: i64, marks: &mut [u8]) {
     let (sx, sy) = from;
     let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
-    let (stx, sty) = ((ex - sx).signum(), (ey - sy).signum());
-    let (row_a, row_b) = (sty * rows.0, sty * rows.1);
-    let (mut x, mut y, mut err) = (sx, sy, dx + dy);
-    let (mut a, mut b) = at;
-    while (x, y) != (ex, ey) {
-        visit(a, b);
+    let (stx, row_step) = ((ex - sx).signum(), (ey - sy).signum() * row);
+    let mut err = dx + dy;
+    let mut k = at;
+    // Every step moves along the longer axis, so the walk takes that many steps.
+    for _ in 0..dx.max(-dy) {
+        marks[k as usize] = CROSSED;
         let e2 = 2 * err;
-        if e2 >= dy {
-            err += dy;
-            x += stx;
-            a += stx;
-            b += stx;
-        }
-        if e2 <= dx {
-            err += dx;
-            y += sty;
-            a += row_a;
-            b += row_b;
-        }
+        let (step_x, step_y) = (i64::from(e2 >= dy), i64::from(e2 <= dx));
+        err += step_x * dy + step_y * dx;
+        k += step_x * stx + step_y * row_step;
     }
 }
 
@@ -711,5 +717,70 @@ mod tests {
         }
         assert!(floor_f64(f64::NAN).is_nan());
         assert_eq!(floor_to_i64(f64::NAN), f64::NAN.floor() as i64);
+    }
+
+    #[test]
+    fn the_marking_walk_crosses_the_cells_of_the_cell_walk() {
+        // Every direction and length out to 12 cells, from a cell inside a 64-bit row.
+        let (row, start) = (64i64, (30i64, 30i64));
+        for ex in 18..=42 {
+            for ey in 18..=42 {
+                let mut expected = vec![0u8; 64 * 64];
+                walk(start, (ex, ey), |x, y| {
+                    expected[(y * row + x) as usize] = CROSSED
+                });
+                let mut marks = vec![0u8; 64 * 64];
+                walk_marking(start, (ex, ey), start.1 * row + start.0, row, &mut marks);
+                assert_eq!(marks, expected, "to ({ex}, {ey})");
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// The once-a-scan rule as its definition: every endpoint a hit where marked one, once
+        /// per endpoint; every other cell a beam crosses or ends in a single miss.
+        #[test]
+        fn a_scan_updates_each_cell_as_the_rule_defines(
+            sensor in (-3.0f64..3.0, -3.0f64..3.0),
+            ends in proptest::collection::vec((-8.0f64..8.0, -8.0f64..8.0, proptest::bool::ANY), 1..60),
+            with_rays in proptest::bool::ANY,
+        ) {
+            let lattice = Lattice { origin: Point2::new(-10.0, -10.0), resolution_m: 0.05, width: 400 };
+            let sensor = Point2::new(sensor.0, sensor.1);
+            let endpoints: Vec<(Point2, bool)> =
+                ends.iter().map(|&(x, y, hit)| (Point2::new(x, y), hit)).collect();
+            // Rays to every other endpoint, as filled-in scans trace them.
+            let rays: Vec<Point2> = endpoints.iter().step_by(2).map(|(p, _)| *p).collect();
+            let rays = with_rays.then_some(rays.as_slice());
+            let mut got = std::collections::BTreeMap::new();
+            trace_beams(&lattice, sensor, &endpoints, rays, MissRule::OncePerScan, |i, d| {
+                *got.entry(i).or_insert(0.0f32) += d;
+            });
+            let cell = |p: Point2| {
+                (((p.x_m + 10.0) / 0.05).floor() as i64, ((p.y_m + 10.0) / 0.05).floor() as i64)
+            };
+            let index = |(x, y): (i64, i64)| (y * 400 + x) as usize;
+            let mut expected = std::collections::BTreeMap::new();
+            for (p, hit) in &endpoints {
+                if *hit {
+                    *expected.entry(index(cell(*p))).or_insert(0.0f32) += HIT;
+                }
+            }
+            let mut crossed = std::collections::BTreeSet::new();
+            let traced: Vec<Point2> = match rays {
+                Some(r) => r.to_vec(),
+                None => endpoints.iter().map(|(p, _)| *p).collect(),
+            };
+            for p in traced {
+                walk(cell(sensor), cell(p), |x, y| { crossed.insert(index((x, y))); });
+            }
+            for (p, _) in &endpoints {
+                crossed.insert(index(cell(*p)));
+            }
+            for i in crossed {
+                expected.entry(i).or_insert(MISS);
+            }
+            proptest::prop_assert_eq!(got, expected);
+        }
     }
 }
