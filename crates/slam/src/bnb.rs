@@ -286,6 +286,18 @@ pub fn search(
             )
         })
         .collect();
+    // Each level's cells of each heading's scan as offsets into its rows, relative to the
+    // prior's cell: scoring a candidate inside the map is then a sum of loads, with no
+    // multiplication per point (closure searches score millions of points).
+    let offsets: Vec<Vec<Vec<i64>>> = (0..=map.depth())
+        .map(|d| {
+            let w = map.level(d).width;
+            scans
+                .iter()
+                .map(|cells| cells.iter().map(|(x, y)| y * w + x).collect())
+                .collect()
+        })
+        .collect();
     let score_at = |d: usize, c: &Candidate| -> u32 {
         let (x0, y0, x1, y1) = boxes[c.angle];
         let level = map.level(d);
@@ -297,9 +309,9 @@ pub fn search(
         if inside {
             let cells = level.cells;
             let shift = (c.dy + pad) * w + c.dx + pad;
-            scans[c.angle]
+            offsets[d][c.angle]
                 .iter()
-                .map(|(x, y)| cells[(y * w + x + shift) as usize] as u32)
+                .map(|k| cells[(k + shift) as usize] as u32)
                 .sum()
         } else {
             scans[c.angle]
@@ -403,7 +415,9 @@ fn descend(
             continue;
         }
         let half = 1i64 << (depth - 1);
-        let mut children = Vec::with_capacity(4);
+        // At most four children, kept on the stack: a search expands thousands of nodes.
+        let mut children = [*c; 4];
+        let mut n = 0;
         for (ox, oy) in [(0, 0), (half, 0), (0, half), (half, half)] {
             let (dx, dy) = (c.dx + ox, c.dy + oy);
             if dx > n_cells || dy > n_cells {
@@ -416,11 +430,13 @@ fn descend(
                 score: 0,
             };
             child.score = score_at(depth - 1, &child);
-            children.push(child);
+            children[n] = child;
+            n += 1;
         }
+        let children = &mut children[..n];
         children.sort_by_key(|c| std::cmp::Reverse(c.score));
         descend(
-            &children,
+            children,
             depth - 1,
             threshold,
             n_cells,
