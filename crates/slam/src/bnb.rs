@@ -173,6 +173,45 @@ impl Level<'_> {
     }
 }
 
+/// One heading's scan on one level, its points split by where they can fall over the whole
+/// search window (offsets up to `n_cells` either way): a point outside the level for every
+/// offset scores [`UNKNOWN`] whatever the offset, one inside it for every offset is a load
+/// with no bounds test, and only the few near its edge are tested. A scan reaches 12 m and
+/// a submap often less, so most candidates straddle the edge, and this keeps them off the
+/// per-point test. The sums are of integers: the same scores as testing every point.
+struct SplitScan {
+    /// The points outside for every offset, times [`UNKNOWN`].
+    outside: u32,
+    /// The points inside for every offset, as offsets into the level's rows from the
+    /// prior's cell.
+    inside: Vec<i64>,
+    /// The rest, in cells from the prior's.
+    near_edge: Vec<(i64, i64)>,
+}
+
+impl SplitScan {
+    fn new(level: &Level<'_>, cells: &[(i64, i64)], n_cells: i64) -> Self {
+        let (pad, w, h) = (level.pad, level.width, level.height);
+        let always = |v: i64, n: i64| v - n_cells + pad >= 0 && v + n_cells + pad < n;
+        let never = |v: i64, n: i64| v + n_cells + pad < 0 || v - n_cells + pad >= n;
+        let mut split = SplitScan {
+            outside: 0,
+            inside: Vec::with_capacity(cells.len()),
+            near_edge: Vec::new(),
+        };
+        for &(x, y) in cells {
+            if never(x, w) || never(y, h) {
+                split.outside += UNKNOWN as u32;
+            } else if always(x, w) && always(y, h) {
+                split.inside.push(y * w + x);
+            } else {
+                split.near_edge.push((x, y));
+            }
+        }
+        split
+    }
+}
+
 /// The search window around a prior pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SearchWindow {
@@ -275,50 +314,31 @@ pub fn search(
     let scans: Vec<Vec<(i64, i64)>> = (-n_angles..=n_angles)
         .map(|k| grid.cells(map, points, prior, k))
         .collect();
-    // Each heading's bounding box of cells, so that a candidate lying wholly inside the map
-    // is scored without a bounds test per point.
-    let boxes: Vec<(i64, i64, i64, i64)> = scans
-        .iter()
-        .map(|cells| {
-            cells.iter().fold(
-                (i64::MAX, i64::MAX, i64::MIN, i64::MIN),
-                |(x0, y0, x1, y1), (x, y)| (x0.min(*x), y0.min(*y), x1.max(*x), y1.max(*y)),
-            )
-        })
-        .collect();
-    // Each level's cells of each heading's scan as offsets into its rows, relative to the
-    // prior's cell: scoring a candidate inside the map is then a sum of loads, with no
-    // multiplication per point (closure searches score millions of points).
-    let offsets: Vec<Vec<Vec<i64>>> = (0..=map.depth())
+    // Each level's view of each heading's scan, split by where its points can fall.
+    let split: Vec<Vec<SplitScan>> = (0..=map.depth())
         .map(|d| {
-            let w = map.level(d).width;
+            let level = map.level(d);
             scans
                 .iter()
-                .map(|cells| cells.iter().map(|(x, y)| y * w + x).collect())
+                .map(|cells| SplitScan::new(&level, cells, n_cells))
                 .collect()
         })
         .collect();
     let score_at = |d: usize, c: &Candidate| -> u32 {
-        let (x0, y0, x1, y1) = boxes[c.angle];
         let level = map.level(d);
-        let (pad, w) = (level.pad, level.width);
-        let inside = x0 + c.dx + pad >= 0
-            && y0 + c.dy + pad >= 0
-            && x1 + c.dx + pad < w
-            && y1 + c.dy + pad < level.height;
-        if inside {
-            let cells = level.cells;
-            let shift = (c.dy + pad) * w + c.dx + pad;
-            offsets[d][c.angle]
-                .iter()
-                .map(|k| cells[(k + shift) as usize] as u32)
-                .sum()
-        } else {
-            scans[c.angle]
-                .iter()
-                .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
-                .sum()
-        }
+        let split = &split[d][c.angle];
+        let shift = (c.dy + level.pad) * level.width + c.dx + level.pad;
+        let inside: u32 = split
+            .inside
+            .iter()
+            .map(|k| level.cells[(k + shift) as usize] as u32)
+            .sum();
+        let near_edge: u32 = split
+            .near_edge
+            .iter()
+            .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
+            .sum();
+        split.outside + inside + near_edge
     };
     let threshold = (min_score * 255.0 * points.len() as f64).ceil() as u32;
     let top = map.depth();
@@ -614,6 +634,46 @@ mod tests {
                         );
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_split_scan_scores_as_every_point_looked_up_on_every_level() {
+        let walls = world();
+        let grid = map_of(&walls, &[Pose2::new(0.0, 0.0, 0.0)]);
+        let map = PrecomputedMap::with_margin(&grid, 4, 3);
+        // Points inside, near the edges and far outside the map (its walls span 9 x 7 m).
+        let cells: Vec<(i64, i64)> = (-300..300)
+            .step_by(7)
+            .flat_map(|x| (-250..250).step_by(11).map(move |y| (x, y)))
+            .collect();
+        let n_cells = 20;
+        for d in 0..=map.depth() {
+            let level = map.level(d);
+            let split = SplitScan::new(&level, &cells, n_cells);
+            assert!(split.outside > 0 && !split.inside.is_empty() && !split.near_edge.is_empty());
+            for (dx, dy) in [(-20, -20), (-20, 20), (0, 0), (7, -13), (20, 20), (20, -5)] {
+                let looked_up: u32 = cells
+                    .iter()
+                    .map(|(x, y)| level.at(x + dx, y + dy) as u32)
+                    .sum();
+                let shift = (dy + level.pad) * level.width + dx + level.pad;
+                let inside: u32 = split
+                    .inside
+                    .iter()
+                    .map(|k| level.cells[(k + shift) as usize] as u32)
+                    .sum();
+                let edge: u32 = split
+                    .near_edge
+                    .iter()
+                    .map(|(x, y)| level.at(x + dx, y + dy) as u32)
+                    .sum();
+                assert_eq!(
+                    split.outside + inside + edge,
+                    looked_up,
+                    "level {d} at ({dx}, {dy})"
+                );
             }
         }
     }
