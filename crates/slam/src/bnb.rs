@@ -15,6 +15,7 @@
 
 use crate::occupancy::{OccupancyGrid, floor_to_i64};
 use realms_core::{Point2, Pose2};
+use std::cell::OnceCell;
 
 /// What an unobserved cell (or one outside the map) scores: its occupancy probability, 0.5.
 /// (Scoring it low, as Cartographer does, prunes better but made closures on the real logs
@@ -314,31 +315,52 @@ pub fn search(
     let scans: Vec<Vec<(i64, i64)>> = (-n_angles..=n_angles)
         .map(|k| grid.cells(map, points, prior, k))
         .collect();
-    // Each level's view of each heading's scan, split by where its points can fall.
-    let split: Vec<Vec<SplitScan>> = (0..=map.depth())
-        .map(|d| {
-            let level = map.level(d);
-            scans
-                .iter()
-                .map(|cells| SplitScan::new(&level, cells, n_cells))
-                .collect()
+    // Each heading's bounding box of cells, so that a candidate lying wholly inside the map
+    // is scored without a bounds test per point.
+    let boxes: Vec<(i64, i64, i64, i64)> = scans
+        .iter()
+        .map(|cells| {
+            cells.iter().fold(
+                (i64::MAX, i64::MAX, i64::MIN, i64::MIN),
+                |(x0, y0, x1, y1), (x, y)| (x0.min(*x), y0.min(*y), x1.max(*x), y1.max(*y)),
+            )
         })
         .collect();
+    // Per level and heading, made when first needed (the bound prunes most headings before
+    // the finer levels): the scan's cells as offsets into the level's rows from the prior's
+    // cell, for candidates wholly inside, and split by where they can fall over the whole
+    // window, for candidates that straddle the level's edge.
+    let offsets: Vec<Vec<OnceCell<Vec<i64>>>> = lazy_table(map.depth(), scans.len());
+    let split: Vec<Vec<OnceCell<SplitScan>>> = lazy_table(map.depth(), scans.len());
     let score_at = |d: usize, c: &Candidate| -> u32 {
+        let (x0, y0, x1, y1) = boxes[c.angle];
         let level = map.level(d);
-        let split = &split[d][c.angle];
-        let shift = (c.dy + level.pad) * level.width + c.dx + level.pad;
-        let inside: u32 = split
-            .inside
-            .iter()
-            .map(|k| level.cells[(k + shift) as usize] as u32)
-            .sum();
-        let near_edge: u32 = split
-            .near_edge
-            .iter()
-            .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
-            .sum();
-        split.outside + inside + near_edge
+        let (pad, w) = (level.pad, level.width);
+        let inside = x0 + c.dx + pad >= 0
+            && y0 + c.dy + pad >= 0
+            && x1 + c.dx + pad < w
+            && y1 + c.dy + pad < level.height;
+        let shift = (c.dy + pad) * w + c.dx + pad;
+        let sum_at = |offsets: &[i64]| -> u32 {
+            offsets
+                .iter()
+                .map(|k| level.cells[(k + shift) as usize] as u32)
+                .sum()
+        };
+        if inside {
+            let offsets = offsets[d][c.angle]
+                .get_or_init(|| scans[c.angle].iter().map(|(x, y)| y * w + x).collect());
+            sum_at(offsets)
+        } else {
+            let split =
+                split[d][c.angle].get_or_init(|| SplitScan::new(&level, &scans[c.angle], n_cells));
+            let near_edge: u32 = split
+                .near_edge
+                .iter()
+                .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
+                .sum();
+            split.outside + sum_at(&split.inside) + near_edge
+        }
     };
     let threshold = (min_score * 255.0 * points.len() as f64).ceil() as u32;
     let top = map.depth();
@@ -409,6 +431,13 @@ pub fn search(
         score: winner.score as f64 / n,
         rival_score: rival.map_or(0.0, |c| c.score as f64 / n),
     })
+}
+
+/// Empty cells for each of `depth + 1` levels and `headings` headings, filled when needed.
+fn lazy_table<T>(depth: usize, headings: usize) -> Vec<Vec<OnceCell<T>>> {
+    (0..=depth)
+        .map(|_| (0..headings).map(|_| OnceCell::new()).collect())
+        .collect()
 }
 
 /// Branch and bound below `candidates` (sorted best first, scored at `depth`): keeps in
