@@ -96,10 +96,7 @@ impl OccupancyGrid {
             return None;
         }
         let log_odds: Vec<f32> = log_odds.iter().map(|l| l.clamp(-CLAMP, CLAMP)).collect();
-        let prob = log_odds
-            .iter()
-            .map(|l| 1.0 - 1.0 / (1.0 + l.exp()))
-            .collect();
+        let prob = log_odds.iter().map(|l| probability(*l)).collect();
         let max = Point2::new(
             geometry.origin.x_m + geometry.width_m(),
             geometry.origin.y_m + geometry.height_m(),
@@ -184,7 +181,7 @@ impl OccupancyGrid {
         // and its probability need not be worked out again.
         if l != old {
             self.log_odds[i] = l;
-            self.prob[i] = 1.0 - 1.0 / (1.0 + l.exp());
+            self.prob[i] = probability(l);
         }
     }
 
@@ -214,13 +211,22 @@ impl OccupancyGrid {
             resolution_m: self.resolution_m,
             width: self.width,
         };
+        let mut probabilities = ProbabilityCache::new();
+        let (log_odds, prob) = (&mut self.log_odds, &mut self.prob);
         trace_beams(
             &lattice,
             sensor,
             endpoints,
             rays,
             self.miss_rule,
-            |i, delta| self.update(i, delta),
+            |i, delta| {
+                let old = log_odds[i];
+                let l = updated_log_odds(old, delta);
+                if l != old {
+                    log_odds[i] = l;
+                    prob[i] = probabilities.of(l);
+                }
+            },
         );
     }
 
@@ -368,6 +374,39 @@ pub(crate) fn floor_f64(v: f64) -> f64 {
 pub(crate) fn floor_to_i64(v: f64) -> i64 {
     let t = v as i64;
     t.saturating_sub(i64::from(t as f64 > v))
+}
+
+/// The occupancy probability of log-odds `l`.
+fn probability(l: f32) -> f32 {
+    1.0 - 1.0 / (1.0 + l.exp())
+}
+
+/// [`probability`] remembered for the last few log-odds seen, for one scan's cells. Most
+/// cells a scan clears hold one of a dozen values (0 and the sums of misses down to the
+/// clamp), so nearly every cell's `exp` is one already worked out. The values are those
+/// [`probability`] gives: the cache only keeps them.
+struct ProbabilityCache {
+    /// By a hash of the log-odds' bits: the bits and their probability.
+    slots: [(u32, f32); 64],
+}
+
+impl ProbabilityCache {
+    fn new() -> Self {
+        // Every slot starts true of the log-odds its bits are (a NaN's).
+        let bits = u32::MAX;
+        ProbabilityCache {
+            slots: [(bits, probability(f32::from_bits(bits))); 64],
+        }
+    }
+
+    fn of(&mut self, l: f32) -> f32 {
+        let bits = l.to_bits();
+        let slot = &mut self.slots[((bits ^ (bits >> 7) ^ (bits >> 17)) & 63) as usize];
+        if slot.0 != bits {
+            *slot = (bits, probability(l));
+        }
+        slot.1
+    }
 }
 
 /// A cell's log-odds `l` after evidence `delta`, clamped.
@@ -801,6 +840,21 @@ mod tests {
                 expected.entry(i).or_insert(MISS);
             }
             proptest::prop_assert_eq!(got, expected);
+        }
+    }
+
+    #[test]
+    fn the_probability_cache_gives_what_probability_gives() {
+        let mut cache = ProbabilityCache::new();
+        // Values colliding in the cache's slots, repeated, and the NaN its slots start at.
+        let mut values: Vec<f32> = (0..400)
+            .map(|k| (k as f32 * 0.0173 - 3.5).sin() * 4.0)
+            .collect();
+        values.extend([0.0, -0.0, -4.0, 4.0, f32::from_bits(u32::MAX), f32::NAN]);
+        for _ in 0..3 {
+            for l in &values {
+                assert_eq!(cache.of(*l).to_bits(), probability(*l).to_bits(), "{l}");
+            }
         }
     }
 }
