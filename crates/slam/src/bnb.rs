@@ -172,6 +172,16 @@ impl Level<'_> {
             UNKNOWN
         }
     }
+
+    /// The sum of the cells at `offsets` (into the rows, from map cell (0, 0)) moved by
+    /// (`dx`, `dy`) cells, every one of which must lie inside.
+    fn sum_at(&self, offsets: &[i64], dx: i64, dy: i64) -> u32 {
+        let shift = (dy + self.pad) * self.width + dx + self.pad;
+        offsets
+            .iter()
+            .map(|k| self.cells[(k + shift) as usize] as u32)
+            .sum()
+    }
 }
 
 /// One heading's scan on one level, its points split by where they can fall over the whole
@@ -210,6 +220,17 @@ impl SplitScan {
             }
         }
         split
+    }
+
+    /// The scan's score on `level` moved by (`dx`, `dy`) cells, within the window it was
+    /// split for.
+    fn score(&self, level: &Level<'_>, dx: i64, dy: i64) -> u32 {
+        let near_edge: u32 = self
+            .near_edge
+            .iter()
+            .map(|(x, y)| level.at(x + dx, y + dy) as u32)
+            .sum();
+        self.outside + level.sum_at(&self.inside, dx, dy) + near_edge
     }
 }
 
@@ -340,26 +361,14 @@ pub fn search(
             && y0 + c.dy + pad >= 0
             && x1 + c.dx + pad < w
             && y1 + c.dy + pad < level.height;
-        let shift = (c.dy + pad) * w + c.dx + pad;
-        let sum_at = |offsets: &[i64]| -> u32 {
-            offsets
-                .iter()
-                .map(|k| level.cells[(k + shift) as usize] as u32)
-                .sum()
-        };
         if inside {
             let offsets = offsets[d][c.angle]
                 .get_or_init(|| scans[c.angle].iter().map(|(x, y)| y * w + x).collect());
-            sum_at(offsets)
+            level.sum_at(offsets, c.dx, c.dy)
         } else {
-            let split =
-                split[d][c.angle].get_or_init(|| SplitScan::new(&level, &scans[c.angle], n_cells));
-            let near_edge: u32 = split
-                .near_edge
-                .iter()
-                .map(|(x, y)| level.at(x + c.dx, y + c.dy) as u32)
-                .sum();
-            split.outside + sum_at(&split.inside) + near_edge
+            split[d][c.angle]
+                .get_or_init(|| SplitScan::new(&level, &scans[c.angle], n_cells))
+                .score(&level, c.dx, c.dy)
         }
     };
     let threshold = (min_score * 255.0 * points.len() as f64).ceil() as u32;
@@ -687,19 +696,8 @@ mod tests {
                     .iter()
                     .map(|(x, y)| level.at(x + dx, y + dy) as u32)
                     .sum();
-                let shift = (dy + level.pad) * level.width + dx + level.pad;
-                let inside: u32 = split
-                    .inside
-                    .iter()
-                    .map(|k| level.cells[(k + shift) as usize] as u32)
-                    .sum();
-                let edge: u32 = split
-                    .near_edge
-                    .iter()
-                    .map(|(x, y)| level.at(x + dx, y + dy) as u32)
-                    .sum();
                 assert_eq!(
-                    split.outside + inside + edge,
+                    split.score(&level, dx, dy),
                     looked_up,
                     "level {d} at ({dx}, {dy})"
                 );

@@ -174,14 +174,15 @@ impl OccupancyGrid {
         self.height = h + g[1] + g[3];
     }
 
-    fn update(&mut self, i: usize, delta: f32) {
+    /// Adds `delta` to cell `i`'s log-odds, its probability from `probabilities`.
+    fn update(&mut self, i: usize, delta: f32, probabilities: &mut ProbabilityCache) {
         let old = self.log_odds[i];
         let l = updated_log_odds(old, delta);
         // A cell held at the clamp (open ground seen from many keyframes) does not change,
         // and its probability need not be worked out again.
         if l != old {
             self.log_odds[i] = l;
-            self.prob[i] = probability(l);
+            self.prob[i] = probabilities.of(l);
         }
     }
 
@@ -212,21 +213,13 @@ impl OccupancyGrid {
             width: self.width,
         };
         let mut probabilities = ProbabilityCache::new();
-        let (log_odds, prob) = (&mut self.log_odds, &mut self.prob);
         trace_beams(
             &lattice,
             sensor,
             endpoints,
             rays,
             self.miss_rule,
-            |i, delta| {
-                let old = log_odds[i];
-                let l = updated_log_odds(old, delta);
-                if l != old {
-                    log_odds[i] = l;
-                    prob[i] = probabilities.of(l);
-                }
-            },
+            |i, delta| self.update(i, delta, &mut probabilities),
         );
     }
 
@@ -254,6 +247,7 @@ impl OccupancyGrid {
         let y0 = ((min.y_m - self.origin.y_m) / r).floor().max(0.0) as usize;
         let x1 = (((max.x_m - self.origin.x_m) / r).floor() as usize).min(self.width - 1);
         let y1 = (((max.y_m - self.origin.y_m) / r).floor() as usize).min(self.height - 1);
+        let mut probabilities = ProbabilityCache::new();
         for y in y0..=y1 {
             for x in x0..=x1 {
                 let p = Point2::new(
@@ -262,7 +256,7 @@ impl OccupancyGrid {
                 );
                 let e = evidence(p);
                 if e != 0.0 {
-                    self.update(y * self.width + x, e);
+                    self.update(y * self.width + x, e, &mut probabilities);
                 }
             }
         }
@@ -305,10 +299,15 @@ impl OccupancyGrid {
         self.ensure(min, max);
         self.touch(min, max);
         let r = self.resolution_m;
+        let mut probabilities = ProbabilityCache::new();
         for (p, yes) in observations {
             let x = ((p.x_m - self.origin.x_m) / r).floor() as usize;
             let y = ((p.y_m - self.origin.y_m) / r).floor() as usize;
-            self.update(y * self.width + x, if *yes { HIT } else { MISS });
+            self.update(
+                y * self.width + x,
+                if *yes { HIT } else { MISS },
+                &mut probabilities,
+            );
         }
     }
 
@@ -381,7 +380,7 @@ fn probability(l: f32) -> f32 {
     1.0 - 1.0 / (1.0 + l.exp())
 }
 
-/// [`probability`] remembered for the last few log-odds seen, for one scan's cells. Most
+/// [`probability`] remembered for the last few log-odds seen, for one update's cells. Most
 /// cells a scan clears hold one of a dozen values (0 and the sums of misses down to the
 /// clamp), so nearly every cell's `exp` is one already worked out. The values are those
 /// [`probability`] gives: the cache only keeps them.
@@ -492,11 +491,15 @@ pub(crate) fn trace_beams(
                 }
                 let marks = &mut marks[..box_w * rows];
                 let from = mark_of(start);
+                let ray_ends: Vec<(i64, i64)>;
                 let traced = match rays {
-                    None => ends.clone(),
-                    Some(rays) => rays.iter().map(|p| to_cell(*p)).collect(),
+                    None => &ends,
+                    Some(rays) => {
+                        ray_ends = rays.iter().map(|p| to_cell(*p)).collect();
+                        &ray_ends
+                    }
                 };
-                for end in traced {
+                for &end in traced {
                     // A walk depends only on its two cells, so a second beam ending in a
                     // cell a walk already ended in would cross the same cells again: filled-in
                     // scans end two or three beams in many cells.
