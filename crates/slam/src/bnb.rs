@@ -266,6 +266,19 @@ pub struct SearchResult {
     pub rival_score: f64,
 }
 
+impl SearchResult {
+    /// Whether a rival comes within `margin` of the winner: the winner is then no closure.
+    pub fn is_ambiguous(&self, margin: f64) -> bool {
+        ambiguous(self.score, self.rival_score, margin)
+    }
+}
+
+/// The one test of ambiguity, shared by the search (which stops at the first rival that
+/// passes it) and its callers (which judge its answer), so both decide alike to the bit.
+fn ambiguous(winner_score: f64, rival_score: f64, margin: f64) -> bool {
+    winner_score - rival_score < margin
+}
+
 #[derive(Clone, Copy)]
 struct Candidate {
     angle: usize,
@@ -440,10 +453,9 @@ fn search_rivals(
             .score
             .saturating_sub((rival_margin * 255.0 * points.len() as f64) as u32),
     );
-    // Ambiguous as the caller judges it, in the same arithmetic: the winner's score less the
-    // rival's under the margin. A better rival would be as ambiguous.
+    // Ambiguous as the caller judges the answer; a better rival would be as ambiguous.
     let winner_score = winner.score as f64 / n;
-    let ambiguous = |c: &Candidate| winner_score - c.score as f64 / n < rival_margin;
+    let close_rival = |c: &Candidate| ambiguous(winner_score, c.score as f64 / n, rival_margin);
     let mut rival: Option<Candidate> = None;
     descend(
         &roots,
@@ -453,7 +465,7 @@ fn search_rivals(
         &score_at,
         &mut rival,
         &|c| !near(c),
-        &|c| stop_when_ambiguous && ambiguous(c),
+        &|c| stop_when_ambiguous && close_rival(c),
     );
     let yaw = prior.yaw_rad + (winner.angle as i64 - n_angles) as f64 * angle_step;
     Some(SearchResult {
@@ -677,7 +689,7 @@ mod tests {
         // The search that stops at the first rival within the margin judges it the same.
         let found = search(&map, &points, prior, &window, 0.3, 0.1).expect("the corridor matches");
         assert_eq!(found.pose, best_rival.pose);
-        assert!(found.score - found.rival_score < 0.1, "{found:?}");
+        assert!(found.is_ambiguous(0.1), "{found:?}");
     }
 
     #[test]
@@ -721,7 +733,7 @@ mod tests {
                     };
                     assert_eq!(early.pose, full.pose);
                     assert_eq!(early.score, full.score);
-                    let verdict = |r: &SearchResult| r.score - r.rival_score < margin;
+                    let verdict = |r: &SearchResult| r.is_ambiguous(margin);
                     assert_eq!(verdict(&early), verdict(&full), "{early:?} {full:?}");
                     if verdict(&full) {
                         ambiguous += 1;

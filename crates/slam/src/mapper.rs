@@ -1426,7 +1426,7 @@ impl Mapper {
             self.cfg.loop_search_min_score,
             self.cfg.loop_ambiguity_margin,
         )?;
-        if found.score - found.rival_score < self.cfg.loop_ambiguity_margin {
+        if found.is_ambiguous(self.cfg.loop_ambiguity_margin) {
             return None;
         }
         let refine = MatcherConfig {
