@@ -480,11 +480,11 @@ impl SimNetwork {
 
     /// Where a packet at mesh node `at` must go next on the mesh, if it can go now.
     fn mesh_next_hop(&self, at: NodeAddr, p: &Packet) -> Option<NodeAddr> {
-        let target = if p.dst.on_mesh() {
-            p.dst
-        } else {
-            NodeAddr::Lander
-        };
+        self.next_hop_to(at, mesh_target(p))
+    }
+
+    /// The next hop from mesh node `at` towards mesh node `target`, if it is up.
+    fn next_hop_to(&self, at: NodeAddr, target: NodeAddr) -> Option<NodeAddr> {
         let hop = self.routes.get(&(at, target))?.next_hop;
         self.mesh.get(&hop).filter(|n| n.up).map(|_| hop)
     }
@@ -498,11 +498,14 @@ impl SimNetwork {
             if !node.up {
                 continue;
             }
-            if let Some(p) = node
-                .queue
-                .iter()
-                .find(|p| self.mesh_next_hop(n, p).is_some())
-            {
+            // A queue cut off from where its packets go holds many for the same few
+            // targets, and is looked through again at every transmission: each target's
+            // route is looked up once.
+            let mut hops = HopMemo::default();
+            if let Some(p) = node.queue.iter().find(|p| {
+                hops.next_hop(mesh_target(p), |t| self.next_hop_to(n, t))
+                    .is_some()
+            }) {
                 let key = (p.qos.priority.index(), p.created, p.id);
                 if pick.is_none_or(|(_, k)| key < k) {
                     pick = Some((n, key));
@@ -512,29 +515,20 @@ impl SimNetwork {
         let Some((from, _)) = pick else {
             return false;
         };
-        let routes = &self.routes;
-        let up: BTreeSet<NodeAddr> = self
-            .mesh
-            .iter()
-            .filter(|(_, n)| n.up)
-            .map(|(a, _)| *a)
-            .collect();
-        let hop_of = |p: &Packet| {
-            let target = if p.dst.on_mesh() {
-                p.dst
-            } else {
-                NodeAddr::Lander
-            };
-            routes
-                .get(&(from, target))
-                .map(|r| r.next_hop)
-                .filter(|h| up.contains(h))
+        // The queue is taken out while it is searched, so the routes can be read.
+        let mut queue = match self.mesh.get_mut(&from) {
+            Some(n) => std::mem::replace(&mut n.queue, TxQueue::new(0)),
+            None => return false,
         };
-        let Some(p) = self
-            .mesh
-            .get_mut(&from)
-            .and_then(|n| n.queue.pop_sendable(|p| hop_of(p).is_some()))
-        else {
+        let mut hops = HopMemo::default();
+        let popped = queue.pop_sendable(|p| {
+            hops.next_hop(mesh_target(p), |t| self.next_hop_to(from, t))
+                .is_some()
+        });
+        if let Some(n) = self.mesh.get_mut(&from) {
+            n.queue = queue;
+        }
+        let Some(p) = popped else {
             return false;
         };
         if p.expired(t) {
@@ -855,4 +849,35 @@ fn splitmix(x: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+/// The mesh node a packet travels to on the mesh: its destination, or the lander (the
+/// gateway) for the ground.
+fn mesh_target(p: &Packet) -> NodeAddr {
+    if p.dst.on_mesh() {
+        p.dst
+    } else {
+        NodeAddr::Lander
+    }
+}
+
+/// Next hops from one node already looked up, by target (a handful at most).
+#[derive(Default)]
+struct HopMemo {
+    known: Vec<(NodeAddr, Option<NodeAddr>)>,
+}
+
+impl HopMemo {
+    fn next_hop(
+        &mut self,
+        target: NodeAddr,
+        look_up: impl FnOnce(NodeAddr) -> Option<NodeAddr>,
+    ) -> Option<NodeAddr> {
+        if let Some((_, hop)) = self.known.iter().find(|(t, _)| *t == target) {
+            return *hop;
+        }
+        let hop = look_up(target);
+        self.known.push((target, hop));
+        hop
+    }
 }

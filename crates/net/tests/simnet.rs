@@ -328,3 +328,30 @@ fn map_updates_sent_twice_reach_the_ground_without_waiting_for_a_resend() {
     assert!(once < 0.8, "sent once: {once:.2} on time");
     assert!(twice > 0.85, "sent twice: {twice:.2} on time");
 }
+
+#[test]
+fn packets_held_for_a_rover_that_is_down_do_not_hold_up_the_rest() {
+    // rover2 (down) and the ground both take rover1's localisation: rover1's queue fills
+    // with copies for rover2 that cannot leave, each ahead of the copy for the ground, and
+    // every transmission must look past them.
+    let mut net = SimNetwork::new(config(), Point2::new(0.0, 0.0));
+    net.add_mesh_node(R1, Point2::new(20.0, 0.0));
+    net.add_mesh_node(R2, Point2::new(25.0, 0.0));
+    net.set_up(R2, false);
+    let topics = [("rover1/localisation", 60)];
+    net.subscribe(R2, Topic::new(topics[0].0));
+    subscribe_ground(&mut net, &topics);
+    let (got, sent) = publish_every(
+        &mut net,
+        R1,
+        &topics,
+        Duration::from_millis(100),
+        Time::from_secs_f64(20.0),
+        Time::from_secs_f64(30.0),
+    );
+    let at =
+        |node: NodeAddr| -> Vec<u32> { got.iter().filter(|d| d.to == node).map(index).collect() };
+    assert_eq!(at(NodeAddr::Ground), (0..sent).collect::<Vec<_>>());
+    assert!(at(R2).is_empty(), "nothing reaches a rover that is down");
+    assert!(net.queued_bytes(R1) > 0, "rover1 holds rover2's copies");
+}
