@@ -68,13 +68,32 @@ impl Costmap {
         let known: Vec<bool> = map.cells().iter().map(|&v| v >= 0).collect();
         let dist2 = squared_distance_transform(&lethal, geometry.width, geometry.height);
         let res = geometry.resolution_m;
+        let cost_of = |d2: f32| inflation_cost((d2 as f64).sqrt() * res, cfg);
+        // Squared distances in cells are sums of two whole squares, so the cost of each is
+        // looked up, not worked out with a root and an exponential a cell. Past the table
+        // every cell lies beyond the inflation radius, where the cost is 0.
+        let reach_cells = cfg.inflation_radius_m / res + 2.0;
+        let table: Vec<u8> = if reach_cells * reach_cells < (1 << 20) as f64 {
+            (0..=(reach_cells * reach_cells).ceil() as usize)
+                .map(|k| cost_of(k as f32))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let inflated_of = |d2: f32| match table.get(d2 as usize) {
+            Some(&c) => {
+                debug_assert_eq!(d2.fract(), 0.0, "whole cells' squared distances");
+                c
+            }
+            None if !table.is_empty() => 0,
+            None => cost_of(d2),
+        };
         let costs = map
             .cells()
             .iter()
             .zip(&dist2)
             .map(|(&v, &d2)| {
-                let d_m = (d2 as f64).sqrt() * res;
-                let inflated = inflation_cost(d_m, cfg);
+                let inflated = inflated_of(d2);
                 if v < 0 {
                     inflated.max(cfg.unknown_cost.min(MAX_PASSABLE))
                 } else {
@@ -144,27 +163,47 @@ fn inflation_cost(d_m: f64, cfg: &CostmapConfig) -> u8 {
 /// (`f32::INFINITY` when there is none): Felzenszwalb & Huttenlocher's lower-envelope
 /// algorithm, first down every column, then along every row.
 pub fn squared_distance_transform(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
-    let inf = f32::INFINITY;
-    let mut d: Vec<f32> = seeds.iter().map(|&s| if s { 0.0 } else { inf }).collect();
-    let n = width.max(height);
-    let mut f = vec![0.0f32; n];
-    let mut out = vec![0.0f32; n];
-    let mut v = vec![0usize; n];
-    let mut z = vec![0.0f32; n + 1];
-    for x in 0..width {
-        for y in 0..height {
-            f[y] = d[y * width + x];
-        }
-        transform_1d(&f[..height], &mut out[..height], &mut v, &mut z);
-        for y in 0..height {
-            d[y * width + x] = out[y];
-        }
-    }
+    let mut d = column_distances(seeds, width, height);
+    let mut f = vec![0.0f32; width];
+    let mut out = vec![0.0f32; width];
+    let mut v = vec![0usize; width];
+    let mut z = vec![0.0f32; width + 1];
     for y in 0..height {
         let row = &mut d[y * width..(y + 1) * width];
-        f[..width].copy_from_slice(row);
-        transform_1d(&f[..width], &mut out[..width], &mut v, &mut z);
-        row.copy_from_slice(&out[..width]);
+        f.copy_from_slice(row);
+        transform_1d(&f, &mut out, &mut v, &mut z);
+        row.copy_from_slice(&out);
+    }
+    d
+}
+
+/// The first dimension of [`squared_distance_transform`]: the squared distance down each
+/// column to the column's nearest seed. Over values that are 0 or infinite the lower
+/// envelope is that and no more, so two sweeps over the rows give it without the
+/// envelope's divisions and without reading the grid a column at a time; the squares of
+/// whole cells are the envelope's own products, so the values are its to the bit.
+fn column_distances(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
+    let mut d = vec![f32::INFINITY; width * height];
+    // Rows since each column's last seed, in the sweep's direction (None: none yet).
+    let mut since: Vec<Option<u32>> = vec![None; width];
+    for y in 0..height {
+        let row = y * width..(y + 1) * width;
+        for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(&mut since) {
+            *run = if seed { Some(0) } else { run.map(|r| r + 1) };
+            if let Some(r) = *run {
+                *out = r as f32 * r as f32;
+            }
+        }
+    }
+    since.fill(None);
+    for y in (0..height).rev() {
+        let row = y * width..(y + 1) * width;
+        for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(&mut since) {
+            *run = if seed { Some(0) } else { run.map(|r| r + 1) };
+            if let Some(r) = *run {
+                *out = out.min(r as f32 * r as f32);
+            }
+        }
     }
     d
 }
@@ -248,6 +287,38 @@ mod tests {
                         })
                         .fold(f32::INFINITY, f32::min);
                     prop_assert_eq!(d[y * width + x], brute, "cell ({}, {})", x, y);
+                }
+            }
+        }
+
+        #[test]
+        fn every_cost_is_the_inflation_law_at_the_cells_distance(
+            width in 1usize..40,
+            height in 1usize..40,
+            fine in proptest::bool::ANY,
+            cells in proptest::collection::vec(
+                prop_oneof![1 => Just(100i8), 2 => Just(-1i8), 20 => Just(0i8)],
+                40 * 40,
+            ),
+        ) {
+            let g = GridGeometry {
+                resolution_m: if fine { 0.05 } else { 0.1 },
+                ..geometry(width, height)
+            };
+            let cells = cells[..width * height].to_vec();
+            let map = Grid::from_cells(g, cells.clone()).expect("sized");
+            let cfg = CostmapConfig::default();
+            let cm = Costmap::from_map(&map, &cfg);
+            for y in 0..height {
+                for x in 0..width {
+                    let d2 = (0..height)
+                        .flat_map(|sy| (0..width).map(move |sx| (sx, sy)))
+                        .filter(|&(sx, sy)| cells[sy * width + sx] >= OCCUPIED_THRESHOLD)
+                        .map(|(sx, sy)| (sx.abs_diff(x).pow(2) + sy.abs_diff(y).pow(2)) as f64)
+                        .fold(f64::INFINITY, f64::min);
+                    let law = inflation_cost(d2.sqrt() * g.resolution_m, &cfg);
+                    let want = if cells[y * width + x] < 0 { law.max(cfg.unknown_cost) } else { law };
+                    prop_assert_eq!(cm.cost(Cell { x, y }), want, "cell ({}, {})", x, y);
                 }
             }
         }
