@@ -88,15 +88,33 @@ pub struct Plan {
 #[derive(Clone, Debug, Default)]
 pub struct Planner {
     cfg: PlannerConfig,
-    g: Vec<f32>,
-    parent: Vec<u32>,
-    /// The search generation that last touched each cell (its `g` is stale otherwise).
-    seen: Vec<u32>,
-    closed: Vec<u32>,
+    /// Each cell's search state, kept together: a step reads and writes all of a
+    /// neighbour's, so one cache line a neighbour instead of one per array.
+    cells: Vec<SearchCell>,
     generation: u32,
     /// The search generation that marked each cell a target of a flood.
     target: Vec<u32>,
     heap: RadixHeap,
+}
+
+/// One cell's state in a search.
+#[derive(Clone, Copy, Debug)]
+struct SearchCell {
+    g: f32,
+    parent: u32,
+    /// The search generation that last touched the cell (its `g` is stale otherwise).
+    seen: u32,
+    /// The search generation that closed it.
+    closed: u32,
+}
+
+impl SearchCell {
+    const UNSEEN: SearchCell = SearchCell {
+        g: f32::INFINITY,
+        parent: u32::MAX,
+        seen: 0,
+        closed: 0,
+    };
 }
 
 const NEIGHBOURS: [(isize, isize, f32); 8] = [
@@ -188,18 +206,17 @@ impl Planner {
     }
 
     fn begin(&mut self, n: usize) {
-        if self.seen.len() != n {
-            self.g = vec![f32::INFINITY; n];
-            self.parent = vec![u32::MAX; n];
-            self.seen = vec![0; n];
-            self.closed = vec![0; n];
+        if self.cells.len() != n {
+            self.cells = vec![SearchCell::UNSEEN; n];
             self.target = vec![0; n];
             self.generation = 0;
         }
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
-            self.seen.fill(0);
-            self.closed.fill(0);
+            for c in &mut self.cells {
+                c.seen = 0;
+                c.closed = 0;
+            }
             self.target.fill(0);
             self.generation = 1;
         }
@@ -267,19 +284,22 @@ impl Planner {
                 .then_some(1.0 + weight * (MAX_PASSABLE as f32) * 2.0)
         };
         let s = geo.index(start);
-        self.g[s] = 0.0;
-        self.seen[s] = gen_;
-        self.parent[s] = u32::MAX;
+        self.cells[s] = SearchCell {
+            g: 0.0,
+            parent: u32::MAX,
+            seen: gen_,
+            closed: self.cells[s].closed,
+        };
         self.heap
             .push(key(estimate(start.x, start.y), 0.0), s as u32);
         let goal_index = goal.map(|g| geo.index(g));
         let mut expanded = 0usize;
         while let Some(i) = self.heap.pop() {
             let i = i as usize;
-            if self.closed[i] == gen_ {
+            if self.cells[i].closed == gen_ {
                 continue;
             }
-            self.closed[i] = gen_;
+            self.cells[i].closed = gen_;
             expanded += 1;
             if Some(i) == goal_index {
                 break;
@@ -291,7 +311,7 @@ impl Planner {
                 break;
             }
             let (x, y) = (i % w, i / w);
-            let gi = self.g[i];
+            let gi = self.cells[i].g;
             for &(dx, dy, len) in &NEIGHBOURS {
                 let nx = x as isize + dx;
                 let ny = y as isize + dy;
@@ -300,7 +320,7 @@ impl Planner {
                 }
                 let (nx, ny) = (nx as usize, ny as usize);
                 let j = ny * w + nx;
-                if self.closed[j] == gen_ {
+                if self.cells[j].closed == gen_ {
                     continue;
                 }
                 let Some(f) = factor(nx, ny) else { continue };
@@ -309,10 +329,11 @@ impl Planner {
                     continue;
                 }
                 let g = gi + len * res * f;
-                if self.seen[j] != gen_ || g < self.g[j] {
-                    self.seen[j] = gen_;
-                    self.g[j] = g;
-                    self.parent[j] = i as u32;
+                let c = &mut self.cells[j];
+                if c.seen != gen_ || g < c.g {
+                    c.seen = gen_;
+                    c.g = g;
+                    c.parent = i as u32;
                     self.heap.push(key(g + estimate(nx, ny), g), j as u32);
                 }
             }
@@ -343,13 +364,13 @@ impl Planner {
 
     fn path_to(&self, geo: &GridGeometry, goal: Cell, expanded: usize) -> Result<Plan, PlanError> {
         let gi = geo.index(goal);
-        if self.closed[gi] != self.generation {
+        if self.cells[gi].closed != self.generation {
             return Err(PlanError::NoPath { expanded });
         }
         let mut cells = vec![goal];
         let mut i = gi;
-        while self.parent[i] != u32::MAX {
-            i = self.parent[i] as usize;
+        while self.cells[i].parent != u32::MAX {
+            i = self.cells[i].parent as usize;
             cells.push(Cell {
                 x: i % geo.width,
                 y: i / geo.width,
@@ -358,7 +379,7 @@ impl Planner {
         cells.reverse();
         Ok(Plan {
             cells,
-            cost: self.g[gi] as f64,
+            cost: self.cells[gi].g as f64,
             expanded,
         })
     }
@@ -417,10 +438,9 @@ impl Planner {
         self.search(map, s, None, false, known_only, targets);
         let gen_ = self.generation;
         Ok(self
-            .g
+            .cells
             .iter()
-            .zip(&self.closed)
-            .map(|(&g, &c)| if c == gen_ { g } else { f32::INFINITY })
+            .map(|c| if c.closed == gen_ { c.g } else { f32::INFINITY })
             .collect())
     }
 
