@@ -160,8 +160,9 @@ fn inflation_cost(d_m: f64, cfg: &CostmapConfig) -> u8 {
 }
 
 /// Squared Euclidean distance, in cells, from every cell to the nearest `true` one
-/// (`f32::INFINITY` when there is none): Felzenszwalb & Huttenlocher's lower-envelope
-/// algorithm, first down every column, then along every row.
+/// (`f32::INFINITY` when there is none): Felzenszwalb & Huttenlocher's separable transform,
+/// first down every column (for seeds, by sweeps: `column_distances`), then along every
+/// row by the lower envelope of parabolas.
 pub fn squared_distance_transform(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
     let mut d = column_distances(seeds, width, height);
     let mut f = vec![0.0f32; width];
@@ -186,24 +187,21 @@ fn column_distances(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
     let mut d = vec![f32::INFINITY; width * height];
     // Rows since each column's last seed, in the sweep's direction (None: none yet).
     let mut since: Vec<Option<u32>> = vec![None; width];
-    for y in 0..height {
+    let mut sweep = |y: usize, since: &mut [Option<u32>]| {
         let row = y * width..(y + 1) * width;
-        for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(&mut since) {
-            *run = if seed { Some(0) } else { run.map(|r| r + 1) };
-            if let Some(r) = *run {
-                *out = r as f32 * r as f32;
-            }
-        }
-    }
-    since.fill(None);
-    for y in (0..height).rev() {
-        let row = y * width..(y + 1) * width;
-        for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(&mut since) {
+        for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(since) {
             *run = if seed { Some(0) } else { run.map(|r| r + 1) };
             if let Some(r) = *run {
                 *out = out.min(r as f32 * r as f32);
             }
         }
+    };
+    for y in 0..height {
+        sweep(y, &mut since);
+    }
+    since.fill(None);
+    for y in (0..height).rev() {
+        sweep(y, &mut since);
     }
     d
 }

@@ -485,15 +485,16 @@ impl SimNetwork {
 
     /// The next hop from mesh node `at` towards mesh node `target`, if it is up.
     fn next_hop_to(&self, at: NodeAddr, target: NodeAddr) -> Option<NodeAddr> {
-        let hop = self.routes.get(&(at, target))?.next_hop;
-        self.mesh.get(&hop).filter(|n| n.up).map(|_| hop)
+        route_hop(&self.routes, at, target, |h| {
+            self.mesh.get(&h).is_some_and(|n| n.up)
+        })
     }
 
     /// Starts the next transmission on the channel, if any node has something it can send:
     /// the node whose most urgent sendable packet is the most urgent, oldest on ties
     /// (802.11e gives urgent traffic earlier channel access).
     fn transmit_next(&mut self, t: Time) -> bool {
-        let mut pick: Option<(NodeAddr, (usize, Time, u64))> = None;
+        let mut pick: Option<(NodeAddr, (usize, Time, u64), HopMemo)> = None;
         for (&n, node) in &self.mesh {
             if !node.up {
                 continue;
@@ -507,28 +508,31 @@ impl SimNetwork {
                     .is_some()
             }) {
                 let key = (p.qos.priority.index(), p.created, p.id);
-                if pick.is_none_or(|(_, k)| key < k) {
-                    pick = Some((n, key));
+                if pick.as_ref().is_none_or(|(_, k, _)| key < *k) {
+                    pick = Some((n, key, hops));
                 }
             }
         }
-        let Some((from, _)) = pick else {
+        let Some((from, _, mut hops)) = pick else {
             return false;
         };
-        // The queue is taken out while it is searched, so the routes can be read.
-        let mut queue = match self.mesh.get_mut(&from) {
-            Some(n) => std::mem::replace(&mut n.queue, TxQueue::new(0)),
-            None => return false,
-        };
-        let mut hops = HopMemo::default();
-        let popped = queue.pop_sendable(|p| {
-            hops.next_hop(mesh_target(p), |t| self.next_hop_to(from, t))
+        // The pop meets the packets the search above looked through, in the same order, so
+        // their targets' hops are all in `hops` already.
+        let up: Vec<NodeAddr> = self
+            .mesh
+            .iter()
+            .filter(|(_, n)| n.up)
+            .map(|(a, _)| *a)
+            .collect();
+        let routes = &self.routes;
+        let Some(p) = self.mesh.get_mut(&from).and_then(|n| {
+            n.queue.pop_sendable(|p| {
+                hops.next_hop(mesh_target(p), |t| {
+                    route_hop(routes, from, t, |h| up.contains(&h))
+                })
                 .is_some()
-        });
-        if let Some(n) = self.mesh.get_mut(&from) {
-            n.queue = queue;
-        }
-        let Some(p) = popped else {
+            })
+        }) else {
             return false;
         };
         if p.expired(t) {
@@ -859,6 +863,17 @@ fn mesh_target(p: &Packet) -> NodeAddr {
     } else {
         NodeAddr::Lander
     }
+}
+
+/// The next hop from `at` towards mesh node `target` in `routes`, if `up` holds for it.
+fn route_hop(
+    routes: &BTreeMap<(NodeAddr, NodeAddr), Route>,
+    at: NodeAddr,
+    target: NodeAddr,
+    up: impl Fn(NodeAddr) -> bool,
+) -> Option<NodeAddr> {
+    let hop = routes.get(&(at, target))?.next_hop;
+    up(hop).then_some(hop)
 }
 
 /// Next hops from one node already looked up, by target (a handful at most).
