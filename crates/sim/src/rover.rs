@@ -5,7 +5,7 @@
 use crate::rng::SimRng;
 use crate::scenario::Rovers;
 use crate::sensors::gaussian;
-use crate::terrain::{Terrain, bilinear};
+use crate::terrain::{Terrain, bilinear, bilinear_with};
 use crate::truth::{GroundTruth, TruthCell};
 use realms_core::msgs::TwistStamped;
 use realms_core::{Point2, Pose2, RoverId, Time};
@@ -116,11 +116,26 @@ impl RoverBody {
     }
 
     /// Sets height, pitch and roll from the ground under the four wheels.
+    ///
+    /// A wheel rides on what it can climb: a cell standing more than `max_step_m` above the
+    /// floor (a wall, the lander, a blocking rock) counts at its floor height. The footprint
+    /// stops half a cell short of such cells, so a wheel beside one would otherwise take part
+    /// of its height by interpolation and tip the rover 30-50 degrees against a rock it
+    /// never climbed.
     pub fn settle(&mut self, spec: &Rovers, terrain: &Terrain) {
         let (hl, hw) = (spec.length_m / 2.0, spec.width_m / 2.0);
+        let (heights, floor) = (terrain.heights.cells(), terrain.floor.cells());
         let h = |dx: f64, dy: f64| {
             let p = self.pose.transform_point(Point2::new(dx, dy));
-            bilinear(&terrain.heights, p).unwrap_or(0.0)
+            bilinear_with(terrain.heights.geometry(), p, |i| {
+                // The truth's test for an obstacle rock (`truth.rs`), to the bit.
+                if (heights[i] - floor[i]) as f64 > spec.max_step_m {
+                    floor[i]
+                } else {
+                    heights[i]
+                }
+            })
+            .unwrap_or(0.0)
         };
         let (fl, fr, rl, rr) = (h(hl, hw), h(hl, -hw), h(-hl, hw), h(-hl, -hw));
         self.z_m = (fl + fr + rl + rr) / 4.0;

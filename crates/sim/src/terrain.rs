@@ -466,15 +466,19 @@ impl Terrain {
 
 /// Bilinear interpolation between cell centres, clamped at the border.
 pub fn bilinear(grid: &Grid<f32>, p: Point2) -> Option<f64> {
-    let g = grid.geometry();
+    let c = grid.cells();
+    bilinear_with(grid.geometry(), p, |i| c[i])
+}
+
+/// [`bilinear`] over the values `value(index)` gives the cells of a grid of geometry `g`.
+pub fn bilinear_with(g: &GridGeometry, p: Point2, value: impl Fn(usize) -> f32) -> Option<f64> {
     g.world_to_cell(p)?;
     let fx = ((p.x_m - g.origin.x_m) / g.resolution_m - 0.5).clamp(0.0, (g.width - 1) as f64);
     let fy = ((p.y_m - g.origin.y_m) / g.resolution_m - 0.5).clamp(0.0, (g.height - 1) as f64);
     let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
     let (x1, y1) = ((x0 + 1).min(g.width - 1), (y0 + 1).min(g.height - 1));
     let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-    let c = grid.cells();
-    let v = |x: usize, y: usize| c[y * g.width + x] as f64;
+    let v = |x: usize, y: usize| value(y * g.width + x) as f64;
     Some(
         (v(x0, y0) * (1.0 - tx) + v(x1, y0) * tx) * (1.0 - ty)
             + (v(x0, y1) * (1.0 - tx) + v(x1, y1) * tx) * ty,

@@ -7,7 +7,7 @@ use common::{drive, flat_world, idle_until, scenario};
 use realms_core::msgs::Message;
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_sim::SimEventKind;
-use realms_sim::terrain::{Crater, Rect};
+use realms_sim::terrain::{Boulder, Crater, Rect};
 
 const R1: RoverId = RoverId(1);
 
@@ -114,6 +114,56 @@ fn driving_into_a_steep_crater_gets_the_rover_stuck() {
     assert_eq!(body.pose.x_m, x_stuck, "a stuck rover does not move");
     let kinds: Vec<_> = world.events().iter().map(|e| e.kind).collect();
     assert_eq!(kinds, vec![SimEventKind::HazardEntry, SimEventKind::Stuck]);
+}
+
+/// A rover pushed against a rock it cannot climb stays level on the floor beside it (the
+/// wheel beside the rock once took part of its height and tipped the rover 50 degrees); a rock
+/// low enough to drive over still lifts the wheel on it.
+#[test]
+fn a_rock_too_tall_to_climb_stops_the_rover_without_tipping_it_and_a_low_one_lifts_a_wheel() {
+    let s = firm(scenario(1));
+    let tall = Boulder {
+        // Off the rover's centre line, so one front corner meets it first.
+        center: Point2::new(7.0, 10.25),
+        radius_m: 0.5,
+        height_m: 0.45,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| t.add_boulder(tall));
+    drive(&mut world, R1, 0.3, 0.0, 20.0);
+    let body = world.rovers().next().expect("rover");
+    assert_eq!(body.stats.collisions, 1, "stopped by the rock");
+    assert!(body.pose.x_m < 6.8, "{}", body.pose.x_m);
+    assert!(
+        body.pitch_rad.abs() < 1e-6 && body.roll_rad.abs() < 1e-6,
+        "pitch {} roll {}",
+        body.pitch_rad.to_degrees(),
+        body.roll_rad.to_degrees()
+    );
+
+    // A 6 cm rock (under the 8 cm step) in the left wheels' track: driven over, left side up
+    // (positive roll) while they are on it.
+    let low = Boulder {
+        center: Point2::new(7.0, 10.0 + s.rovers.width_m / 2.0),
+        radius_m: 0.3,
+        height_m: 0.06,
+    };
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| t.add_boulder(low));
+    let mut most_roll: f64 = 0.0;
+    for _ in 0..30 {
+        drive(&mut world, R1, 0.3, 0.0, 0.5);
+        most_roll = most_roll.max(world.rovers().next().expect("rover").roll_rad);
+    }
+    let body = world.rovers().next().expect("rover");
+    assert_eq!(body.stats.collisions, 0);
+    assert!(body.pose.x_m > 8.0, "drove over it: {}", body.pose.x_m);
+    // Both left wheels on its crest at best: atan(0.06 / width).
+    let crest = 0.06f64.atan2(s.rovers.width_m);
+    assert!(
+        most_roll > 0.4 * crest && most_roll <= crest + 1e-6,
+        "roll {} of at most {}",
+        most_roll.to_degrees(),
+        crest.to_degrees()
+    );
 }
 
 #[test]
