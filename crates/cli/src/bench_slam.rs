@@ -117,6 +117,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.smooth_ranges = false,
     },
     Variant {
+        name: "no-deskew",
+        what: "a sweeping lidar's beams all taken as seen at the scan's last beam, the rover's motion during the sweep left in",
+        apply: |c| c.deskew = false,
+    },
+    Variant {
         name: "chain-solver",
         what: "the pose graph solved by conjugate gradients preconditioned by the chain of poses, to the optimum, not stopped after 500 block-Jacobi iterations",
         apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Chain,
@@ -625,7 +630,7 @@ fn replay(
         }
         // The final trajectory is stamped as the scans are (the time of what they show).
         let stamp = match &c.message {
-            Message::LaserScan(scan) => scan.header.stamp,
+            Message::LaserScan(scan) => scan.last_beam_time(),
             _ => c.t,
         };
         scans.push((stamp.as_secs_f64(), c.truth, m.pose()));

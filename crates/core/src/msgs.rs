@@ -4,7 +4,7 @@
 //! ROS leaves it implicit. Stamps are mission [`Time`].
 
 use crate::geometry::{Point2, Quaternion, Vec3};
-use crate::time::Time;
+use crate::time::{Duration, Time};
 use serde::{Deserialize, Serialize};
 
 /// std_msgs/Header: when the data was taken and in which frame it is expressed.
@@ -39,6 +39,40 @@ pub struct LaserScan {
     pub ranges_m: Vec<f32>,
     /// One intensity per beam, or empty.
     pub intensities: Vec<f32>,
+}
+
+impl LaserScan {
+    /// How long the sweep from the first beam to the last took: `time_increment_s` times
+    /// the beams after the first, or zero (an instantaneous scan) where that is no plausible
+    /// sweep: negative, not finite, or over a second, which no spinning lidar of the field
+    /// takes. A scan from a driver or the network decides nothing here by itself.
+    pub fn sweep(&self) -> Duration {
+        sweep_duration(self.ranges_m.len(), self.time_increment_s)
+    }
+
+    /// When the last beam was measured: the instant a scan's beams are all brought to once
+    /// the motion during the sweep is taken out of them.
+    pub fn last_beam_time(&self) -> Time {
+        self.header.stamp + self.sweep()
+    }
+
+    /// When beam `i` was measured, counted from the stamp (the first beam's time).
+    pub fn beam_offset(&self, i: usize) -> Duration {
+        if self.sweep() == Duration::ZERO {
+            return Duration::ZERO;
+        }
+        Duration::from_secs_f64(i as f64 * self.time_increment_s as f64)
+    }
+}
+
+/// [`LaserScan::sweep`] for a scan of `beams` beams `time_increment_s` apart.
+pub fn sweep_duration(beams: usize, time_increment_s: f32) -> Duration {
+    let s = beams.saturating_sub(1) as f64 * time_increment_s as f64;
+    if s.is_finite() && s > 0.0 && s <= 1.0 {
+        Duration::from_secs_f64(s)
+    } else {
+        Duration::ZERO
+    }
 }
 
 /// geometry_msgs/Pose.

@@ -162,11 +162,12 @@ fn slam_replayed_on_the_captured_input_tracks_exactly_as_on_board() {
         let mut mapping = realms_node::mapping::Mapping::new(*id, cfg.clone());
         let mut tracked = std::collections::BTreeMap::new();
         realms_mission::replay_slam(&mut mapping, input, |c, m| {
-            // Scans are stamped with the time of what they show, a few ms before they come.
+            // Scans are stamped with the time of what they show (a sweep's last beam for SLAM),
+            // a few ms before they come.
             let realms_core::msgs::Message::LaserScan(scan) = &c.message else {
                 unreachable!("called after scans")
             };
-            tracked.insert(c.t, (m.pose(), scan.header.stamp));
+            tracked.insert(c.t, (m.pose(), scan.last_beam_time()));
         });
         assert!(
             input.iter().all(|c| matches!(

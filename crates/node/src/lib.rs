@@ -11,6 +11,7 @@
 //! - [`guard::Guard`]: the reactive check of the rover's own sensors.
 //! - [`lander_merge`]: the lander's job of merging every rover's map into one.
 //! - [`layers`]: the rover's published and planner maps, redrawn only where they changed.
+//! - [`sweep`]: a sweeping lidar's scan brought to one instant by the rover's measured motion.
 //! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
 //!   from its updates, its pose and its status.
 
@@ -22,6 +23,7 @@ pub mod mapping;
 pub mod navigation;
 pub mod rover;
 pub mod station;
+pub mod sweep;
 
 use realms_core::msgs::Message;
 use realms_core::{Time, Topic};

@@ -12,6 +12,7 @@
 
 use crate::Outgoing;
 use crate::layers::TiledLayer;
+use crate::sweep::{self, RecentMotion};
 use realms_core::geometry::{Quaternion, Vec3, normalize_angle_rad};
 use realms_core::msgs::{
     Header, Imu, LaserScan, LocalisationStatus, MapDelta, MapMetaData, Message, OccupancyGrid,
@@ -69,6 +70,10 @@ pub struct MappingConfig {
     /// 0.6 of itself, and the 1-degree curve of a wall moves the average by under a
     /// millimetre.
     pub smooth_ranges: bool,
+    /// A sweeping lidar's beams (a scan whose `time_increment_s` says when each was measured)
+    /// are brought to where the rover was at the scan's last beam, by the wheels' and the
+    /// gyro's motion in between ([`crate::sweep`]); `false` takes every beam as seen from there.
+    pub deskew: bool,
     /// The depth camera's points in hazard cells (rocks below the lidar's plane, rims) go
     /// into the refinement of each match, beside the lidar's points, as features seen from
     /// the last depth frame, carried to the scan by odometry (`false`: the lidar alone).
@@ -301,6 +306,8 @@ pub struct Mapping {
     /// gyro's heading).
     relief_reference: Option<(Time, ElevationPatch, Pose2)>,
     relief_hops: Vec<ReliefHop>,
+    /// The wheels' and gyro's last half second, to de-skew sweeping scans.
+    recent: RecentMotion,
 }
 
 impl Mapping {
@@ -333,6 +340,7 @@ impl Mapping {
             depth_features: None,
             relief_reference: None,
             relief_hops: Vec::new(),
+            recent: RecentMotion::default(),
         }
     }
 
@@ -409,9 +417,13 @@ impl Mapping {
             _ => {
                 self.gyro_yaw_rad = wheel.yaw_rad;
                 self.prev_gyro = None;
+                // The gyro's heading starts again from the wheels': what came before is
+                // another reckoning.
+                self.recent = RecentMotion::default();
                 wheel
             }
         };
+        self.recent.push_position(stamp, fused);
         self.last_wheel = Some(wheel);
         if !back_from_silence
             && let Some((t1, _)) = self.odometry.last()
@@ -472,6 +484,7 @@ impl Mapping {
             self.prev_gyro = self.last_gyro.map(|prev| (prev, self.gyro_yaw_rad));
             self.last_gyro = Some(t);
             self.gyro_heard = true;
+            self.recent.push_heading(t, self.gyro_yaw_rad);
             return;
         } else if self.bias_samples > 0 && self.gyro_bias_rad_s.is_none() {
             self.gyro_bias_rad_s = Some(self.bias_sum / self.bias_samples as f64);
@@ -487,6 +500,7 @@ impl Mapping {
         }
         self.last_gyro = Some(t);
         self.gyro_heard = true;
+        self.recent.push_heading(t, self.gyro_yaw_rad);
     }
 
     /// Whether the rover must stand still at `now` so the gyro's bias can be measured: for
@@ -664,7 +678,10 @@ impl Mapping {
     /// Takes a lidar scan; pushes the pose (and any change of state, and the map when due)
     /// to `out`.
     pub fn on_scan(&mut self, scan: &LaserScan, out: &mut Vec<Outgoing>) {
-        let stamp = scan.header.stamp;
+        // A sweeping scan is taken as seen at its last beam, once de-skewed; an instantaneous
+        // one at its stamp.
+        let stamp = scan.last_beam_time();
+        let deskewing = self.cfg.deskew && scan.sweep() > Duration::ZERO;
         let Some(mut odom) = self.odometry_at(stamp) else {
             // No odometry yet: nothing to anchor the map frame to.
             return;
@@ -681,6 +698,7 @@ impl Mapping {
         let (lx, lh) = (self.cfg.lidar_x_m, self.cfg.lidar_height_m);
         let mut points = Vec::with_capacity(scan.ranges_m.len());
         let mut heights = Vec::with_capacity(scan.ranges_m.len());
+        let mut offsets = Vec::with_capacity(if deskewing { scan.ranges_m.len() } else { 0 });
         let ranges = if self.cfg.smooth_ranges {
             std::borrow::Cow::Owned(smoothed(&scan.ranges_m))
         } else {
@@ -701,6 +719,18 @@ impl Mapping {
             }
             points.push(Point2::new(x, y));
             heights.push(height);
+            if deskewing {
+                offsets.push(scan.beam_offset(i));
+            }
+        }
+        if deskewing {
+            sweep::deskew(
+                &self.recent,
+                scan.header.stamp,
+                stamp,
+                &mut points,
+                &offsets,
+            );
         }
         let sample = OdomSample {
             pose: odom,
@@ -902,6 +932,7 @@ mod tests {
                 depth_origin_m: [0.2, 0.0, 0.3],
                 traversability: TraversabilityConfig::default(),
                 smooth_ranges: false,
+                deskew: true,
                 depth_features: false,
                 relief_odometry: None,
             },

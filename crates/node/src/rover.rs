@@ -370,6 +370,7 @@ mod tests {
                     depth_origin_m: [0.2, 0.0, 0.3],
                     traversability: TraversabilityConfig::default(),
                     smooth_ranges: false,
+                    deskew: true,
                     depth_features: false,
                     relief_odometry: None,
                 },

@@ -187,6 +187,10 @@ pub struct Lidar {
     pub mount_height_m: f64,
     /// Mount offset forward of the rover centre, metres.
     pub mount_x_m: f64,
+    /// Whether each beam is measured at its own time during the scan, as the spinning head
+    /// of a real RPLIDAR does (the message's `time_increment_s` says when), rather than every
+    /// beam at once from one pose.
+    pub sweeps: bool,
 }
 
 /// RealSense D455-like depth camera.
@@ -457,6 +461,7 @@ impl Default for Lidar {
             noise_per_m: 0.002,
             mount_height_m: 0.3,
             mount_x_m: 0.0,
+            sweeps: true,
         }
     }
 }

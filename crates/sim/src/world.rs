@@ -14,10 +14,11 @@ use crate::sensors::depth::BODY_FROM_OPTICAL;
 use crate::sensors::{Frame3, camera, depth, lidar, proprio};
 use crate::terrain::Terrain;
 use crate::truth::GroundTruth;
-use realms_core::msgs::{Message, TwistStamped};
+use realms_core::geometry::normalize_angle_rad;
+use realms_core::msgs::{Message, TwistStamped, sweep_duration};
 use realms_core::{Duration, RoverId, Time, Topic};
 use serde::Serialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 /// Something notable that happened in the world.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -69,6 +70,9 @@ struct RoverSlot {
     gyro_rng: SimRng,
     camera_wanted: bool,
     dropped: BTreeMap<SensorKind, u32>,
+    /// `world_from_lidar` and the heading at each physics step of the last scan's length,
+    /// oldest first, for a sweeping lidar's beams (each from where the rover was at its time).
+    lidar_frames: VecDeque<(Time, Frame3, f64)>,
 }
 
 /// The whole simulated world.
@@ -116,6 +120,7 @@ impl World {
                     gyro_rng: streams.rng(Purpose::Gyro(n)),
                     camera_wanted: false,
                     dropped: BTreeMap::new(),
+                    lidar_frames: VecDeque::new(),
                 }
             })
             .collect();
@@ -148,7 +153,7 @@ impl World {
                 queue.push(Time::from_secs_f64(f.at_s + f.duration_s), Due::FaultEnd(k));
             }
         }
-        World {
+        let mut world = World {
             physics_dt,
             scenario: scenario.clone(),
             terrain,
@@ -159,7 +164,9 @@ impl World {
             now: Time::ZERO,
             state_time: Time::ZERO,
             events: Vec::new(),
-        }
+        };
+        world.keep_lidar_frames(Time::ZERO);
+        world
     }
 
     /// Swaps the accelerated ray caster for plain cell-by-cell marching (same results,
@@ -253,6 +260,7 @@ impl World {
                 Due::Physics => {
                     self.physics(t);
                     self.state_time = t;
+                    self.keep_lidar_frames(t);
                     self.queue.push_first(t + self.physics_dt, Due::Physics);
                 }
                 Due::Sensor(i, kind) => {
@@ -274,6 +282,26 @@ impl World {
             }
         }
         self.now = self.now.max(until);
+    }
+
+    /// Records each rover's `world_from_lidar` at the state of time `t`, and forgets those
+    /// no beam of a scan due from now on can need.
+    fn keep_lidar_frames(&mut self, t: Time) {
+        let spec = &self.scenario.rovers.lidar;
+        if !spec.sweeps {
+            return;
+        }
+        let base_from_lidar = self.base_from_lidar();
+        let sweep = sweep_duration(spec.beams as usize, lidar::time_increment_s(spec));
+        let oldest_needed = t - sweep - self.physics_dt;
+        for slot in &mut self.rovers {
+            let frame = World::world_from_base(&slot.body).compose(&base_from_lidar);
+            let frames = &mut slot.lidar_frames;
+            frames.push_back((t, frame, slot.body.pose.yaw_rad));
+            while frames.len() >= 2 && frames[1].0 <= oldest_needed {
+                frames.pop_front();
+            }
+        }
     }
 
     fn physics(&mut self, t: Time) {
@@ -350,14 +378,32 @@ impl World {
             SensorKind::Lidar => {
                 let pose = world_from_base.compose(&base_from_lidar);
                 let frame = format!("{ns}/laser");
-                let scan = lidar::scan(
-                    &self.pyramid,
-                    &pose,
-                    &spec.lidar,
-                    &mut slot.lidar_rng,
-                    t,
-                    &frame,
-                );
+                let scan = if spec.lidar.sweeps {
+                    // The last beam is measured now, the first a sweep earlier; each from
+                    // the latest state at or before its own time.
+                    let increment = lidar::time_increment_s(&spec.lidar);
+                    let beams = spec.lidar.beams as usize;
+                    let stamp = t - sweep_duration(beams, increment);
+                    let segments =
+                        sweep_segments(&slot.lidar_frames, pose, stamp, beams, increment);
+                    lidar::sweep(
+                        &self.pyramid,
+                        &segments,
+                        &spec.lidar,
+                        &mut slot.lidar_rng,
+                        stamp,
+                        &frame,
+                    )
+                } else {
+                    lidar::scan(
+                        &self.pyramid,
+                        &pose,
+                        &spec.lidar,
+                        &mut slot.lidar_rng,
+                        t,
+                        &frame,
+                    )
+                };
                 (id.topic("scan"), Message::LaserScan(scan))
             }
             SensorKind::Depth => {
@@ -445,4 +491,69 @@ impl World {
             rover: id.to_string(),
         });
     }
+}
+
+/// The segments a sweep's beams are cast from ([`lidar::sweep`]): beam `i`, measured at
+/// `stamp + i * increment`, from where the lidar was then, between the two states of
+/// `history` around that time. Between two physics steps the rover turned at a steady rate
+/// along a short arc, so its heading is interpolated and its position taken on the chord
+/// (under a micrometre off the arc at the rovers' speeds); its pitch and roll are those of
+/// the earlier step, as every other sensor sees them. Beams before the oldest state are
+/// measured from it, and with no history at all, every beam from `now`.
+fn sweep_segments(
+    history: &VecDeque<(Time, Frame3, f64)>,
+    now: Frame3,
+    stamp: Time,
+    beams: usize,
+    increment_s: f32,
+) -> Vec<lidar::SweepSegment> {
+    let beam_time = |i: usize| stamp + Duration::from_secs_f64(i as f64 * increment_s as f64);
+    let Some(&(_, oldest, _)) = history.front() else {
+        return vec![lidar::SweepSegment::still(0, now)];
+    };
+    let mut segments = Vec::new();
+    // The state at or before beam i's time: history[k].
+    let mut k: Option<usize> = None;
+    for i in 0..beams {
+        let at = beam_time(i);
+        let mut next = k.map_or(0, |k| k + 1);
+        while next < history.len() && history[next].0 <= at {
+            next += 1;
+        }
+        let state = next.checked_sub(1);
+        if i > 0 && state == k {
+            continue;
+        }
+        k = state;
+        segments.push(match state {
+            None => lidar::SweepSegment::still(i, oldest),
+            Some(j) if j + 1 == history.len() => lidar::SweepSegment::still(i, history[j].1),
+            Some(j) => {
+                let ((t0, f0, yaw0), (t1, f1, yaw1)) = (history[j], history[j + 1]);
+                let span = (t1 - t0).as_secs_f64();
+                let yaw_rate = normalize_angle_rad(yaw1 - yaw0) / span;
+                let velocity = [0, 1, 2].map(|a| (f1.origin[a] - f0.origin[a]) / span);
+                let since = (at - t0).as_secs_f64();
+                let (s, c) = (yaw_rate * since).sin_cos();
+                let r = &f0.rot;
+                let turned = [0, 1, 2].map(|col| {
+                    [
+                        c * r[0][col] - s * r[1][col],
+                        s * r[0][col] + c * r[1][col],
+                        r[2][col],
+                    ]
+                });
+                lidar::SweepSegment {
+                    first_beam: i,
+                    frame: Frame3 {
+                        origin: [0, 1, 2].map(|a| f0.origin[a] + velocity[a] * since),
+                        rot: [0, 1, 2].map(|row| [0, 1, 2].map(|col| turned[col][row])),
+                    },
+                    origin_step_m: velocity.map(|v| v * increment_s as f64),
+                    yaw_step_rad: yaw_rate * increment_s as f64,
+                }
+            }
+        });
+    }
+    segments
 }

@@ -361,7 +361,16 @@ fn every_sensor_message_is_stamped_with_the_time_of_the_state_it_shows() {
     let step = Duration::from_secs_f64(s.rovers.physics_step_s);
     let mut travelled: [std::collections::BTreeMap<Time, Pose2>; 2] = Default::default();
     for (topic, message) in &out {
-        let stamp = message.stamp();
+        // A sweeping scan is stamped with its first beam, a sweep before its last: the last
+        // shows the state of the step it is published at.
+        let stamp = match message {
+            Message::LaserScan(scan) => {
+                assert_eq!(scan.last_beam_time() - scan.header.stamp, scan.sweep());
+                assert!(scan.sweep() > Duration::ZERO, "the default lidar sweeps");
+                scan.last_beam_time()
+            }
+            other => other.stamp(),
+        };
         assert_eq!(
             stamp.0 % step.0,
             0,

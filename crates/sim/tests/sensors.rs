@@ -3,8 +3,9 @@
 mod common;
 
 use common::{flat_world, idle_until, scenario};
-use realms_core::msgs::{LaserScan, Message, PointCloud};
-use realms_core::{Point2, Pose2, Time};
+use realms_core::geometry::{Vec3, normalize_angle_rad};
+use realms_core::msgs::{Header, LaserScan, Message, PointCloud, Twist, TwistStamped};
+use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_sim::World;
 use realms_sim::terrain::{Boulder, Crater, Rect};
 
@@ -80,6 +81,94 @@ fn lidar_ranges_to_a_wall_match_geometry() {
     // Behind the rover the west wall is 4.8 m away (its face at x = 0.2).
     let back = scan.ranges_m[0] as f64;
     assert!((back - 4.8).abs() < 1e-3, "{back}");
+}
+
+/// A sweeping lidar measures each beam at its own time, from where the rover then was: on a
+/// rover turning in place, every beam that meets the east wall reads the wall's distance
+/// along the direction the beam had at its own instant, and the early beams of a scan read
+/// clearly other ranges than a scan taken at once from the last pose would.
+#[test]
+fn a_sweeping_lidar_measures_each_beam_from_the_pose_of_its_own_time() {
+    let s = noiseless_lidar();
+    assert!(s.rovers.lidar.sweeps, "the default lidar sweeps");
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
+        t.add_wall(
+            Rect {
+                min: Point2::new(12.0, 0.0),
+                max: Point2::new(12.5, 20.0),
+            },
+            1.0,
+        );
+    });
+    // Turn in place at 1 rad/s, recording the state at every physics step.
+    let step = Duration::from_secs_f64(s.rovers.physics_step_s);
+    let (mut states, mut out) = (vec![(Time::ZERO, 0.0)], Vec::new());
+    let mut t = Time::ZERO;
+    while t < Time::from_secs_f64(3.0) {
+        world.command(
+            RoverId(1),
+            TwistStamped {
+                header: Header {
+                    stamp: t,
+                    frame_id: "rover1/base_link".into(),
+                },
+                twist: Twist {
+                    linear: Vec3::new(0.0, 0.0, 0.0),
+                    angular: Vec3::new(0.0, 0.0, 1.0),
+                },
+            },
+        );
+        t += step;
+        world.advance_to(t, &mut out);
+        let body = world.rovers().next().expect("one rover");
+        assert!((body.pose.x_m - 5.0).abs() < 1e-9 && (body.pose.y_m - 10.0).abs() < 1e-9);
+        states.push((t, body.pose.yaw_rad));
+    }
+    // Between two physics steps the rover turns at a steady rate.
+    let yaw_at = |at: Time| {
+        let k = states.partition_point(|(ts, _)| *ts <= at);
+        let (t0, y0) = states[k - 1];
+        let Some(&(t1, y1)) = states.get(k) else {
+            return y0;
+        };
+        y0 + normalize_angle_rad(y1 - y0) * (at - t0).as_secs_f64() / (t1 - t0).as_secs_f64()
+    };
+    let scan = out
+        .iter()
+        .rev()
+        .find_map(|(_, m)| match m {
+            Message::LaserScan(s) => Some(s.clone()),
+            _ => None,
+        })
+        .expect("scans were published");
+    let sweep = scan.sweep().as_secs_f64();
+    assert!(
+        (sweep - 0.1 * 359.0 / 360.0).abs() < 1e-6,
+        "sweep {sweep} s"
+    );
+    let last_yaw = yaw_at(scan.last_beam_time());
+    let (mut checked, mut skewed) = (0, 0);
+    for (i, r) in scan.ranges_m.iter().enumerate() {
+        let a = beam_angle(&scan, i);
+        let own = normalize_angle_rad(a + yaw_at(scan.header.stamp + scan.beam_offset(i)));
+        if own.abs() < 40f64.to_radians() {
+            let expected = 7.0 / own.cos();
+            assert!(
+                (*r as f64 - expected).abs() < 1e-3,
+                "beam {i}: {r} against {expected}"
+            );
+            checked += 1;
+            let at_once = normalize_angle_rad(a + last_yaw);
+            if at_once.abs() < 40f64.to_radians() && (7.0 / at_once.cos() - expected).abs() > 0.05 {
+                skewed += 1;
+            }
+        }
+    }
+    assert!(checked > 70, "{checked}");
+    assert!(
+        skewed > 20,
+        "{skewed} beams read differently from a scan at once"
+    );
 }
 
 #[test]

@@ -163,23 +163,23 @@ impl HeightPyramid {
         ClearStep::Open
     }
 
-    /// [`cast`](Self::cast) for `N` rays from one origin, their clearance walks stepped in
-    /// turn so their chains of dependent steps overlap.
+    /// [`cast`](Self::cast) for `N` rays, each from its origin, their clearance walks stepped
+    /// in turn so their chains of dependent steps overlap.
     pub fn cast_side_by_side<const N: usize>(
         &self,
-        origin: [f64; 3],
+        origins: [[f64; 3]; N],
         dirs: [[f64; 3]; N],
         t_max_m: f64,
     ) -> [Option<f64>; N] {
         let Some(c) = &self.clearance else {
-            return dirs.map(|d| self.cast(origin, d, 0.0, t_max_m));
+            return std::array::from_fn(|i| self.cast(origins[i], dirs[i], 0.0, t_max_m));
         };
         // Where each ray's exact walk starts; None once it is known to hit nothing.
         let mut exact_from: [Option<f64>; N] = [None; N];
         let mut walks: [Option<ClearWalk>; N] = [None; N];
         let mut walking = 0;
         for i in 0..N {
-            match self.clear_walk(origin, dirs[i], 0.0, t_max_m) {
+            match self.clear_walk(origins[i], dirs[i], 0.0, t_max_m) {
                 Ok(w) => {
                     walks[i] = Some(w);
                     walking += 1;
@@ -200,7 +200,7 @@ impl HeightPyramid {
             }
         }
         std::array::from_fn(|i| {
-            exact_from[i].and_then(|t| self.cast_near(origin, dirs[i], t, t_max_m))
+            exact_from[i].and_then(|t| self.cast_near(origins[i], dirs[i], t, t_max_m))
         })
     }
 
@@ -351,23 +351,25 @@ mod tests {
     }
 
     proptest! {
-        /// Four rays cast side by side hit what each hits cast alone.
+        /// Four rays cast side by side, from origins a little apart (a sweeping lidar's
+        /// beams as the rover moves), hit what each hits cast alone.
         #[test]
         fn rays_cast_side_by_side_hit_what_each_hits_alone(
             seed in 0u64..1000,
             ox in 1.0..9.0f64, oy in 1.0..9.0f64, oz in 0.1..0.6f64,
             yaw in 0.0..std::f64::consts::TAU, pitch in -0.3..0.1f64,
-            spread in 0.0..0.2f64,
+            spread in 0.0..0.2f64, drift in -0.01..0.01f64,
         ) {
             let p = HeightPyramid::new(&rocky_field(seed));
-            let o = [ox, oy, oz];
+            let origins: [[f64; 3]; 4] =
+                std::array::from_fn(|i| [ox + drift * i as f64, oy - drift * i as f64, oz]);
             let dirs: [[f64; 3]; 4] = std::array::from_fn(|i| {
                 let (a, e) = (yaw + spread * i as f64, pitch + 0.02 * i as f64);
                 [e.cos() * a.cos(), e.cos() * a.sin(), e.sin()]
             });
-            let together = p.cast_side_by_side(o, dirs, 12.0);
+            let together = p.cast_side_by_side(origins, dirs, 12.0);
             for i in 0..4 {
-                prop_assert_eq!(together[i], p.cast(o, dirs[i], 0.0, 12.0), "ray {}", i);
+                prop_assert_eq!(together[i], p.cast(origins[i], dirs[i], 0.0, 12.0), "ray {}", i);
             }
         }
 
