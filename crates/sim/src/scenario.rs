@@ -189,7 +189,8 @@ pub struct Lidar {
     pub mount_x_m: f64,
     /// Whether each beam is measured at its own time during the scan, as the spinning head
     /// of a real RPLIDAR does (the message's `time_increment_s` says when), rather than every
-    /// beam at once from one pose.
+    /// beam at once from one pose. Off by default until the rovers' SLAM holds up under it
+    /// over whole missions as it does without (BENCHMARKS.md, "A lidar that sweeps").
     pub sweeps: bool,
 }
 
@@ -461,7 +462,7 @@ impl Default for Lidar {
             noise_per_m: 0.002,
             mount_height_m: 0.3,
             mount_x_m: 0.0,
-            sweeps: true,
+            sweeps: false,
         }
     }
 }

@@ -329,11 +329,17 @@ fn commands_a_driver_cannot_execute_are_refused() {
 
 #[test]
 fn every_sensor_message_is_stamped_with_the_time_of_the_state_it_shows() {
+    stamped_with_the_time_of_the_state_they_show(false);
+    stamped_with_the_time_of_the_state_they_show(true);
+}
+
+fn stamped_with_the_time_of_the_state_they_show(sweeps: bool) {
     // Two rovers driven alike, side by side, with exact encoders. Their sensors fire at
     // staggered instants, but each message is stamped with the physics step whose state it
     // shows, so at any stamp both have the same odometry. Stamped when they fire, rover2's
     // readings would carry stamps 3 ms late and none would meet rover1's.
     let mut s = firm(scenario(2));
+    s.rovers.lidar.sweeps = sweeps;
     s.rovers.odometry.speed_noise_frac = 0.0;
     s.rovers.odometry.yaw_scale_error_std = 0.0;
     let starts = [Pose2::new(3.0, 5.0, 0.0), Pose2::new(3.0, 12.0, 0.0)];
@@ -366,7 +372,7 @@ fn every_sensor_message_is_stamped_with_the_time_of_the_state_it_shows() {
         let stamp = match message {
             Message::LaserScan(scan) => {
                 assert_eq!(scan.last_beam_time() - scan.header.stamp, scan.sweep());
-                assert!(scan.sweep() > Duration::ZERO, "the default lidar sweeps");
+                assert_eq!(scan.sweep() > Duration::ZERO, sweeps);
                 scan.last_beam_time()
             }
             other => other.stamp(),
