@@ -524,3 +524,44 @@ impl Message {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(beams: usize, time_increment_s: f32) -> LaserScan {
+        LaserScan {
+            header: Header {
+                stamp: Time::from_secs_f64(10.0),
+                frame_id: "rover1/laser".into(),
+            },
+            time_increment_s,
+            ranges_m: vec![1.0; beams],
+            ..LaserScan::default()
+        }
+    }
+
+    #[test]
+    fn a_sweep_runs_from_the_stamp_to_the_last_beam() {
+        let s = scan(360, 0.1 / 360.0);
+        let sweep = s.sweep().as_secs_f64();
+        // time_increment_s is an f32: a few nanoseconds off the exact sweep.
+        assert!((sweep - 0.1 * 359.0 / 360.0).abs() < 1e-7, "{sweep}");
+        assert_eq!(s.last_beam_time(), s.header.stamp + s.sweep());
+        assert_eq!(s.beam_offset(0), Duration::ZERO);
+        assert_eq!(s.beam_offset(359), s.sweep());
+    }
+
+    #[test]
+    fn a_scan_claiming_no_plausible_sweep_is_taken_as_measured_at_once() {
+        // From a driver or the network: nothing here may panic or move a beam in time.
+        for ti in [0.0, -1e-3, f32::NAN, f32::INFINITY, f32::MAX, 0.01] {
+            let s = scan(360, ti);
+            assert_eq!(s.sweep(), Duration::ZERO, "time_increment_s {ti}");
+            assert_eq!(s.last_beam_time(), s.header.stamp);
+            assert_eq!(s.beam_offset(200), Duration::ZERO);
+        }
+        assert_eq!(scan(0, 1e-3).sweep(), Duration::ZERO, "no beams");
+        assert_eq!(scan(1, 1e-3).sweep(), Duration::ZERO, "one beam");
+    }
+}

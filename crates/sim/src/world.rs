@@ -378,12 +378,15 @@ impl World {
             SensorKind::Lidar => {
                 let pose = world_from_base.compose(&base_from_lidar);
                 let frame = format!("{ns}/laser");
-                let scan = if spec.lidar.sweeps {
+                let increment = lidar::time_increment_s(&spec.lidar);
+                let beams = spec.lidar.beams as usize;
+                let sweep = sweep_duration(beams, increment);
+                // A head turning slower than once a second is no sweep a receiver would take
+                // for one (`LaserScan::sweep`): such a lidar measures at once.
+                let scan = if spec.lidar.sweeps && sweep > Duration::ZERO {
                     // The last beam is measured now, the first a sweep earlier; each from
-                    // the latest state at or before its own time.
-                    let increment = lidar::time_increment_s(&spec.lidar);
-                    let beams = spec.lidar.beams as usize;
-                    let stamp = t - sweep_duration(beams, increment);
+                    // where the rover was at its own time.
+                    let stamp = t - sweep;
                     let segments =
                         sweep_segments(&slot.lidar_frames, pose, stamp, beams, increment);
                     lidar::sweep(

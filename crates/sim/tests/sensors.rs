@@ -473,3 +473,23 @@ mod exactness {
         }
     }
 }
+
+/// A head turning slower than once a second is no sweep a receiver takes for one, so such a
+/// lidar measures at once and says so, rather than spreading beams over times its scan's
+/// stamp and `time_increment_s` would not tell apart.
+#[test]
+fn a_lidar_turning_slower_than_once_a_second_measures_at_once() {
+    let mut s = noiseless_lidar();
+    s.rovers.lidar.sweeps = true;
+    s.rovers.lidar.rate_hz = 0.5;
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |_| {});
+    let scan = first_scan(&idle_until(&mut world, Time::from_secs_f64(2.5)));
+    assert_eq!(scan.time_increment_s, 0.0);
+    assert_eq!(scan.sweep(), Duration::ZERO);
+    let step = Duration::from_secs_f64(s.rovers.physics_step_s);
+    assert_eq!(
+        scan.header.stamp.as_ns() % step.as_ns(),
+        0,
+        "a physics step's state"
+    );
+}
