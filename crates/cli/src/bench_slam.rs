@@ -15,7 +15,7 @@ use crate::bench_slam_drift::{BAND_EDGES_M, Band, WINDOW_SCANS, drift_by_band};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
-use realms_core::msgs::{LocalisationState, Message};
+use realms_core::msgs::{LaserScan, LocalisationState, Message};
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map, pose_errors};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
@@ -592,6 +592,31 @@ struct Replay {
 /// The columns of a `--trajectories` file.
 const CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_yaw_rad,tracked_x_m,tracked_y_m,tracked_yaw_rad,final_x_m,final_y_m,final_yaw_rad,state,closures,wheels_x_m,wheels_y_m,wheels_yaw_rad";
 
+/// The name of the replays on the sweeps' twins taken at once (`--lidar-twins`).
+const AT_ONCE_TWIN: &str = "at-once-twin";
+
+/// A rover's captured input with each sweeping scan replaced by its twin taken at once (the
+/// twin is stamped with the sweep's last beam's time).
+fn with_twins(input: &[CapturedInput], twins: &[LaserScan]) -> Vec<CapturedInput> {
+    let by_time: std::collections::BTreeMap<Time, &LaserScan> =
+        twins.iter().map(|s| (s.header.stamp, s)).collect();
+    input
+        .iter()
+        .map(|c| match &c.message {
+            Message::LaserScan(scan) => {
+                let twin = by_time
+                    .get(&scan.last_beam_time())
+                    .expect("every sweep has its twin");
+                CapturedInput {
+                    message: Message::LaserScan((*twin).clone()),
+                    ..c.clone()
+                }
+            }
+            _ => c.clone(),
+        })
+        .collect()
+}
+
 /// Runs SLAM for one rover over its captured input.
 fn replay(
     seed: u64,
@@ -893,6 +918,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         }
     }
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
+    // Every replayed setup by name, the setup as it is first.
+    let names: Vec<&str> = std::iter::once("baseline")
+        .chain(args.lidar_twins.then_some(AT_ONCE_TWIN))
+        .chain(variants.iter().map(|v| v.name))
+        .collect();
     let workers = crate::bench::workers(args.jobs);
     let with_csv = args.trajectories.is_some();
     if let Some(dir) = &args.trajectories {
@@ -924,6 +954,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     if args.exact_gyro_bias {
         println!("gyro: the calibration's leftover bias removed");
     }
+    if args.lidar_twins {
+        println!(
+            "lidar: sweeping; {AT_ONCE_TWIN}: the same SLAM on each sweep's twin taken at once from its last beam's pose"
+        );
+    }
     for v in &variants {
         println!("variant {}: {}", v.name, v.what);
     }
@@ -934,6 +969,9 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         s.duration_s = limit_s;
         if args.no_faults {
             s.faults.clear();
+        }
+        if args.lidar_twins {
+            s.rovers.lidar.sweeps = true;
         }
         let options = MissionOptions {
             ideal_comms: !args.radio,
@@ -946,8 +984,12 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         let biases: Vec<f64> = world.rovers().map(|b| b.gyro_bias_rad_s).collect();
         let mut mission = Mission::with_options(world, options);
         mission.capture_slam_inputs();
+        if args.lidar_twins {
+            mission.world_mut().keep_lidar_twins();
+        }
         mission.run_until(Time::from_secs_f64(limit_s));
         let mut capture = mission.take_capture();
+        let twins = mission.world_mut().take_lidar_twins();
         drop(mission);
         if args.perfect_wheels {
             for input in &mut capture {
@@ -960,8 +1002,20 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             }
         }
         let mut replays = Vec::new();
-        for (id, input) in ids.iter().zip(&capture) {
+        for (k, (id, input)) in ids.iter().zip(&capture).enumerate() {
             replays.push(replay(seed, *id, "baseline", &cfg, input, &truth, with_csv));
+            if args.lidar_twins {
+                let twinned = with_twins(input, &twins[k]);
+                replays.push(replay(
+                    seed,
+                    *id,
+                    AT_ONCE_TWIN,
+                    &cfg,
+                    &twinned,
+                    &truth,
+                    with_csv,
+                ));
+            }
             for v in &variants {
                 let mut changed = cfg.clone();
                 (v.apply)(&mut changed);
@@ -1024,10 +1078,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         "| variant | final RMS, median rover | final RMS, worst rover per seed (median) | aligned RMS, median rover | tracked RMS, median rover | fleet SLAM speed, median seed (sim s / wall s of all rovers) | hazards near the paths marked, all rovers | hazard cells truly untraversable, all rovers |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
-    let names: Vec<&str> = std::iter::once("baseline")
-        .chain(variants.iter().map(|v| v.name))
-        .collect();
-    for name in names {
+    for &name in &names {
         let of: Vec<&Replay> = all.iter().filter(|r| r.variant == name).collect();
         let worst: Vec<f64> = seeds
             .iter()
@@ -1075,7 +1126,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         BAND_EDGES_M[0], BAND_EDGES_M[0], BAND_EDGES_M[1], BAND_EDGES_M[1]
     );
     println!("| --- | --- | --- | --- |");
-    for name in std::iter::once("baseline").chain(variants.iter().map(|v| v.name)) {
+    for &name in &names {
         let mut pooled = [Band::default(); 3];
         for r in all.iter().filter(|r| r.variant == name) {
             for (p, b) in pooled.iter_mut().zip(&r.drift) {

@@ -236,6 +236,11 @@ pub struct BenchSlamArgs {
     /// the true one), to see what the gyro's leftover bias costs.
     #[arg(long)]
     pub exact_gyro_bias: bool,
+    /// Run the missions with the sweeping lidar and keep each scan's twin taken at once from
+    /// the pose of its last beam (the same noise stream), then replay every rover's SLAM on
+    /// the twins too (`at-once-twin`): the two lidars compared on one path.
+    #[arg(long)]
+    pub lidar_twins: bool,
     /// Seeds run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,

@@ -315,6 +315,11 @@ impl Mission {
         &self.world
     }
 
+    /// The world, to change what it keeps for a benchmark ([`World::keep_lidar_twins`]).
+    pub fn world_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
+
     /// Sampled true trajectories, one per rover.
     pub fn trajectories(&self) -> &[Vec<PoseSample>] {
         &self.trajectories

@@ -15,7 +15,7 @@ use crate::sensors::{Frame3, camera, depth, lidar, proprio};
 use crate::terrain::Terrain;
 use crate::truth::GroundTruth;
 use realms_core::geometry::normalize_angle_rad;
-use realms_core::msgs::{Message, TwistStamped, sweep_duration};
+use realms_core::msgs::{LaserScan, Message, TwistStamped, sweep_duration};
 use realms_core::{Duration, RoverId, Time, Topic};
 use serde::Serialize;
 use std::collections::{BTreeMap, VecDeque};
@@ -89,6 +89,9 @@ pub struct World {
     state_time: Time,
     events: Vec<SimEvent>,
     physics_dt: Duration,
+    /// Each rover's sweeping scans taken again at once, once asked for
+    /// ([`World::keep_lidar_twins`]).
+    lidar_twins: Option<Vec<Vec<LaserScan>>>,
 }
 
 impl World {
@@ -164,6 +167,7 @@ impl World {
             now: Time::ZERO,
             state_time: Time::ZERO,
             events: Vec::new(),
+            lidar_twins: None,
         };
         world.keep_lidar_frames(Time::ZERO);
         world
@@ -284,6 +288,24 @@ impl World {
         self.now = self.now.max(until);
     }
 
+    /// From now on, every sweeping scan is also taken at once from the pose of its last beam,
+    /// with the same noise, and kept ([`World::take_lidar_twins`]); nothing is published for
+    /// it. Two replays of a rover's SLAM, one on its sweeps and one on their twins, then
+    /// compare the two lidars on one path (`realms bench slam --lidar-twins`), where two
+    /// missions, one with each, part ways at the first decision they take differently.
+    pub fn keep_lidar_twins(&mut self) {
+        self.lidar_twins = Some(vec![Vec::new(); self.rovers.len()]);
+    }
+
+    /// Each rover's twins kept so far, in the order of their sweeps (empty without
+    /// [`World::keep_lidar_twins`], or while the lidar does not sweep).
+    pub fn take_lidar_twins(&mut self) -> Vec<Vec<LaserScan>> {
+        match &mut self.lidar_twins {
+            None => vec![Vec::new(); self.rovers.len()],
+            Some(twins) => twins.iter_mut().map(std::mem::take).collect(),
+        }
+    }
+
     /// Records each rover's `world_from_lidar` at the state of time `t`, and forgets those
     /// no beam of a scan due from now on can need.
     fn keep_lidar_frames(&mut self, t: Time) {
@@ -387,6 +409,17 @@ impl World {
                     // The last beam is measured now, the first a sweep earlier; each from
                     // where the rover was at its own time.
                     let stamp = t - sweep;
+                    if let Some(twins) = &mut self.lidar_twins {
+                        let mut same_noise = slot.lidar_rng.clone();
+                        twins[i].push(lidar::scan(
+                            &self.pyramid,
+                            &pose,
+                            &spec.lidar,
+                            &mut same_noise,
+                            t,
+                            &frame,
+                        ));
+                    }
                     let segments =
                         sweep_segments(&slot.lidar_frames, pose, stamp, beams, increment);
                     lidar::sweep(

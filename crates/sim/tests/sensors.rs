@@ -493,3 +493,46 @@ fn a_lidar_turning_slower_than_once_a_second_measures_at_once() {
         "a physics step's state"
     );
 }
+
+/// Kept for a benchmark, each sweep's twin is taken at once from the pose of its last beam
+/// with the same noise: on a rover standing still the two are the same scan, on one turning
+/// they are not.
+#[test]
+fn each_sweep_keeps_a_twin_taken_at_once_from_its_last_beam() {
+    let mut s = scenario(1);
+    s.rovers.lidar.sweeps = true;
+    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |_| {});
+    world.keep_lidar_twins();
+    let standing = idle_until(&mut world, Time::from_secs_f64(1.0));
+    let turning = common::drive(&mut world, RoverId(1), 0.0, 1.0, 2.0);
+    let twins = world.take_lidar_twins();
+    assert_eq!(twins.len(), 1);
+    let scans: Vec<&LaserScan> = standing
+        .iter()
+        .chain(&turning)
+        .filter_map(|(_, m)| match m {
+            Message::LaserScan(s) => Some(s),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(twins[0].len(), scans.len(), "one twin per sweep");
+    let mut differing = 0;
+    for (scan, twin) in scans.iter().zip(&twins[0]) {
+        assert_eq!(twin.header.stamp, scan.last_beam_time());
+        assert_eq!(twin.sweep(), Duration::ZERO);
+        if scan.header.stamp < Time::from_secs_f64(0.9) {
+            assert_eq!(
+                twin.ranges_m, scan.ranges_m,
+                "standing still at {:?}",
+                scan.header.stamp
+            );
+        } else if twin.ranges_m != scan.ranges_m {
+            differing += 1;
+        }
+    }
+    assert!(
+        differing >= 15,
+        "{differing} turning sweeps differ from their twins"
+    );
+    assert!(world.take_lidar_twins()[0].is_empty(), "taken once");
+}
