@@ -7,10 +7,9 @@ use realms_mission::{Mission, MissionOptions};
 use realms_sim::{Scenario, World};
 use std::path::{Path, PathBuf};
 
-fn small() -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
-    Scenario::load(&path).expect("small scenario loads")
-}
+mod common;
+
+use common::small;
 
 fn run(scenario: &Scenario, name: &str, wall_s: f64) -> PathBuf {
     let dir =
@@ -142,20 +141,7 @@ fn the_report_holds_the_contracted_fields_and_the_scheduled_faults() {
 fn slam_replayed_on_the_captured_input_tracks_exactly_as_on_board() {
     // The replay is how `realms bench slam` compares SLAM variants on identical input: it
     // is only worth that if the setup as it is gives back exactly what the rovers had.
-    let s = small();
-    let options = MissionOptions {
-        ideal_comms: true,
-        gyro_calibration: realms_core::Duration::from_secs(5),
-        ..MissionOptions::default()
-    };
-    let world = World::new(&s);
-    let cfg = realms_mission::rover_mapping_config(&world, &options);
-    let ids: Vec<_> = world.rovers().map(|b| b.id).collect();
-    let mut mission = Mission::with_options(world, options);
-    mission.capture_slam_inputs();
-    mission.run_until(Time::from_secs_f64(60.0));
-    mission.finish();
-    let capture = mission.take_capture();
+    let (cfg, ids, mut mission, capture) = common::captured_run(&small(), 60.0);
     assert_eq!(capture.len(), ids.len());
     let mut drove = 0;
     for (k, (id, input)) in ids.iter().zip(&capture).enumerate() {

@@ -5,13 +5,11 @@
 use realms_core::msgs::{Header, LocalisationState, Message, NavActivity, NavGoal};
 use realms_core::{Point2, RoverId, Time};
 use realms_mission::{Mission, MissionOptions};
-use realms_sim::{Scenario, World};
-use std::path::Path;
+use realms_sim::World;
 
-fn small() -> Scenario {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
-    Scenario::load(&path).expect("small scenario loads")
-}
+mod common;
+
+use common::small;
 
 /// When rover1's wheels start slipping, seconds.
 const SLIP_AT_S: f64 = 100.0;
@@ -230,20 +228,8 @@ fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
 fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     let mut s = small();
     s.rovers.lidar.sweeps = true;
-    let options = MissionOptions {
-        ideal_comms: true,
-        gyro_calibration: realms_core::Duration::from_secs(5),
-        ..MissionOptions::default()
-    };
-    let world = World::new(&s);
-    let cfg = realms_mission::rover_mapping_config(&world, &options);
+    let (cfg, ids, _, capture) = common::captured_run(&s, 60.0);
     assert!(cfg.deskew, "the rovers de-skew");
-    let ids: Vec<_> = world.rovers().map(|b| b.id).collect();
-    let mut mission = Mission::with_options(world, options);
-    mission.capture_slam_inputs();
-    mission.run_until(Time::from_secs_f64(60.0));
-    mission.finish();
-    let capture = mission.take_capture();
     // The tracked pose's RMS error against the truth over every scan, for one setup.
     let rms = |id: RoverId, input: &[realms_mission::CapturedInput], deskew: bool| {
         let mut c = cfg.clone();

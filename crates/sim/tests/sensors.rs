@@ -35,6 +35,19 @@ fn noiseless_lidar() -> realms_sim::Scenario {
     s
 }
 
+/// One rover at (5, 10) facing a 1 m wall whose face is 7 m east of it (x = 12 m).
+fn facing_the_east_wall(s: &realms_sim::Scenario) -> World {
+    flat_world(s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
+        t.add_wall(
+            Rect {
+                min: Point2::new(12.0, 0.0),
+                max: Point2::new(12.5, 20.0),
+            },
+            1.0,
+        );
+    })
+}
+
 fn beam_angle(scan: &LaserScan, i: usize) -> f64 {
     scan.angle_min_rad as f64 + i as f64 * scan.angle_increment_rad as f64
 }
@@ -54,15 +67,7 @@ fn cloud_in_world(world: &World, cloud: &PointCloud) -> Vec<[f64; 3]> {
 #[test]
 fn lidar_ranges_to_a_wall_match_geometry() {
     let s = noiseless_lidar();
-    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
-        t.add_wall(
-            Rect {
-                min: Point2::new(12.0, 0.0),
-                max: Point2::new(12.5, 20.0),
-            },
-            1.0,
-        );
-    });
+    let mut world = facing_the_east_wall(&s);
     let scan = first_scan(&idle_until(&mut world, Time::from_secs_f64(0.2)));
     assert_eq!(scan.ranges_m.len(), 360);
     let mut checked = 0;
@@ -91,15 +96,7 @@ fn lidar_ranges_to_a_wall_match_geometry() {
 fn a_sweeping_lidar_measures_each_beam_from_the_pose_of_its_own_time() {
     let mut s = noiseless_lidar();
     s.rovers.lidar.sweeps = true;
-    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
-        t.add_wall(
-            Rect {
-                min: Point2::new(12.0, 0.0),
-                max: Point2::new(12.5, 20.0),
-            },
-            1.0,
-        );
-    });
+    let mut world = facing_the_east_wall(&s);
     // Turn in place at 1 rad/s, recording the state at every physics step.
     let step = Duration::from_secs_f64(s.rovers.physics_step_s);
     let (mut states, mut out) = (vec![(Time::ZERO, 0.0)], Vec::new());
@@ -174,15 +171,7 @@ fn a_sweeping_lidar_measures_each_beam_from_the_pose_of_its_own_time() {
 #[test]
 fn lidar_noise_has_the_configured_spread() {
     let s = scenario(1);
-    let mut world = flat_world(&s, &[Pose2::new(5.0, 10.0, 0.0)], |t| {
-        t.add_wall(
-            Rect {
-                min: Point2::new(12.0, 0.0),
-                max: Point2::new(12.5, 20.0),
-            },
-            1.0,
-        );
-    });
+    let mut world = facing_the_east_wall(&s);
     let out = idle_until(&mut world, Time::from_secs_f64(20.0));
     let errors: Vec<f64> = out
         .iter()
