@@ -189,8 +189,8 @@ pub struct Lidar {
     pub mount_x_m: f64,
     /// Whether each beam is measured at its own time during the scan, as the spinning head
     /// of a real RPLIDAR does (the message's `time_increment_s` says when), rather than every
-    /// beam at once from one pose. Off by default until the rovers' SLAM holds up under it
-    /// over whole missions as it does without (BENCHMARKS.md, "A lidar that sweeps").
+    /// beam at once from one pose. Off by default for now: de-skewed, it maps as well on one
+    /// path, but the rovers then drive other paths (BENCHMARKS.md, "A lidar that sweeps").
     pub sweeps: bool,
 }
 
