@@ -61,8 +61,14 @@ impl LaserScan {
         if self.sweep() == Duration::ZERO {
             return Duration::ZERO;
         }
-        Duration::from_secs_f64(i as f64 * self.time_increment_s as f64)
+        beam_offset(i, self.time_increment_s)
     }
+}
+
+/// When beam `i` of a sweep `time_increment_s` apart is measured, counted from its first: the
+/// one rule a lidar and a receiver both time a beam by, to the nanosecond.
+pub fn beam_offset(i: usize, time_increment_s: f32) -> Duration {
+    Duration::from_secs_f64(i as f64 * time_increment_s as f64)
 }
 
 /// [`LaserScan::sweep`] for a scan of `beams` beams `time_increment_s` apart.

@@ -89,9 +89,13 @@ pub fn deskew(
     points: &mut [Point2],
     offsets: &[Duration],
 ) {
+    // Where the rover was at the reference, once for the whole scan.
+    let Some(to_reference) = motion.pose_at(reference).map(|r| r.inverse()) else {
+        return;
+    };
     for (p, offset) in points.iter_mut().zip(offsets) {
-        if let Some(m) = motion.motion(stamp + *offset, reference) {
-            *p = m.transform_point(*p);
+        if let Some(at) = motion.pose_at(stamp + *offset) {
+            *p = (to_reference * at).transform_point(*p);
         }
     }
 }

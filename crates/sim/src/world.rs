@@ -15,7 +15,7 @@ use crate::sensors::{Frame3, camera, depth, lidar, proprio};
 use crate::terrain::Terrain;
 use crate::truth::GroundTruth;
 use realms_core::geometry::normalize_angle_rad;
-use realms_core::msgs::{LaserScan, Message, TwistStamped, sweep_duration};
+use realms_core::msgs::{LaserScan, Message, TwistStamped, beam_offset};
 use realms_core::{Duration, RoverId, Time, Topic};
 use serde::Serialize;
 use std::collections::{BTreeMap, VecDeque};
@@ -309,12 +309,10 @@ impl World {
     /// Records each rover's `world_from_lidar` at the state of time `t`, and forgets those
     /// no beam of a scan due from now on can need.
     fn keep_lidar_frames(&mut self, t: Time) {
-        let spec = &self.scenario.rovers.lidar;
-        if !spec.sweeps {
+        let Some(sweep) = lidar::sweep_length(&self.scenario.rovers.lidar) else {
             return;
-        }
+        };
         let base_from_lidar = self.base_from_lidar();
-        let sweep = sweep_duration(spec.beams as usize, lidar::time_increment_s(spec));
         let oldest_needed = t - sweep - self.physics_dt;
         for slot in &mut self.rovers {
             let frame = World::world_from_base(&slot.body).compose(&base_from_lidar);
@@ -400,12 +398,7 @@ impl World {
             SensorKind::Lidar => {
                 let pose = world_from_base.compose(&base_from_lidar);
                 let frame = format!("{ns}/laser");
-                let increment = lidar::time_increment_s(&spec.lidar);
-                let beams = spec.lidar.beams as usize;
-                let sweep = sweep_duration(beams, increment);
-                // A head turning slower than once a second is no sweep a receiver would take
-                // for one (`LaserScan::sweep`): such a lidar measures at once.
-                let scan = if spec.lidar.sweeps && sweep > Duration::ZERO {
+                let scan = if let Some(sweep) = lidar::sweep_length(&spec.lidar) {
                     // The last beam is measured now, the first a sweep earlier; each from
                     // where the rover was at its own time.
                     let stamp = t - sweep;
@@ -420,8 +413,13 @@ impl World {
                             &frame,
                         ));
                     }
-                    let segments =
-                        sweep_segments(&slot.lidar_frames, pose, stamp, beams, increment);
+                    let segments = sweep_segments(
+                        &slot.lidar_frames,
+                        pose,
+                        stamp,
+                        spec.lidar.beams as usize,
+                        lidar::time_increment_s(&spec.lidar),
+                    );
                     lidar::sweep(
                         &self.pyramid,
                         &segments,
@@ -543,7 +541,7 @@ fn sweep_segments(
     beams: usize,
     increment_s: f32,
 ) -> Vec<lidar::SweepSegment> {
-    let beam_time = |i: usize| stamp + Duration::from_secs_f64(i as f64 * increment_s as f64);
+    let beam_time = |i: usize| stamp + beam_offset(i, increment_s);
     let Some(&(_, oldest, _)) = history.front() else {
         return vec![lidar::SweepSegment::still(0, now)];
     };
@@ -570,20 +568,11 @@ fn sweep_segments(
                 let yaw_rate = normalize_angle_rad(yaw1 - yaw0) / span;
                 let velocity = [0, 1, 2].map(|a| (f1.origin[a] - f0.origin[a]) / span);
                 let since = (at - t0).as_secs_f64();
-                let (s, c) = (yaw_rate * since).sin_cos();
-                let r = &f0.rot;
-                let turned = [0, 1, 2].map(|col| {
-                    [
-                        c * r[0][col] - s * r[1][col],
-                        s * r[0][col] + c * r[1][col],
-                        r[2][col],
-                    ]
-                });
                 lidar::SweepSegment {
                     first_beam: i,
                     frame: Frame3 {
                         origin: [0, 1, 2].map(|a| f0.origin[a] + velocity[a] * since),
-                        rot: [0, 1, 2].map(|row| [0, 1, 2].map(|col| turned[col][row])),
+                        ..f0.turned_about_vertical((yaw_rate * since).sin_cos())
                     },
                     origin_step_m: velocity.map(|v| v * increment_s as f64),
                     yaw_step_rad: yaw_rate * increment_s as f64,

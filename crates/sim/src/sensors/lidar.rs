@@ -8,8 +8,8 @@ use super::{Frame3, gaussian};
 use crate::raycast::HeightPyramid;
 use crate::rng::SimRng;
 use crate::scenario::Lidar;
-use realms_core::Time;
-use realms_core::msgs::{Header, LaserScan};
+use realms_core::msgs::{Header, LaserScan, sweep_duration};
+use realms_core::{Duration, Time};
 
 /// A stretch of a sweep's beams measured while the rover moves from one physics state to the
 /// next: its heading turns and its position moves by the same amount from beam to beam.
@@ -59,6 +59,14 @@ pub fn scan(
 /// The time between beams of a sweeping scan: one turn of the head per scan.
 pub fn time_increment_s(spec: &Lidar) -> f32 {
     (1.0 / spec.rate_hz / spec.beams as f64) as f32
+}
+
+/// How long a scan of `spec` takes from its first beam to its last, if it sweeps: `None` for
+/// a lidar that measures at once, and for one whose head turns slower than once a second,
+/// which no receiver would take for a sweep ([`LaserScan::sweep`]) and so measures at once.
+pub fn sweep_length(spec: &Lidar) -> Option<Duration> {
+    let sweep = sweep_duration(spec.beams as usize, time_increment_s(spec));
+    (spec.sweeps && sweep > Duration::ZERO).then_some(sweep)
 }
 
 /// Takes one scan as a spinning lidar does, each beam at its own time (`stamp` the first

@@ -53,6 +53,20 @@ impl Frame3 {
         ]
     }
 
+    /// This frame turned by the angle of (`sin`, `cos`) about the world's vertical through its
+    /// origin.
+    pub fn turned_about_vertical(&self, (sin, cos): (f64, f64)) -> Frame3 {
+        let r = &self.rot;
+        Frame3 {
+            origin: self.origin,
+            rot: [
+                [0, 1, 2].map(|col| cos * r[0][col] - sin * r[1][col]),
+                [0, 1, 2].map(|col| sin * r[0][col] + cos * r[1][col]),
+                r[2],
+            ],
+        }
+    }
+
     /// `self * child`: the child's frame expressed in this frame's parent.
     pub fn compose(&self, child: &Frame3) -> Frame3 {
         let mut rot = [[0.0; 3]; 3];
