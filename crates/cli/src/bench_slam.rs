@@ -117,6 +117,29 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.smooth_ranges = false,
     },
     Variant {
+        name: "weak-hops-30",
+        what: "sequential edges along the heading loosened by 30 % of the hop's unpinned travel",
+        apply: |c| c.mapper.weak_hop_share = Some(0.3),
+    },
+    Variant {
+        name: "weak-hops-100",
+        what: "sequential edges along the heading loosened by all of the hop's unpinned travel",
+        apply: |c| c.mapper.weak_hop_share = Some(1.0),
+    },
+    Variant {
+        name: "weak-hops-300",
+        what: "sequential edges along the heading loosened by three times the hop's unpinned travel",
+        apply: |c| c.mapper.weak_hop_share = Some(3.0),
+    },
+    Variant {
+        name: "weak-hops-100-chain",
+        what: "weak-hops-100, the pose graph solved to the optimum by the chain-preconditioned solver",
+        apply: |c| {
+            c.mapper.weak_hop_share = Some(1.0);
+            c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Chain;
+        },
+    },
+    Variant {
         name: "no-deskew",
         what: "a sweeping lidar's beams all taken as seen at the scan's last beam, the rover's motion during the sweep left in",
         apply: |c| c.deskew = false,

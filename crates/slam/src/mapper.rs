@@ -367,6 +367,13 @@ pub struct MapperConfig {
     /// Closures across travel the scans did not pin are searched wider and may correct more
     /// (see [`WeakTravel`]; `None`: the path's drift alone). Needs `closure_drift`.
     pub weak_travel: Option<WeakTravel>,
+    /// A keyframe hop over travel the scans did not pin along the heading ([`WeakTravel`])
+    /// holds the graph along the heading only as firmly as the wheels can carry it: its
+    /// sequential edge's standard deviation there grows by this share of that travel. A
+    /// later closure can then bend a stretch that slid along a wall back into place, where
+    /// an edge as stiff as a pinned one makes the closure the outlier (`None`: every
+    /// sequential edge as stiff as a pinned one). Needs `weak_travel`.
+    pub weak_hop_share: Option<f64>,
     /// Scale the wheels' translation by the share the scan matches found real (`None`: take
     /// the wheels at their word, as for a recorded log's calibrated odometry).
     pub slip_calibration: Option<SlipCalibration>,
@@ -666,6 +673,7 @@ impl Default for MapperConfig {
                 per_m_rad: 1f64.to_radians(),
             }),
             weak_travel: None,
+            weak_hop_share: None,
             slip_calibration: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
@@ -1478,8 +1486,8 @@ impl Mapper {
         self.keyframe_odom.push((time_s, odom));
         let unmatched_m = std::mem::take(&mut self.unmatched_m);
         self.keyframe_unmatched_m.push(unmatched_m);
-        let weak_total_m = self.keyframe_weak_total_m.last().copied().unwrap_or(0.0)
-            + std::mem::take(&mut self.weak_m);
+        let weak_hop_m = std::mem::take(&mut self.weak_m);
+        let weak_total_m = self.keyframe_weak_total_m.last().copied().unwrap_or(0.0) + weak_hop_m;
         self.keyframe_weak_total_m.push(weak_total_m);
         if node > 0 {
             let mut measurement = self.graph.nodes[node - 1].inverse() * self.pose;
@@ -1490,6 +1498,12 @@ impl Mapper {
                 SEQUENTIAL_POSITION_INFORMATION
             };
             let mut information = [position, position, SEQUENTIAL_HEADING_INFORMATION];
+            if let Some(share) = self.cfg.weak_hop_share.filter(|_| weak_hop_m > 0.0) {
+                // The residual's x is along the later keyframe's heading, which the rover
+                // drove along.
+                let along = 1.0 / (SEQUENTIAL_SIGMA_M + share * weak_hop_m).powi(2);
+                information[0] = information[0].min(along);
+            }
             if let Some(gyro) = self.cfg.gyro_heading {
                 let (t0, odom0) = self.keyframe_odom[node - 1];
                 let turned = normalize_angle_rad(odom.yaw_rad - odom0.yaw_rad);
@@ -2406,6 +2420,54 @@ mod tests {
         // 3 m driven; the first scan is not matched.
         assert!(along_wall > 2.5, "along the wall {along_wall:.2} m");
         assert!(in_hall < 0.3, "in the hall {in_hall:.2} m");
+    }
+
+    #[test]
+    fn hops_along_a_lone_wall_hold_the_graph_loosely_along_the_heading_only() {
+        let edges_after = |scan: &dyn Fn(Pose2) -> Vec<Point2>| {
+            let mut cfg = MapperConfig::default();
+            cfg.frontend.max_range_m = 12.0;
+            cfg.weak_travel = Some(WeakTravel::default());
+            cfg.weak_hop_share = Some(0.5);
+            let mut mapper = Mapper::new(cfg);
+            for k in 0..=60 {
+                let truth = Pose2::new(0.05 * k as f64, 0.0, 0.0);
+                mapper.add_points(0.1 * k as f64, truth, scan(truth));
+            }
+            let hops: Vec<f64> = (1..mapper.graph.nodes.len())
+                .map(|k| mapper.keyframe_weak_total_m[k] - mapper.keyframe_weak_total_m[k - 1])
+                .collect();
+            (mapper.graph.edges.clone(), hops)
+        };
+        let lone_wall = |pose: Pose2| -> Vec<Point2> {
+            (0..800)
+                .map(|i| Point2::new(-20.0 + 0.05 * i as f64, 1.5))
+                .map(|p| pose.inverse().transform_point(p))
+                .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
+                .collect()
+        };
+        let (edges, hops) = edges_after(&lone_wall);
+        assert!(edges.len() >= 5, "{} edges", edges.len());
+        for (e, hop_m) in edges.iter().zip(&hops).skip(1) {
+            // Every hop after the first matched scan slid freely along the wall.
+            assert!(*hop_m > 0.15, "{hop_m:.3} m unpinned in a hop");
+            let expected = 1.0 / (SEQUENTIAL_SIGMA_M + 0.5 * hop_m).powi(2);
+            assert!((e.information[0] - expected).abs() < 1e-9, "{e:?}");
+            assert!(
+                e.information[0] < SEQUENTIAL_POSITION_INFORMATION / 2.0,
+                "{e:?}"
+            );
+            // Across the wall, and in heading, as firm as any matched hop.
+            assert_eq!(e.information[1], SEQUENTIAL_POSITION_INFORMATION);
+            assert_eq!(e.information[2], SEQUENTIAL_HEADING_INFORMATION);
+        }
+        // In a hall the matches pin every hop once the young map holds a few scans: the
+        // later edges stay firm.
+        let (edges, _) = edges_after(&sparse_hall_scan);
+        assert!(edges.len() >= 5);
+        for e in edges.iter().skip(2) {
+            assert_eq!(e.information[0], SEQUENTIAL_POSITION_INFORMATION, "{e:?}");
+        }
     }
 
     #[test]
