@@ -2407,15 +2407,7 @@ mod tests {
             }
             mapper.keyframe_weak_total_m.last().copied().unwrap_or(0.0) + mapper.weak_m
         };
-        // A wall 1.5 m to the left, running along the travel, 20 m long each way.
-        let lone_wall = |pose: Pose2| -> Vec<Point2> {
-            (0..800)
-                .map(|i| Point2::new(-20.0 + 0.05 * i as f64, 1.5))
-                .map(|p| pose.inverse().transform_point(p))
-                .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
-                .collect()
-        };
-        let along_wall = weak_after(&lone_wall);
+        let along_wall = weak_after(&lone_wall_scan);
         let in_hall = weak_after(&sparse_hall_scan);
         // 3 m driven; the first scan is not matched.
         assert!(along_wall > 2.5, "along the wall {along_wall:.2} m");
@@ -2439,14 +2431,7 @@ mod tests {
                 .collect();
             (mapper.graph.edges.clone(), hops)
         };
-        let lone_wall = |pose: Pose2| -> Vec<Point2> {
-            (0..800)
-                .map(|i| Point2::new(-20.0 + 0.05 * i as f64, 1.5))
-                .map(|p| pose.inverse().transform_point(p))
-                .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
-                .collect()
-        };
-        let (edges, hops) = edges_after(&lone_wall);
+        let (edges, hops) = edges_after(&lone_wall_scan);
         assert!(edges.len() >= 5, "{} edges", edges.len());
         for (e, hop_m) in edges.iter().zip(&hops).skip(1) {
             // Every hop after the first matched scan slid freely along the wall.
@@ -2507,6 +2492,16 @@ mod tests {
         let matched = &mapper.graph.edges[0];
         assert_eq!(mapper.keyframe_unmatched_m[1], 0.0);
         assert_eq!(matched.information[0], SEQUENTIAL_POSITION_INFORMATION);
+    }
+
+    /// A noise-free 12 m scan from `pose` of a lone wall 1.5 m to the left of the x axis,
+    /// running along it, 20 m long each way from the origin (a point every 5 cm).
+    fn lone_wall_scan(pose: Pose2) -> Vec<Point2> {
+        (0..800)
+            .map(|i| Point2::new(-20.0 + 0.05 * i as f64, 1.5))
+            .map(|p| pose.inverse().transform_point(p))
+            .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
+            .collect()
     }
 
     /// A noise-free 1-degree, 12 m scan from `pose` in a sparse hall like the simulated
