@@ -32,6 +32,7 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::Slip(args) => crate::bench_slip::run(args),
         crate::cli::BenchCommand::Slam(args) => crate::bench_slam::run(args),
         crate::cli::BenchCommand::Logs(args) => crate::bench_logs::run(args),
+        crate::cli::BenchCommand::Missions(args) => crate::bench_missions::run(args),
     }
 }
 
@@ -58,13 +59,13 @@ pub(crate) fn in_parallel<J: Sync, R: Send>(
     results.into_inner().expect("workers are done")
 }
 
-/// Runs a mission of `scenario` until its rovers have explored the arena or `limit_s` has
-/// passed, and lets the nodes publish their final products.
 /// How many jobs to run at once: as asked, or one per core.
 pub(crate) fn workers(jobs: Option<usize>) -> usize {
     jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
+/// Runs a mission of `scenario` until its rovers have explored the arena or `limit_s` has
+/// passed, and lets the nodes publish their final products.
 pub(crate) fn explore_to_end(
     scenario: &realms_sim::scenario::Scenario,
     options: realms_mission::MissionOptions,

@@ -192,6 +192,32 @@ pub enum BenchCommand {
     Slam(BenchSlamArgs),
     /// SLAM on the recorded logs of the standard 2D benchmark (Intel, ACES, MIT CSAIL) against the published figures.
     Logs(BenchLogsArgs),
+    /// Whole missions, one per seed, run as `realms mission` runs them: each rover's map and trajectory against the truth, the crater cells near its path, the lander's merged map.
+    Missions(BenchMissionsArgs),
+}
+
+/// `realms bench missions`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchMissionsArgs {
+    /// Missions, one per seed.
+    #[arg(long, default_value_t = 16)]
+    pub seeds: u64,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub first_seed: u64,
+    /// Time limit per mission (it ends sooner once the arena is explored, as `realms
+    /// mission` does), e.g. `4h` (default: the scenario's).
+    #[arg(long)]
+    pub duration: Option<String>,
+    /// Missions run at once (default: one per core).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Scenario TOML (default: the built-in one).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `realms bench logs`.

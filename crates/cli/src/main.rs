@@ -11,6 +11,7 @@ mod bench;
 mod bench_logs;
 mod bench_merge;
 mod bench_merge_rovers;
+mod bench_missions;
 mod bench_nav;
 mod bench_net;
 mod bench_slam;

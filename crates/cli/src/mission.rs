@@ -89,27 +89,13 @@ pub fn run(args: MissionArgs) -> Result<()> {
         );
         bar
     };
-    let chunk = realms_core::Duration::from_secs(30);
-    // Once exploration is over, the mission still waits for the ground to hold every
-    // rover's final map (after a blackout, the queues must drain first).
-    let mut explored_at = None;
-    while mission.now() < end {
-        if !args.full_duration && mission.exploration_over() {
-            let t = *explored_at.get_or_insert(mission.now());
-            if mission.ground_current_since(t) {
-                break;
-            }
-        }
-        let next = (mission.now() + chunk).min(end);
-        mission.run_until(next);
-        let sim_s = mission.now().as_secs_f64();
+    run_to_end(&mut mission, end, args.full_duration, |sim_s| {
         bar.set_position(sim_s as u64);
         bar.set_message(format!(
             "{:.0}x real time",
             sim_s / wall.elapsed().as_secs_f64().max(1e-9)
         ));
-    }
-    mission.finish();
+    });
     bar.finish_and_clear();
     let wall_s = wall.elapsed().as_secs_f64();
     let report = write_results(&mission, &out, &source, wall_s)
@@ -263,6 +249,31 @@ pub fn run(args: MissionArgs) -> Result<()> {
 }
 
 /// `realms scenario`.
+/// Runs `mission` as `realms mission` does: until `end`, or, unless `full_duration`, until
+/// its rovers are done exploring and the ground holds every rover's final map (after a
+/// blackout the queues must drain first); then lets the nodes publish their final products.
+/// `progress` hears the simulated seconds every 30 of them.
+pub(crate) fn run_to_end(
+    mission: &mut Mission,
+    end: Time,
+    full_duration: bool,
+    mut progress: impl FnMut(f64),
+) {
+    let chunk = realms_core::Duration::from_secs(30);
+    let mut explored_at = None;
+    while mission.now() < end {
+        if !full_duration && mission.exploration_over() {
+            let t = *explored_at.get_or_insert(mission.now());
+            if mission.ground_current_since(t) {
+                break;
+            }
+        }
+        mission.run_until((mission.now() + chunk).min(end));
+        progress(mission.now().as_secs_f64());
+    }
+    mission.finish();
+}
+
 pub fn scenario(args: ScenarioArgs) -> Result<()> {
     if args.print_default {
         print!("{}", Scenario::default_toml());

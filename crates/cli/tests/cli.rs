@@ -57,6 +57,87 @@ fn mission_writes_its_results_folder_and_says_where() {
 }
 
 #[test]
+fn bench_missions_grades_each_seed_as_its_own_mission_would() {
+    let small = repo("scenarios/small.toml");
+    let o = realms()
+        .args(["bench", "missions", "--scenario", &small])
+        .args([
+            "--seeds",
+            "2",
+            "--first-seed",
+            "3",
+            "--duration",
+            "150s",
+            "--json",
+        ])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bench: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let missions = bench["missions"].as_array().expect("missions");
+    assert_eq!(missions.len(), 2);
+    // The second seed, run on its own as a user runs it.
+    let out = fresh_dir("realms-bench-missions");
+    let o = realms()
+        .args([
+            "mission",
+            "--scenario",
+            &small,
+            "--seed",
+            "4",
+            "--duration",
+            "150s",
+        ])
+        .arg("--quiet")
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
+            .expect("valid");
+    let graded = &missions[1];
+    assert_eq!(graded["seed"], 4);
+    assert_eq!(graded["sim_duration_s"], report["sim_duration_s"]);
+    assert_eq!(
+        graded["merged_occupied_correct"],
+        report["merge"]["occupied_correct"]
+    );
+    let rovers = report["rovers"].as_array().expect("rovers");
+    assert_eq!(
+        graded["rovers"].as_array().expect("rovers").len(),
+        rovers.len()
+    );
+    let mut maps = Vec::new();
+    for (g, r) in graded["rovers"]
+        .as_array()
+        .expect("rovers")
+        .iter()
+        .zip(rovers)
+    {
+        assert_eq!(g["name"], r["name"]);
+        assert_eq!(g["occupied_correct"], r["slam"]["map"]["occupied_correct"]);
+        assert_eq!(
+            g["trajectory_rmse_m"],
+            r["slam"]["trajectory_error"]["rmse_m"]
+        );
+        assert_eq!(g["path_hazards"], r["slam"]["map"]["path_hazards"]);
+        maps.push(g["occupied_correct"].as_f64().expect("a graded map"));
+    }
+    // The summary pools both missions' rovers.
+    for g in missions[0]["rovers"].as_array().expect("rovers") {
+        maps.push(g["occupied_correct"].as_f64().expect("a graded map"));
+    }
+    let summary = &bench["summary"];
+    assert_eq!(summary["rovers_graded"], maps.len());
+    let mean = maps.iter().sum::<f64>() / maps.len() as f64;
+    let reported = summary["occupied_correct_mean"].as_f64().expect("a mean");
+    assert!((reported - mean).abs() < 1e-12, "{reported} against {mean}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
 fn print_default_round_trips_through_check() {
     let o = realms()
         .args(["scenario", "--print-default"])

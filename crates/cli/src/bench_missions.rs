@@ -1,0 +1,253 @@
+//! `realms bench missions`: whole missions, one per seed, run exactly as `realms mission`
+//! runs them, and what issue 3 grades over them: each rover's map and trajectory against the
+//! truth, the crater cells near its path it marked, and the lander's merged map.
+//!
+//! Any change to a rover's SLAM or planning sends the rovers along other paths, so one
+//! mission says little of a change: these figures are read over many seeds (BENCHMARKS.md
+//! compares builds on sixteen). For SLAM alone on fixed paths, see `realms bench slam`.
+
+use crate::bench::{in_parallel, machine, median, workers};
+use crate::cli::BenchMissionsArgs;
+use crate::mission::{load_scenario, parse_duration_s, run_to_end};
+use anyhow::{Result, bail};
+use realms_core::Time;
+use realms_mission::report::MissionReport;
+use realms_mission::{Mission, MissionOptions};
+use realms_sim::World;
+use serde::Serialize;
+
+/// One rover's grades in one mission.
+#[derive(Clone, Debug, Serialize)]
+struct RoverGrades {
+    name: String,
+    powered: bool,
+    /// Share of the map's occupied cells the truth holds occupied (absent without a map).
+    occupied_correct: Option<f64>,
+    /// RMS of the final trajectory against the truth, metres.
+    trajectory_rmse_m: Option<f64>,
+    /// Crater cells within reach of the rover's path ...
+    path_hazards: usize,
+    /// ... and the share of them its map marks.
+    path_hazards_flagged: f64,
+}
+
+/// One mission's grades.
+#[derive(Clone, Debug, Serialize)]
+struct MissionGrades {
+    seed: u64,
+    sim_duration_s: f64,
+    slam_speedup: f64,
+    /// The lander's merged map: share of its occupied cells right (absent without a merge).
+    merged_occupied_correct: Option<f64>,
+    rovers: Vec<RoverGrades>,
+}
+
+impl MissionGrades {
+    fn of(report: &MissionReport) -> MissionGrades {
+        MissionGrades {
+            seed: report.seed,
+            sim_duration_s: report.sim_duration_s,
+            slam_speedup: report.slam_speedup,
+            merged_occupied_correct: report.merge.as_ref().map(|m| m.occupied_correct),
+            rovers: report
+                .rovers
+                .iter()
+                .map(|r| {
+                    let map = r.slam.map.as_ref();
+                    RoverGrades {
+                        name: r.name.clone(),
+                        powered: r.powered,
+                        occupied_correct: map.map(|m| m.occupied_correct),
+                        trajectory_rmse_m: r.slam.trajectory_error.as_ref().map(|e| e.rmse_m),
+                        path_hazards: map.map_or(0, |m| m.path_hazards),
+                        path_hazards_flagged: map.map_or(0.0, |m| m.path_hazards_flagged),
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The figures over every mission.
+#[derive(Clone, Debug, Serialize)]
+struct Summary {
+    missions: usize,
+    rovers_graded: usize,
+    occupied_correct_mean: f64,
+    occupied_correct_median: f64,
+    rovers_under_80: usize,
+    rovers_under_90: usize,
+    rovers_at_least_95: usize,
+    trajectory_rmse_mean_m: f64,
+    trajectory_rmse_median_m: f64,
+    trajectory_rmse_worst_m: f64,
+    rovers_under_10cm: usize,
+    /// Crater cells near the paths marked, pooled over every rover.
+    path_hazards_flagged: f64,
+    merged_occupied_correct_mean: f64,
+    sim_duration_mean_s: f64,
+    slam_speedup_median: f64,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+fn summarise(missions: &[MissionGrades]) -> Summary {
+    let rovers = || missions.iter().flat_map(|m| &m.rovers);
+    let maps: Vec<f64> = rovers().filter_map(|r| r.occupied_correct).collect();
+    let errors: Vec<f64> = rovers().filter_map(|r| r.trajectory_rmse_m).collect();
+    let (flagged, near) = rovers().fold((0.0, 0usize), |(f, n), r| {
+        (
+            f + r.path_hazards_flagged * r.path_hazards as f64,
+            n + r.path_hazards,
+        )
+    });
+    let merged: Vec<f64> = missions
+        .iter()
+        .filter_map(|m| m.merged_occupied_correct)
+        .collect();
+    let lengths: Vec<f64> = missions.iter().map(|m| m.sim_duration_s).collect();
+    Summary {
+        missions: missions.len(),
+        rovers_graded: maps.len(),
+        occupied_correct_mean: mean(&maps),
+        occupied_correct_median: median(maps.clone()),
+        rovers_under_80: maps.iter().filter(|v| **v < 0.80).count(),
+        rovers_under_90: maps.iter().filter(|v| **v < 0.90).count(),
+        rovers_at_least_95: maps.iter().filter(|v| **v >= 0.95).count(),
+        trajectory_rmse_mean_m: mean(&errors),
+        trajectory_rmse_median_m: median(errors.clone()),
+        trajectory_rmse_worst_m: errors.iter().copied().fold(f64::NAN, f64::max),
+        rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
+        path_hazards_flagged: flagged / near.max(1) as f64,
+        merged_occupied_correct_mean: mean(&merged),
+        sim_duration_mean_s: mean(&lengths),
+        slam_speedup_median: median(missions.iter().map(|m| m.slam_speedup).collect()),
+    }
+}
+
+/// `realms bench missions`.
+pub fn run(args: BenchMissionsArgs) -> Result<()> {
+    let (base, source) = load_scenario(args.scenario.as_deref())?;
+    if args.seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    let limit_s = match &args.duration {
+        Some(d) => parse_duration_s(d)?,
+        None => base.duration_s,
+    };
+    let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
+    let mut scenarios = Vec::with_capacity(seeds.len());
+    for seed in &seeds {
+        let mut s = base.clone();
+        s.seed = *seed;
+        s.duration_s = limit_s;
+        s.validate(&source)?;
+        scenarios.push(s);
+    }
+    let jobs = workers(args.jobs);
+    let mut missions = in_parallel(&scenarios, jobs, |scenario| {
+        let wall = std::time::Instant::now();
+        let options = MissionOptions {
+            cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
+            ..MissionOptions::default()
+        };
+        let mut mission = Mission::with_options(World::new(scenario), options);
+        run_to_end(
+            &mut mission,
+            Time::from_secs_f64(scenario.duration_s),
+            false,
+            |_| {},
+        );
+        let report = MissionReport::new(&mission, &source, wall.elapsed().as_secs_f64());
+        MissionGrades::of(&report)
+    });
+    missions.sort_by_key(|m| m.seed);
+    let summary = summarise(&missions);
+    if args.json {
+        let out =
+            serde_json::json!({ "scenario": source, "missions": missions, "summary": summary });
+        println!("{out}");
+        return Ok(());
+    }
+    print_tables(&source, &seeds, jobs, limit_s, &missions, &summary);
+    Ok(())
+}
+
+fn print_tables(
+    source: &str,
+    seeds: &[u64],
+    jobs: usize,
+    limit_s: f64,
+    missions: &[MissionGrades],
+    s: &Summary,
+) {
+    let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1} %", 100.0 * v));
+    println!("# realms bench missions");
+    println!();
+    println!(
+        "scenario: {source}; seeds {}..{}; missions of at most {:.0} s, ended as `realms mission` ends them; {jobs} at a time; machine: {}",
+        seeds[0],
+        seeds[seeds.len() - 1],
+        limit_s,
+        machine()
+    );
+    println!();
+    println!(
+        "| seed | rover | occupied cells right | final trajectory RMS | crater cells near the path marked (cells) | powered at the end |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for m in missions {
+        for r in &m.rovers {
+            println!(
+                "| {} | {} | {} | {} | {:.1} % ({}) | {} |",
+                m.seed,
+                r.name,
+                pct(r.occupied_correct),
+                r.trajectory_rmse_m
+                    .map_or("-".to_string(), |e| format!("{e:.3} m")),
+                100.0 * r.path_hazards_flagged,
+                r.path_hazards,
+                if r.powered { "yes" } else { "no" }
+            );
+        }
+    }
+    println!();
+    println!(
+        "| seed | mission length | lander's merged map, occupied cells right | fleet SLAM speed |"
+    );
+    println!("| --- | --- | --- | --- |");
+    for m in missions {
+        println!(
+            "| {} | {:.0} s | {} | {:.0}x |",
+            m.seed,
+            m.sim_duration_s,
+            pct(m.merged_occupied_correct),
+            m.slam_speedup
+        );
+    }
+    println!();
+    println!(
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | crater cells near the paths marked | lander's merged map, mean | mission length, mean | fleet SLAM speed, median |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {:.0} s | {:.0}x |",
+        s.missions,
+        s.rovers_graded,
+        100.0 * s.occupied_correct_mean,
+        100.0 * s.occupied_correct_median,
+        s.rovers_under_80,
+        s.rovers_under_90,
+        s.rovers_at_least_95,
+        s.trajectory_rmse_mean_m,
+        s.trajectory_rmse_median_m,
+        s.trajectory_rmse_worst_m,
+        s.rovers_under_10cm,
+        100.0 * s.path_hazards_flagged,
+        100.0 * s.merged_occupied_correct_mean,
+        s.sim_duration_mean_s,
+        s.slam_speedup_median
+    );
+}
