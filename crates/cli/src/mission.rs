@@ -248,7 +248,6 @@ pub fn run(args: MissionArgs) -> Result<()> {
     Ok(())
 }
 
-/// `realms scenario`.
 /// Runs `mission` as `realms mission` does: until `end`, or, unless `full_duration`, until
 /// its rovers are done exploring and the ground holds every rover's final map (after a
 /// blackout the queues must drain first); then lets the nodes publish their final products.
@@ -274,6 +273,7 @@ pub(crate) fn run_to_end(
     mission.finish();
 }
 
+/// `realms scenario`.
 pub fn scenario(args: ScenarioArgs) -> Result<()> {
     if args.print_default {
         print!("{}", Scenario::default_toml());
