@@ -140,6 +140,31 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "closure-ridges",
+        what: "closures whose only rivals lie on a ridge of the score from the winner taken, held along the ridge as the score falls",
+        apply: |c| c.mapper.closure_ridges = Some(realms_slam::mapper::ClosureRidges::default()),
+    },
+    Variant {
+        name: "closure-ridges-across",
+        what: "closure-ridges, the closures held across the ridge and in heading only, not along it",
+        apply: |c| {
+            c.mapper.closure_ridges = Some(realms_slam::mapper::ClosureRidges {
+                reference_m: 0.0,
+                ..realms_slam::mapper::ClosureRidges::default()
+            })
+        },
+    },
+    Variant {
+        name: "closure-ridges-loose",
+        what: "closure-ridges, held along the ridge a quarter as firmly (reference 0.15 m)",
+        apply: |c| {
+            c.mapper.closure_ridges = Some(realms_slam::mapper::ClosureRidges {
+                reference_m: 0.15,
+                ..realms_slam::mapper::ClosureRidges::default()
+            })
+        },
+    },
+    Variant {
         name: "no-deskew",
         what: "a sweeping lidar's beams all taken as seen at the scan's last beam, the rover's motion during the sweep left in",
         apply: |c| c.deskew = false,

@@ -264,6 +264,24 @@ pub struct SearchResult {
     /// of the window again to no end (ambiguous winners were four fifths of the rovers'
     /// closure searches' time).
     pub rival_score: f64,
+    /// Set where the only rivals within the margin lie on a ridge of high scores running
+    /// from the winner (see [`search_allowing_ridges`]): the scan pins the pose across the
+    /// ridge, and along it only as the scores fall. `rival_score` is then the best score
+    /// off the ridge.
+    pub ridge: Option<Ridge>,
+}
+
+/// A ridge of the score through the winner: poses along it score nearly as well, with no
+/// dip between them and the winner (a long wall seen with little else), unlike a rival in
+/// a look-alike place, which scores well only where it matches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ridge {
+    /// Its direction in the map's frame, radians.
+    pub direction_rad: f64,
+    /// How far along it the rival that revealed it lies, metres ...
+    pub rival_m: f64,
+    /// ... and how much lower it scores than the winner.
+    pub drop: f64,
 }
 
 impl SearchResult {
@@ -344,11 +362,52 @@ pub fn search(
     min_score: f64,
     rival_margin: f64,
 ) -> Option<SearchResult> {
-    search_rivals(map, points, prior, window, min_score, rival_margin, true)
+    search_rivals(
+        map,
+        points,
+        prior,
+        window,
+        min_score,
+        rival_margin,
+        true,
+        None,
+    )
+}
+
+/// [`search`], where a rival within `rival_margin` that lies on a ridge of high scores
+/// running from the winner does not make the winner ambiguous: the scores between the two,
+/// at every cell along the way, stay within `dip` of the rival's (each the best of itself
+/// and its two neighbours along the way, as the scan's cells alias). The ridge is followed
+/// both ways along that line as far as its scores stay within the margin and the dip of
+/// the winner's, the rivals are looked for again away from it, and the answer is ambiguous
+/// only if one comes within the margin there; otherwise it carries the ridge.
+/// Olson ("Real-Time Correlative Scan Matching", ICRA 2009) reads the same shape of the
+/// score as the match's uncertainty, not as a second answer.
+pub fn search_allowing_ridges(
+    map: &PrecomputedMap,
+    points: &[Point2],
+    prior: Pose2,
+    window: &SearchWindow,
+    min_score: f64,
+    rival_margin: f64,
+    dip: f64,
+) -> Option<SearchResult> {
+    search_rivals(
+        map,
+        points,
+        prior,
+        window,
+        min_score,
+        rival_margin,
+        true,
+        Some(dip),
+    )
 }
 
 /// [`search`], stopping the rival's search at the first rival closer than `rival_margin`
-/// if `stop_when_ambiguous`, else finding the best rival.
+/// if `stop_when_ambiguous`, else finding the best rival; with `ridge_dip`, as
+/// [`search_allowing_ridges`].
+#[allow(clippy::too_many_arguments)]
 fn search_rivals(
     map: &PrecomputedMap,
     points: &[Point2],
@@ -357,6 +416,7 @@ fn search_rivals(
     min_score: f64,
     rival_margin: f64,
     stop_when_ambiguous: bool,
+    ridge_dip: Option<f64>,
 ) -> Option<SearchResult> {
     if points.is_empty() {
         return None;
@@ -467,6 +527,41 @@ fn search_rivals(
         &|c| !near(c),
         &|c| stop_when_ambiguous && close_rival(c),
     );
+    let mut ridge = None;
+    if let (Some(dip), Some(first)) = (ridge_dip, rival)
+        && close_rival(&first)
+        && on_ridge(&winner, &first, angle_step, (dip * n) as u32, &|c| {
+            score_at(0, c)
+        })
+    {
+        // The ridge runs both ways from the winner, as far as its scores stay within the
+        // margin (and the dip) of the winner's; a rival off it is a look-alike place.
+        let floor = rival_threshold.saturating_sub((dip * n) as u32);
+        let score = |c: &Candidate| score_at(0, c);
+        let ends = [1, -1].map(|sign| ridge_end(&winner, &first, sign, n_cells, floor, &score));
+        let mut off_ridge: Option<Candidate> = None;
+        descend(
+            &roots,
+            top,
+            rival_threshold,
+            n_cells,
+            &score_at,
+            &mut off_ridge,
+            &|c| !near(c) && !near_segment(&ends[0], &ends[1], c, angle_step),
+            &|c| stop_when_ambiguous && close_rival(c),
+        );
+        if !off_ridge.as_ref().is_some_and(close_rival) {
+            let (ex, ey) = ((first.dx - winner.dx) as f64, (first.dy - winner.dy) as f64);
+            ridge = Some(Ridge {
+                direction_rad: ey.atan2(ex),
+                rival_m: ex.hypot(ey) * r,
+                drop: winner_score - first.score as f64 / n,
+            });
+        }
+        if ridge.is_some() || off_ridge.as_ref().is_some_and(close_rival) {
+            rival = off_ridge;
+        }
+    }
     let yaw = prior.yaw_rad + (winner.angle as i64 - n_angles) as f64 * angle_step;
     Some(SearchResult {
         pose: Pose2::new(
@@ -476,7 +571,106 @@ fn search_rivals(
         ),
         score: winner.score as f64 / n,
         rival_score: rival.map_or(0.0, |c| c.score as f64 / n),
+        ridge,
     })
+}
+
+/// Whether `rival` lies on a ridge of high scores from `winner`: at the same heading (to
+/// within [`RIVAL_RAD`]), and every cell on the straight way between them scores (the
+/// best of itself and its neighbours along the way) no more than `dip` below the rival,
+/// `score` being the leaf score.
+fn on_ridge(
+    winner: &Candidate,
+    rival: &Candidate,
+    angle_step: f64,
+    dip: u32,
+    score: &dyn Fn(&Candidate) -> u32,
+) -> bool {
+    if (rival.angle as f64 - winner.angle as f64).abs() * angle_step > RIVAL_RAD {
+        return false;
+    }
+    let steps = (rival.dx - winner.dx)
+        .abs()
+        .max((rival.dy - winner.dy).abs());
+    if steps < 2 {
+        return true;
+    }
+    let at = |k: i64| {
+        let f = k as f64 / steps as f64;
+        let mut c = Candidate {
+            angle: (winner.angle as f64 + f * (rival.angle as f64 - winner.angle as f64)).round()
+                as usize,
+            dx: winner.dx + (f * (rival.dx - winner.dx) as f64).round() as i64,
+            dy: winner.dy + (f * (rival.dy - winner.dy) as f64).round() as i64,
+            score: 0,
+        };
+        c.score = score(&c);
+        c.score
+    };
+    let scores: Vec<u32> = (0..=steps).map(at).collect();
+    let floor = rival.score.saturating_sub(dip);
+    scores.windows(3).all(|w| w[0].max(w[1]).max(w[2]) >= floor)
+}
+
+/// The last pose, going from `winner` along the way to `rival` (`sign` 1) or away from it
+/// (-1), one step of the larger of its cell offsets at a time, whose score (the best of
+/// itself and the next step's, as the scan's cells alias) stays at `floor` or above, within
+/// `n_cells` of the window's centre.
+fn ridge_end(
+    winner: &Candidate,
+    rival: &Candidate,
+    sign: i64,
+    n_cells: i64,
+    floor: u32,
+    score: &dyn Fn(&Candidate) -> u32,
+) -> Candidate {
+    let (ex, ey) = (rival.dx - winner.dx, rival.dy - winner.dy);
+    let steps = ex.abs().max(ey.abs()).max(1) as f64;
+    let at = |k: i64| {
+        let f = (sign * k) as f64 / steps;
+        let mut c = Candidate {
+            angle: winner.angle,
+            dx: winner.dx + (f * ex as f64).round() as i64,
+            dy: winner.dy + (f * ey as f64).round() as i64,
+            score: 0,
+        };
+        if c.dx.abs() > n_cells || c.dy.abs() > n_cells {
+            return None;
+        }
+        c.score = score(&c);
+        Some(c)
+    };
+    let mut last = *winner;
+    let mut k = 1;
+    while let Some(c) = at(k) {
+        let ahead = at(k + 1).map_or(0, |a| a.score);
+        if c.score.max(ahead) < floor {
+            break;
+        }
+        last = c;
+        k += 1;
+    }
+    last
+}
+
+/// Whether `c` lies within [`RIVAL_CELLS`] (and [`RIVAL_RAD`] of heading, `angle_step`
+/// radians a step) of the straight way from `a` to `b`.
+fn near_segment(a: &Candidate, b: &Candidate, c: &Candidate, angle_step: f64) -> bool {
+    let turn = |x: &Candidate| x.angle as f64 * angle_step;
+    let (lo, hi) = (turn(a).min(turn(b)), turn(a).max(turn(b)));
+    if turn(c) < lo - RIVAL_RAD || turn(c) > hi + RIVAL_RAD {
+        return false;
+    }
+    let (ex, ey) = ((b.dx - a.dx) as f64, (b.dy - a.dy) as f64);
+    let (px, py) = ((c.dx - a.dx) as f64, (c.dy - a.dy) as f64);
+    let len2 = ex * ex + ey * ey;
+    let t = if len2 > 0.0 {
+        ((px * ex + py * ey) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (qx, qy) = (px - t * ex, py - t * ey);
+    qx.abs() <= RIVAL_CELLS as f64 && qy.abs() <= RIVAL_CELLS as f64
 }
 
 /// Empty cells for each of `depth + 1` levels and `headings` headings, filled when needed.
@@ -680,7 +874,7 @@ mod tests {
             step_range_m: 6.0,
         };
         let prior = Pose2::new(1.2, 0.1, 0.0);
-        let best_rival = search_rivals(&map, &points, prior, &window, 0.3, 0.1, false)
+        let best_rival = search_rivals(&map, &points, prior, &window, 0.3, 0.1, false, None)
             .expect("the corridor matches");
         assert!(
             best_rival.score - best_rival.rival_score < 0.02,
@@ -690,6 +884,73 @@ mod tests {
         let found = search(&map, &points, prior, &window, 0.3, 0.1).expect("the corridor matches");
         assert_eq!(found.pose, best_rival.pose);
         assert!(found.is_ambiguous(0.1), "{found:?}");
+    }
+
+    /// A corridor's two long walls and, at `posts` along the lower one, square posts 0.3 m
+    /// a side: what pins the pose along the corridor.
+    fn corridor_with_posts(posts: &[f64]) -> Vec<(Point2, Point2)> {
+        let mut walls = vec![
+            (Point2::new(-20.0, -1.5), Point2::new(20.0, -1.5)),
+            (Point2::new(-20.0, 1.5), Point2::new(20.0, 1.5)),
+        ];
+        for x in posts {
+            let (x0, x1, y0, y1) = (x - 0.15, x + 0.15, -1.5, -1.2);
+            walls.push((Point2::new(x0, y0), Point2::new(x0, y1)));
+            walls.push((Point2::new(x0, y1), Point2::new(x1, y1)));
+            walls.push((Point2::new(x1, y1), Point2::new(x1, y0)));
+        }
+        walls
+    }
+
+    /// The search with ridges allowed (dip 0.02) in `walls` mapped from two poses, for a
+    /// scan from `truth` searched from 0.2 m off it, with margin 0.08.
+    fn ridge_search(walls: &[(Point2, Point2)], truth: Pose2) -> (SearchResult, SearchResult) {
+        let grid = map_of(
+            walls,
+            &[Pose2::new(0.0, 0.0, 0.0), Pose2::new(1.5, 0.0, 0.0)],
+        );
+        let map = PrecomputedMap::new(&grid, 5);
+        let points = scan(walls, truth);
+        let window = SearchWindow {
+            linear_m: 1.0,
+            angular_rad: 4f64.to_radians(),
+            step_range_m: 6.0,
+        };
+        let prior = Pose2::new(truth.x_m + 0.2, truth.y_m - 0.05, truth.yaw_rad);
+        let plain = search(&map, &points, prior, &window, 0.3, 0.08).expect("a match");
+        let ridged = search_allowing_ridges(&map, &points, prior, &window, 0.3, 0.08, 0.02)
+            .expect("a match");
+        assert_eq!(plain.pose, ridged.pose, "the winner is the same either way");
+        (plain, ridged)
+    }
+
+    #[test]
+    fn a_lone_post_in_a_corridor_makes_a_ridge_not_a_rival() {
+        // The corridor's walls score alike all along it; one post lifts the score where it
+        // matches, and falls off smoothly on either side: one answer, loosely pinned along.
+        let truth = Pose2::new(0.7, 0.1, 0.0);
+        let (plain, ridged) = ridge_search(&corridor_with_posts(&[0.0]), truth);
+        assert!(plain.is_ambiguous(0.08), "{plain:?}");
+        assert!(!ridged.is_ambiguous(0.08), "{ridged:?}");
+        let ridge = ridged.ridge.expect("a ridge");
+        assert!(
+            ridge.direction_rad.sin().abs() < 0.2,
+            "the ridge runs along the corridor: {ridge:?}"
+        );
+        assert!(ridge.drop > 0.0 && ridge.drop < 0.08, "{ridge:?}");
+        let err = ridged.pose.relative_to(&truth);
+        assert!(err.x_m.hypot(err.y_m) < 0.1, "{:?}", ridged.pose);
+    }
+
+    #[test]
+    fn posts_repeating_along_a_corridor_stay_ambiguous_with_ridges_allowed() {
+        // Posts every 0.8 m: the pose one period along matches as well, and between the
+        // two the posts miss, so the score dips: a look-alike place, not a ridge.
+        let posts: Vec<f64> = (-10..=10).map(|k| k as f64 * 0.8).collect();
+        let (plain, ridged) = ridge_search(&corridor_with_posts(&posts), Pose2::new(0.3, 0.1, 0.0));
+        assert!(plain.is_ambiguous(0.08), "{plain:?}");
+        assert!(ridged.is_ambiguous(0.08), "{ridged:?}");
+        assert_eq!(ridged.ridge, None);
     }
 
     #[test]
@@ -726,7 +987,8 @@ mod tests {
                 );
                 for margin in [0.01, 0.05, 0.1, 0.3] {
                     let early = search(&map, &points, prior, &window, 0.3, margin);
-                    let full = search_rivals(&map, &points, prior, &window, 0.3, margin, false);
+                    let full =
+                        search_rivals(&map, &points, prior, &window, 0.3, margin, false, None);
                     let (Some(early), Some(full)) = (early, full) else {
                         assert_eq!(early.is_some(), full.is_some());
                         continue;
