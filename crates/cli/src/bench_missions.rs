@@ -84,7 +84,8 @@ struct Summary {
     rovers_under_10cm: usize,
     /// Crater cells near the paths marked, pooled over every rover.
     path_hazards_flagged: f64,
-    merged_occupied_correct_mean: f64,
+    /// Absent when no mission merged a map (a lone rover).
+    merged_occupied_correct_mean: Option<f64>,
     sim_duration_mean_s: f64,
     slam_speedup_median: f64,
 }
@@ -121,7 +122,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         trajectory_rmse_worst_m: errors.iter().copied().fold(f64::NAN, f64::max),
         rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
         path_hazards_flagged: flagged / near.max(1) as f64,
-        merged_occupied_correct_mean: mean(&merged),
+        merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),
         slam_speedup_median: median(missions.iter().map(|m| m.slam_speedup).collect()),
     }
@@ -233,7 +234,7 @@ fn print_tables(
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {:.0} s | {:.0}x |",
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {} | {:.0} s | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -246,7 +247,7 @@ fn print_tables(
         s.trajectory_rmse_worst_m,
         s.rovers_under_10cm,
         100.0 * s.path_hazards_flagged,
-        100.0 * s.merged_occupied_correct_mean,
+        pct(s.merged_occupied_correct_mean),
         s.sim_duration_mean_s,
         s.slam_speedup_median
     );
