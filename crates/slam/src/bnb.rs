@@ -382,7 +382,7 @@ pub fn search(
 /// the winner's, the rivals are looked for again away from it, and the answer is ambiguous
 /// only if one comes within the margin there; otherwise it carries the ridge.
 /// Olson ("Real-Time Correlative Scan Matching", ICRA 2009) reads the same shape of the
-/// score as the match's uncertainty, not as a second answer.
+/// score as the match's uncertainty, not as a second answer. `dip` `None`: [`search`].
 pub fn search_allowing_ridges(
     map: &PrecomputedMap,
     points: &[Point2],
@@ -390,7 +390,7 @@ pub fn search_allowing_ridges(
     window: &SearchWindow,
     min_score: f64,
     rival_margin: f64,
-    dip: f64,
+    dip: Option<f64>,
 ) -> Option<SearchResult> {
     search_rivals(
         map,
@@ -400,7 +400,7 @@ pub fn search_allowing_ridges(
         min_score,
         rival_margin,
         true,
-        Some(dip),
+        dip,
     )
 }
 
@@ -528,17 +528,16 @@ fn search_rivals(
         &|c| stop_when_ambiguous && close_rival(c),
     );
     let mut ridge = None;
-    if let (Some(dip), Some(first)) = (ridge_dip, rival)
+    let leaf_score = |c: &Candidate| score_at(0, c);
+    if let (Some(dip), Some(first)) = (ridge_dip.map(|d| (d * n) as u32), rival)
         && close_rival(&first)
-        && on_ridge(&winner, &first, angle_step, (dip * n) as u32, &|c| {
-            score_at(0, c)
-        })
+        && on_ridge(&winner, &first, angle_step, dip, &leaf_score)
     {
         // The ridge runs both ways from the winner, as far as its scores stay within the
         // margin (and the dip) of the winner's; a rival off it is a look-alike place.
-        let floor = rival_threshold.saturating_sub((dip * n) as u32);
-        let score = |c: &Candidate| score_at(0, c);
-        let ends = [1, -1].map(|sign| ridge_end(&winner, &first, sign, n_cells, floor, &score));
+        let floor = rival_threshold.saturating_sub(dip);
+        let ends =
+            [1, -1].map(|sign| ridge_end(&winner, &first, sign, n_cells, floor, &leaf_score));
         let mut off_ridge: Option<Candidate> = None;
         descend(
             &roots,
@@ -597,15 +596,9 @@ fn on_ridge(
     }
     let at = |k: i64| {
         let f = k as f64 / steps as f64;
-        let mut c = Candidate {
-            angle: (winner.angle as f64 + f * (rival.angle as f64 - winner.angle as f64)).round()
-                as usize,
-            dx: winner.dx + (f * (rival.dx - winner.dx) as f64).round() as i64,
-            dy: winner.dy + (f * (rival.dy - winner.dy) as f64).round() as i64,
-            score: 0,
-        };
-        c.score = score(&c);
-        c.score
+        let angle =
+            (winner.angle as f64 + f * (rival.angle as f64 - winner.angle as f64)).round() as usize;
+        score(&on_line(winner, rival, f, angle))
     };
     let scores: Vec<u32> = (0..=steps).map(at).collect();
     let floor = rival.score.saturating_sub(dip);
@@ -624,16 +617,12 @@ fn ridge_end(
     floor: u32,
     score: &dyn Fn(&Candidate) -> u32,
 ) -> Candidate {
-    let (ex, ey) = (rival.dx - winner.dx, rival.dy - winner.dy);
-    let steps = ex.abs().max(ey.abs()).max(1) as f64;
+    let steps = (rival.dx - winner.dx)
+        .abs()
+        .max((rival.dy - winner.dy).abs())
+        .max(1) as f64;
     let at = |k: i64| {
-        let f = (sign * k) as f64 / steps;
-        let mut c = Candidate {
-            angle: winner.angle,
-            dx: winner.dx + (f * ex as f64).round() as i64,
-            dy: winner.dy + (f * ey as f64).round() as i64,
-            score: 0,
-        };
+        let mut c = on_line(winner, rival, (sign * k) as f64 / steps, winner.angle);
         if c.dx.abs() > n_cells || c.dy.abs() > n_cells {
             return None;
         }
@@ -651,6 +640,17 @@ fn ridge_end(
         k += 1;
     }
     last
+}
+
+/// The cell a share `f` of the way from `winner` to `rival` (past the rival above 1, behind
+/// the winner below 0), at heading step `angle`, unscored.
+fn on_line(winner: &Candidate, rival: &Candidate, f: f64, angle: usize) -> Candidate {
+    Candidate {
+        angle,
+        dx: winner.dx + (f * (rival.dx - winner.dx) as f64).round() as i64,
+        dy: winner.dy + (f * (rival.dy - winner.dy) as f64).round() as i64,
+        score: 0,
+    }
 }
 
 /// Whether `c` lies within [`RIVAL_CELLS`] (and [`RIVAL_RAD`] of heading, `angle_step`
@@ -918,7 +918,7 @@ mod tests {
         };
         let prior = Pose2::new(truth.x_m + 0.2, truth.y_m - 0.05, truth.yaw_rad);
         let plain = search(&map, &points, prior, &window, 0.3, 0.08).expect("a match");
-        let ridged = search_allowing_ridges(&map, &points, prior, &window, 0.3, 0.08, 0.02)
+        let ridged = search_allowing_ridges(&map, &points, prior, &window, 0.3, 0.08, Some(0.02))
             .expect("a match");
         assert_eq!(plain.pose, ridged.pose, "the winner is the same either way");
         (plain, ridged)

@@ -1483,24 +1483,17 @@ impl Mapper {
         let precomputed = sub.precomputed.get_or_insert_with(|| {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
-        let (min_score, margin) = (
+        let margin = self.cfg.loop_ambiguity_margin;
+        let found = bnb::search_allowing_ridges(
+            precomputed,
+            sample,
+            origin.inverse() * prior,
+            window,
             self.cfg.loop_search_min_score,
-            self.cfg.loop_ambiguity_margin,
-        );
-        let prior = origin.inverse() * prior;
-        let found = match ridges {
-            Some(r) => bnb::search_allowing_ridges(
-                precomputed,
-                sample,
-                prior,
-                window,
-                min_score,
-                margin,
-                r.dip,
-            ),
-            None => bnb::search(precomputed, sample, prior, window, min_score, margin),
-        }?;
-        if found.is_ambiguous(self.cfg.loop_ambiguity_margin) {
+            margin,
+            ridges.map(|r| r.dip),
+        )?;
+        if found.is_ambiguous(margin) {
             return None;
         }
         let refine = MatcherConfig {
