@@ -25,10 +25,25 @@ use realms_slam::mapper::ClosureWeighting;
 use std::time::Instant;
 
 /// A named change to the rovers' SLAM setup, compared against the setup as it is.
-struct Variant {
-    name: &'static str,
-    what: &'static str,
-    apply: fn(&mut MappingConfig),
+pub(crate) struct Variant {
+    pub(crate) name: &'static str,
+    pub(crate) what: &'static str,
+    pub(crate) apply: fn(&mut MappingConfig),
+}
+
+/// The variant called `name`, or an error listing the known ones.
+pub(crate) fn variant(name: &str) -> Result<&'static Variant> {
+    match VARIANTS.iter().find(|v| v.name == name) {
+        Some(v) => Ok(v),
+        None => bail!(
+            "unknown variant `{name}`; known: {}",
+            VARIANTS
+                .iter()
+                .map(|v| v.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
 }
 
 /// Changes the refinement on the hits, if the setup has one.
@@ -344,6 +359,32 @@ const VARIANTS: &[Variant] = &[
         name: "weak-floor-100",
         what: "where the map pins the position less than 100 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
         apply: |c| c.mapper.weak_direction_floor = Some(100.0),
+    },
+    Variant {
+        name: "weak-floor-100-chain",
+        what: "weak-floor-100, the slip check hearing each match's motion from the previous match",
+        apply: |c| {
+            c.mapper.weak_direction_floor = Some(100.0);
+            c.mapper.slip_check_match_to_match = true;
+        },
+    },
+    Variant {
+        name: "weak-floor-100-gate-2cm",
+        what: "weak-floor-100-chain, the pull only where the match lies within 2 cm of the prediction along the weak direction",
+        apply: |c| {
+            c.mapper.weak_direction_floor = Some(100.0);
+            c.mapper.slip_check_match_to_match = true;
+            c.mapper.weak_direction_gate_m = Some(0.02);
+        },
+    },
+    Variant {
+        name: "weak-floor-100-gate-3cm",
+        what: "weak-floor-100-chain, the pull only where the match lies within 3 cm of the prediction along the weak direction",
+        apply: |c| {
+            c.mapper.weak_direction_floor = Some(100.0);
+            c.mapper.slip_check_match_to_match = true;
+            c.mapper.weak_direction_gate_m = Some(0.03);
+        },
     },
     Variant {
         name: "prior-x30",
@@ -951,20 +992,11 @@ const RELIEF_CONFIDENT_M: f64 = 0.02;
 pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     let (base, source) = load_scenario(args.scenario.as_deref())?;
     let limit_s = parse_duration_s(&args.duration)?;
-    let mut variants: Vec<&Variant> = Vec::new();
-    for name in &args.variant {
-        match VARIANTS.iter().find(|v| v.name == name) {
-            Some(v) => variants.push(v),
-            None => bail!(
-                "unknown variant `{name}`; known: {}",
-                VARIANTS
-                    .iter()
-                    .map(|v| v.name)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        }
-    }
+    let variants = args
+        .variant
+        .iter()
+        .map(|name| variant(name))
+        .collect::<Result<Vec<_>>>()?;
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
     // Every replayed setup by name, the setup as it is first.
     let names: Vec<&str> = std::iter::once("baseline")

@@ -271,8 +271,17 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
     );
     let seeds: Vec<u64> = (args.first_seed..args.first_seed + args.seeds).collect();
     let workers = crate::bench::workers(args.jobs);
+    let variant = args
+        .variant
+        .as_deref()
+        .map(crate::bench_slam::variant)
+        .transpose()?;
     println!("# realms bench slip");
     println!();
+    if let Some(v) = variant {
+        println!("SLAM variant {}: {}", v.name, v.what);
+        println!();
+    }
     println!(
         "scenario: {source}, {} rovers; seeds {}..{}; up to {:.0} min each; a slip burst (90 % slip, 3-8 s) every {:.0} s per rover on average; ideal communication; {workers} missions at a time; machine: {}",
         base.rovers.count,
@@ -291,6 +300,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         let t0 = Instant::now();
         let options = MissionOptions {
             ideal_comms: true,
+            mapping_change: variant.map(|v| v.apply),
             ..MissionOptions::default()
         };
         let mission = crate::bench::explore_to_end(&s, options, limit_s);

@@ -296,6 +296,10 @@ pub struct BenchSlipArgs {
     /// Mean time between one rover's slip bursts, seconds.
     #[arg(long, default_value_t = 120.0)]
     pub period_s: f64,
+    /// Run the rovers with this SLAM variant of `realms bench slam` instead of the setup as
+    /// it is (the missions' paths then differ too).
+    #[arg(long)]
+    pub variant: Option<String>,
     /// Missions run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,

@@ -54,7 +54,7 @@ pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 pub use realms_node::cost::CostClock;
 
 /// How a mission is run, beyond its scenario.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub struct MissionOptions {
     /// Rovers hear each other's navigation messages (targets, explored ground). Off, each
     /// explores as if alone: what allocation falls back to when the radio is silent.
@@ -68,6 +68,9 @@ pub struct MissionOptions {
     /// Lent to the rovers to time their SLAM (`mission.json`'s `slam_wall_s`); without it
     /// that time reads zero.
     pub cost_clock: CostClock,
+    /// A change to every rover's SLAM setup, for benches that compare setups over whole
+    /// missions (`None`: the setup as it is).
+    pub mapping_change: Option<fn(&mut MappingConfig)>,
 }
 
 impl Default for MissionOptions {
@@ -77,6 +80,7 @@ impl Default for MissionOptions {
             ideal_comms: false,
             gyro_calibration: GYRO_CALIBRATION,
             cost_clock: CostClock::default(),
+            mapping_change: None,
         }
     }
 }
@@ -85,7 +89,7 @@ impl Default for MissionOptions {
 pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingConfig {
     let spec = &world.scenario().rovers;
     let base_from_optical = world.base_from_optical();
-    MappingConfig {
+    let mut cfg = MappingConfig {
         lidar_x_m: spec.lidar.mount_x_m,
         lidar_height_m: spec.lidar.mount_height_m,
         ground_clearance_m: GROUND_CLEARANCE_M,
@@ -112,7 +116,11 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         deskew: true,
         depth_features: false,
         relief_odometry: None,
+    };
+    if let Some(change) = options.mapping_change {
+        change(&mut cfg);
     }
+    cfg
 }
 
 /// A sensor message a rover's SLAM took in, kept with the rover's true pose when the

@@ -195,21 +195,27 @@ fn weakest_direction(information: &[[f64; 3]; 3], prior_weight: f64) -> (f64, (f
 /// `matched` moved towards `predicted` along the direction in which the match's translation
 /// `information` (which holds the matcher's own pull `prior_weight` towards the prediction)
 /// is weakest, as far as adding the information the map lacks below `floor` there would
-/// move it; unchanged where the map pins both directions at least that firmly.
+/// move it; unchanged where the map pins both directions at least that firmly, or where
+/// the match lies more than `gate_m` from the prediction along that direction (slipping
+/// wheels run away from the map faster than its weak pull strays).
 fn towards_prediction_where_weak(
     matched: Pose2,
     predicted: Pose2,
     information: &[[f64; 3]; 3],
     prior_weight: f64,
     floor: f64,
+    gate_m: f64,
 ) -> Pose2 {
     let (weakest, (ux, uy)) = weakest_direction(information, prior_weight);
     if weakest >= floor {
         return matched;
     }
+    let along = (predicted.x_m - matched.x_m) * ux + (predicted.y_m - matched.y_m) * uy;
+    if along.abs() > gate_m {
+        return matched;
+    }
     let added = floor - weakest;
     let share = added / (weakest + prior_weight + added);
-    let along = (predicted.x_m - matched.x_m) * ux + (predicted.y_m - matched.y_m) * uy;
     Pose2::new(
         matched.x_m + share * along * ux,
         matched.y_m + share * along * uy,
@@ -338,6 +344,12 @@ pub struct MapperConfig {
     /// match a quarter or more of the way towards their over-report. Off by default: it was
     /// measured on the rovers only, not on the recorded logs.
     pub slip_check_without_prior: bool,
+    /// The slip check hears each match's motion from the previous match (as it was before
+    /// any pull towards the prediction), not from the previous pose: where the pose is
+    /// pulled off the match (see [`MapperConfig::weak_direction_floor`]), the map's steady
+    /// disagreement with it would otherwise read as motion the wheels did not report, at
+    /// every scan. Without that pull the two are the same.
+    pub slip_check_match_to_match: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
     pub trim_radius_m: Option<f64>,
@@ -386,6 +398,9 @@ pub struct MapperConfig {
     /// it comes from how its hits were sampled, not from the wall (BENCHMARKS.md, "A rover's
     /// drift along a bare wall").
     pub weak_direction_floor: Option<f64>,
+    /// ... but only where the match lies within this distance of the prediction along that
+    /// direction, metres (`None`: at any distance).
+    pub weak_direction_gate_m: Option<f64>,
     /// The refinement on the hits moves the match only along directions the occupancy match
     /// pins at least this firmly (per point, per square metre, its prior left out; `None`:
     /// along any). Its cells of a few hits along a wall can lie across it and pull the
@@ -701,6 +716,7 @@ impl Default for MapperConfig {
             loop_candidates: 3,
             health: HealthConfig::default(),
             slip_check_without_prior: false,
+            slip_check_match_to_match: false,
             trim_radius_m: None,
             motion_filter: None,
             min_scan_points: 10,
@@ -710,6 +726,7 @@ impl Default for MapperConfig {
             heading_map_share_without_walls: false,
             still_hold: None,
             weak_direction_floor: None,
+            weak_direction_gate_m: None,
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
             map_occupied_above: crate::assembly::OCCUPIED_ABOVE,
@@ -898,6 +915,9 @@ pub struct Mapper {
     /// Relocalisation searches since the rover was declared lost.
     searches_since_lost: usize,
     last_information: [[f64; 3]; 3],
+    /// The last match before any pull towards the prediction, relative to the pose tracking
+    /// kept (see [`MapperConfig::slip_check_match_to_match`]).
+    heard_from_pose: Option<Pose2>,
     /// Accepted loop closures.
     pub closures: usize,
     /// Every verified closure match, with what its search and refinement saw.
@@ -961,6 +981,7 @@ impl Mapper {
             last_odom_yaw: None,
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
+            heard_from_pose: None,
             closures: 0,
             closure_records: Vec::new(),
             heading_holds: 0,
@@ -1089,6 +1110,8 @@ impl Mapper {
         let mut score = None;
         let mut trusted_along = false;
         let mut matched_alone = None;
+        // The match before any pull towards the prediction, for the slip check's next scan.
+        let mut match_before_pull = None;
         // Matched and mapped filled in; the live map and closures take the endpoints.
         let dense = match self.cfg.frontend.densify {
             Some(d) => std::borrow::Cow::Owned(crate::frontend::densify(&points, d)),
@@ -1293,6 +1316,7 @@ impl Mapper {
                         m.pose
                     };
                     matched_alone = Some(origin * verdict);
+                    match_before_pull = Some(origin * m.pose);
                     if let Some(floor) = self.cfg.weak_direction_floor
                         && still.is_none()
                         && self.health.state() == LocalisationState::Tracking
@@ -1303,6 +1327,7 @@ impl Mapper {
                             &m.information,
                             prior_pull,
                             floor * matched_points,
+                            self.cfg.weak_direction_gate_m.unwrap_or(f64::INFINITY),
                         );
                     }
                     score = Some(m.score);
@@ -1335,14 +1360,22 @@ impl Mapper {
                 odom_delta,
                 matched_delta: if self.scans.is_empty() {
                     Pose2::IDENTITY
+                } else if self.cfg.slip_check_match_to_match {
+                    // Without a match the last one's offset from the pose is carried on.
+                    let offset = self.heard_from_pose.unwrap_or(Pose2::IDENTITY);
+                    (before * offset).inverse() * matched_alone.unwrap_or(self.pose * offset)
                 } else {
                     before.inverse() * matched_alone.unwrap_or(self.pose)
                 },
                 score,
                 wheels_silent: sample.wheels_silent,
             };
+            if let Some(heard) = match_before_pull {
+                self.heard_from_pose = Some(self.pose.inverse() * heard);
+            }
             if let Some(t) = self.health.observe(&observed) {
                 if t.state == LocalisationState::Lost {
+                    self.heard_from_pose = None;
                     // The scan that tipped it is not trusted either.
                     self.pose = predicted;
                     self.lost_at = Some(before);
@@ -2858,8 +2891,14 @@ mod tests {
         ];
         let matched = Pose2::new(1.0, 2.0, 0.1);
         let predicted = Pose2::new(0.9, 2.05, 0.2);
-        let moved =
-            towards_prediction_where_weak(matched, predicted, &information, prior_weight, 100.0);
+        let moved = towards_prediction_where_weak(
+            matched,
+            predicted,
+            &information,
+            prior_weight,
+            100.0,
+            f64::INFINITY,
+        );
         // Along x, 98 of information added to the 2 + 30 there: 98 / 130 of the way.
         assert!(
             (moved.x_m - (1.0 - 0.1 * 98.0 / 130.0)).abs() < 1e-12,
@@ -2869,15 +2908,39 @@ mod tests {
         // The same wall running diagonally: moved along the wall only.
         let info = information_along(std::f64::consts::FRAC_PI_4, 2.0, 1000.0, prior_weight);
         let predicted = Pose2::new(1.1, 2.1, 0.1);
-        let moved = towards_prediction_where_weak(matched, predicted, &info, prior_weight, 100.0);
+        let moved = towards_prediction_where_weak(
+            matched,
+            predicted,
+            &info,
+            prior_weight,
+            100.0,
+            f64::INFINITY,
+        );
         let share = 98.0 / 130.0;
         assert!((moved.x_m - (1.0 + 0.1 * share)).abs() < 1e-9, "{moved:?}");
         assert!((moved.y_m - (2.0 + 0.1 * share)).abs() < 1e-9, "{moved:?}");
         // Pinned firmly both ways: left alone.
         let firm_both = [[500.0, 0.0, 0.0], [0.0, 800.0, 0.0], [0.0, 0.0, 50.0]];
         assert_eq!(
-            towards_prediction_where_weak(matched, predicted, &firm_both, prior_weight, 100.0),
+            towards_prediction_where_weak(
+                matched,
+                predicted,
+                &firm_both,
+                prior_weight,
+                100.0,
+                f64::INFINITY
+            ),
             matched
+        );
+        // Diagonally 0.14 m apart along the weak direction: with a gate of 0.1 m the match
+        // is taken as it is (slipping wheels, not the map's weak pull), within 0.2 m not.
+        assert_eq!(
+            towards_prediction_where_weak(matched, predicted, &info, prior_weight, 100.0, 0.1),
+            matched
+        );
+        assert_eq!(
+            towards_prediction_where_weak(matched, predicted, &info, prior_weight, 100.0, 0.2),
+            moved
         );
     }
 
@@ -3044,6 +3107,54 @@ mod tests {
         assert!(
             heard_with_the_pull.is_none_or(|t| t >= 7.0),
             "reported at {heard_with_the_pull:?} s"
+        );
+    }
+
+    /// [`slip_burst_seen`] beside the wall of [`slip_beside_a_wall_reported_at`], the slip
+    /// check hearing the matches without the matcher's pull, the match held to the wheels'
+    /// prediction where the map pins it weakly at `floor` (gated at `gate_m`), and the slip
+    /// check hearing each match from the previous one (`match_to_match`) or from the pose.
+    fn slip_beside_a_wall_held(
+        floor: Option<f64>,
+        gate_m: Option<f64>,
+        match_to_match: bool,
+    ) -> (Option<f64>, f64) {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.slip_check_without_prior = true;
+        cfg.weak_direction_floor = floor;
+        cfg.weak_direction_gate_m = gate_m;
+        cfg.slip_check_match_to_match = match_to_match;
+        cfg.frontend.densify = Some(Densify {
+            max_gap_m: 0.3,
+            spacing_m: 0.05,
+        });
+        let wall = [(-20.0, 1.5, 40.0, 1.5)];
+        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)])
+    }
+
+    #[test]
+    fn a_match_held_to_the_wheels_where_the_map_is_weak_lets_go_of_slipping_wheels() {
+        // Nothing pulls the pose off the match: from the last match or from the pose, the
+        // check hears the same.
+        let usual = slip_beside_a_wall_held(None, None, false);
+        assert_eq!(slip_beside_a_wall_held(None, None, true), usual);
+        assert!(
+            usual.0.is_some_and(|t| (5.0..7.0).contains(&t)),
+            "{usual:?}"
+        );
+        // Held to the wheels along the wall at any distance, the pose runs off with the
+        // burst's over-report, and the matches started from it follow, unheard.
+        let (held, held_error_m) = slip_beside_a_wall_held(Some(100.0), None, true);
+        assert_eq!(held, None);
+        assert!(held_error_m > 1.0, "{held_error_m}");
+        // Let go of once the match lies more than 1 cm from the prediction, the pose stays
+        // with the map and the burst is heard.
+        let (gated, gated_error_m) = slip_beside_a_wall_held(Some(100.0), Some(0.01), true);
+        assert!(gated.is_some_and(|t| (5.0..8.0).contains(&t)), "{gated:?}");
+        assert!(
+            gated_error_m < 0.7 * held_error_m,
+            "{gated_error_m} {held_error_m}"
         );
     }
 
