@@ -387,6 +387,25 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "weak-floor-100-gate-3cm-own",
+        what: "weak-floor-100-gate-3cm, the slip check's matches its own, each started from its last one",
+        apply: |c| {
+            c.mapper.weak_direction_floor = Some(100.0);
+            c.mapper.slip_check_match_to_match = true;
+            c.mapper.weak_direction_gate_m = Some(0.03);
+            c.mapper.slip_check_own_match = true;
+        },
+    },
+    Variant {
+        name: "weak-floor-100-own",
+        what: "weak-floor-100, the slip check's matches its own, each started from its last one",
+        apply: |c| {
+            c.mapper.weak_direction_floor = Some(100.0);
+            c.mapper.slip_check_match_to_match = true;
+            c.mapper.slip_check_own_match = true;
+        },
+    },
+    Variant {
         name: "prior-x30",
         what: "the matcher's pull towards the predicted position 30 times as strong (90 per point per m^2)",
         apply: |c| c.mapper.frontend.matcher.prior_translation_weight *= 30.0,

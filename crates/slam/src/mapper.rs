@@ -180,6 +180,13 @@ fn subsample(points: &[Point2], max: usize) -> Vec<Point2> {
     points.iter().step_by(step).copied().collect()
 }
 
+/// The slip check's own match ([`MapperConfig::slip_check_own_match`]) is made only where its
+/// last one lies at least this far from the pose, metres (nearer, the tracking match is as
+/// good)...
+const OWN_MATCH_MIN_OFFSET_M: f64 = 0.002;
+/// ... and less than this (farther, it has lost the map and starts again from the pose).
+const OWN_MATCH_MAX_OFFSET_M: f64 = 0.5;
+
 /// The weakest direction of a match's translation `information` once the matcher's own pull
 /// `prior_weight` towards the prediction is taken out: how firmly the map pins it (per square
 /// metre) and its unit vector.
@@ -350,6 +357,9 @@ pub struct MapperConfig {
     /// disagreement with it would otherwise read as motion the wheels did not report, at
     /// every scan. Without that pull the two are the same.
     pub slip_check_match_to_match: bool,
+    /// ... and that match is the check's own: started from its last one carried on by the
+    /// wheels, not from the pose, wherever the two lie apart (a second match per scan).
+    pub slip_check_own_match: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
     pub trim_radius_m: Option<f64>,
@@ -717,6 +727,7 @@ impl Default for MapperConfig {
             health: HealthConfig::default(),
             slip_check_without_prior: false,
             slip_check_match_to_match: false,
+            slip_check_own_match: false,
             trim_radius_m: None,
             motion_filter: None,
             min_scan_points: 10,
@@ -1317,6 +1328,32 @@ impl Mapper {
                     };
                     matched_alone = Some(origin * verdict);
                     match_before_pull = Some(origin * m.pose);
+                    // The check's own chain of matches, each started from its last one
+                    // carried on by the wheels, where the pose has been pulled off it.
+                    let own = self
+                        .heard_from_pose
+                        .filter(|o| {
+                            self.cfg.slip_check_own_match
+                                && still.is_none()
+                                && o.x_m.hypot(o.y_m) > OWN_MATCH_MIN_OFFSET_M
+                                && o.x_m.hypot(o.y_m) < OWN_MATCH_MAX_OFFSET_M
+                        })
+                        .map(|o| origin.inverse() * (before * o * (before.inverse() * predicted)));
+                    if let Some(own_prior) = own {
+                        let own_match = match_scan(map, &dense, own_prior, &matcher);
+                        let heard = if self.cfg.slip_check_without_prior {
+                            without_prior_along_heading(
+                                own_match.pose,
+                                own_prior,
+                                &own_match.information,
+                                prior_pull,
+                            )
+                        } else {
+                            own_match.pose
+                        };
+                        matched_alone = Some(origin * heard);
+                        match_before_pull = Some(origin * own_match.pose);
+                    }
                     if let Some(floor) = self.cfg.weak_direction_floor
                         && still.is_none()
                         && self.health.state() == LocalisationState::Tracking
@@ -3118,6 +3155,7 @@ mod tests {
         floor: Option<f64>,
         gate_m: Option<f64>,
         match_to_match: bool,
+        own_match: bool,
     ) -> (Option<f64>, f64) {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
@@ -3125,6 +3163,7 @@ mod tests {
         cfg.weak_direction_floor = floor;
         cfg.weak_direction_gate_m = gate_m;
         cfg.slip_check_match_to_match = match_to_match;
+        cfg.slip_check_own_match = own_match;
         cfg.frontend.densify = Some(Densify {
             max_gap_m: 0.3,
             spacing_m: 0.05,
@@ -3137,24 +3176,36 @@ mod tests {
     fn a_match_held_to_the_wheels_where_the_map_is_weak_lets_go_of_slipping_wheels() {
         // Nothing pulls the pose off the match: from the last match or from the pose, the
         // check hears the same.
-        let usual = slip_beside_a_wall_held(None, None, false);
-        assert_eq!(slip_beside_a_wall_held(None, None, true), usual);
+        let usual = slip_beside_a_wall_held(None, None, false, false);
+        assert_eq!(slip_beside_a_wall_held(None, None, true, false), usual);
         assert!(
             usual.0.is_some_and(|t| (5.0..7.0).contains(&t)),
             "{usual:?}"
         );
         // Held to the wheels along the wall at any distance, the pose runs off with the
         // burst's over-report, and the matches started from it follow, unheard.
-        let (held, held_error_m) = slip_beside_a_wall_held(Some(100.0), None, true);
+        let (held, held_error_m) = slip_beside_a_wall_held(Some(100.0), None, true, false);
         assert_eq!(held, None);
         assert!(held_error_m > 1.0, "{held_error_m}");
         // Let go of once the match lies more than 1 cm from the prediction, the pose stays
         // with the map and the burst is heard.
-        let (gated, gated_error_m) = slip_beside_a_wall_held(Some(100.0), Some(0.01), true);
+        let (gated, gated_error_m) = slip_beside_a_wall_held(Some(100.0), Some(0.01), true, false);
         assert!(gated.is_some_and(|t| (5.0..8.0).contains(&t)), "{gated:?}");
         assert!(
             gated_error_m < 0.7 * held_error_m,
             "{gated_error_m} {held_error_m}"
+        );
+        // Or, held at any distance, the check's matches its own, started from its last
+        // match: the burst is heard as soon as from a pose that follows the map.
+        let (own, own_error_m) = slip_beside_a_wall_held(Some(100.0), None, true, true);
+        assert!(
+            own.is_some_and(|t| t <= usual.0.unwrap_or(f64::INFINITY)),
+            "{own:?}"
+        );
+        assert!(own.is_some_and(|t| t >= 5.0), "{own:?}");
+        assert!(
+            own_error_m < 0.7 * held_error_m,
+            "{own_error_m} {held_error_m}"
         );
     }
 
