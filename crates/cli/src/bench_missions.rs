@@ -131,6 +131,12 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
 /// `realms bench missions`.
 pub fn run(args: BenchMissionsArgs) -> Result<()> {
     let (base, source) = load_scenario(args.scenario.as_deref())?;
+    let variant = args
+        .variant
+        .as_deref()
+        .map(crate::bench_slam::variant)
+        .transpose()?;
+
     if args.seeds == 0 {
         bail!("--seeds must be at least 1");
     }
@@ -147,11 +153,16 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         s.validate(&source)?;
         scenarios.push(s);
     }
+    let source = match variant {
+        Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
+        None => source,
+    };
     let jobs = workers(args.jobs);
     let mut missions = in_parallel(&scenarios, jobs, |scenario| {
         let wall = std::time::Instant::now();
         let options = MissionOptions {
             cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
+            mapping_change: variant.map(|v| v.apply),
             ..MissionOptions::default()
         };
         let mut mission = Mission::with_options(World::new(scenario), options);

@@ -218,6 +218,10 @@ pub struct BenchMissionsArgs {
     /// Print one JSON object instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Run the rovers with this SLAM variant of `realms bench slam` instead of the setup as
+    /// it is (the missions' paths then differ too).
+    #[arg(long)]
+    pub variant: Option<String>,
 }
 
 /// `realms bench logs`.
