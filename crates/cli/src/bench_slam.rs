@@ -46,6 +46,16 @@ pub(crate) fn variant(name: &str) -> Result<&'static Variant> {
     }
 }
 
+/// The position held to the wheels' prediction where the map pins it weakly (floor 100 per
+/// point), the pull gated at `gate_m`, the slip check hearing each match from the previous
+/// one (its own if `own_match`).
+fn held_where_weak(c: &mut MappingConfig, gate_m: Option<f64>, own_match: bool) {
+    c.mapper.weak_direction_floor = Some(100.0);
+    c.mapper.weak_direction_gate_m = gate_m;
+    c.mapper.slip_check_match_to_match = true;
+    c.mapper.slip_check_own_match = own_match;
+}
+
 /// Changes the refinement on the hits, if the setup has one.
 fn on_refinement(c: &mut MappingConfig, change: impl FnOnce(&mut realms_slam::ndt::NdtConfig)) {
     if let Some(n) = &mut c.mapper.ndt_refine {
@@ -363,47 +373,27 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "weak-floor-100-chain",
         what: "weak-floor-100, the slip check hearing each match's motion from the previous match",
-        apply: |c| {
-            c.mapper.weak_direction_floor = Some(100.0);
-            c.mapper.slip_check_match_to_match = true;
-        },
+        apply: |c| held_where_weak(c, None, false),
     },
     Variant {
         name: "weak-floor-100-gate-2cm",
         what: "weak-floor-100-chain, the pull only where the match lies within 2 cm of the prediction along the weak direction",
-        apply: |c| {
-            c.mapper.weak_direction_floor = Some(100.0);
-            c.mapper.slip_check_match_to_match = true;
-            c.mapper.weak_direction_gate_m = Some(0.02);
-        },
+        apply: |c| held_where_weak(c, Some(0.02), false),
     },
     Variant {
         name: "weak-floor-100-gate-3cm",
         what: "weak-floor-100-chain, the pull only where the match lies within 3 cm of the prediction along the weak direction",
-        apply: |c| {
-            c.mapper.weak_direction_floor = Some(100.0);
-            c.mapper.slip_check_match_to_match = true;
-            c.mapper.weak_direction_gate_m = Some(0.03);
-        },
+        apply: |c| held_where_weak(c, Some(0.03), false),
     },
     Variant {
         name: "weak-floor-100-gate-3cm-own",
         what: "weak-floor-100-gate-3cm, the slip check's matches its own, each started from its last one",
-        apply: |c| {
-            c.mapper.weak_direction_floor = Some(100.0);
-            c.mapper.slip_check_match_to_match = true;
-            c.mapper.weak_direction_gate_m = Some(0.03);
-            c.mapper.slip_check_own_match = true;
-        },
+        apply: |c| held_where_weak(c, Some(0.03), true),
     },
     Variant {
         name: "weak-floor-100-own",
         what: "weak-floor-100, the slip check's matches its own, each started from its last one",
-        apply: |c| {
-            c.mapper.weak_direction_floor = Some(100.0);
-            c.mapper.slip_check_match_to_match = true;
-            c.mapper.slip_check_own_match = true;
-        },
+        apply: |c| held_where_weak(c, None, true),
     },
     Variant {
         name: "prior-x30",

@@ -362,16 +362,7 @@ pub fn search(
     min_score: f64,
     rival_margin: f64,
 ) -> Option<SearchResult> {
-    search_rivals(
-        map,
-        points,
-        prior,
-        window,
-        min_score,
-        rival_margin,
-        true,
-        None,
-    )
+    search_allowing_ridges(map, points, prior, window, min_score, rival_margin, None)
 }
 
 /// [`search`], where a rival within `rival_margin` that lies on a ridge of high scores

@@ -359,6 +359,7 @@ pub struct MapperConfig {
     pub slip_check_match_to_match: bool,
     /// ... and that match is the check's own: started from its last one carried on by the
     /// wheels, not from the pose, wherever the two lie apart (a second match per scan).
+    /// Only with [`MapperConfig::slip_check_match_to_match`], whose chain it is.
     pub slip_check_own_match: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
@@ -1330,13 +1331,15 @@ impl Mapper {
                     match_before_pull = Some(origin * m.pose);
                     // The check's own chain of matches, each started from its last one
                     // carried on by the wheels, where the pose has been pulled off it.
+                    let own_check = self.cfg.slip_check_match_to_match
+                        && self.cfg.slip_check_own_match
+                        && still.is_none();
                     let own = self
                         .heard_from_pose
                         .filter(|o| {
-                            self.cfg.slip_check_own_match
-                                && still.is_none()
-                                && o.x_m.hypot(o.y_m) > OWN_MATCH_MIN_OFFSET_M
-                                && o.x_m.hypot(o.y_m) < OWN_MATCH_MAX_OFFSET_M
+                            own_check
+                                && (OWN_MATCH_MIN_OFFSET_M..OWN_MATCH_MAX_OFFSET_M)
+                                    .contains(&o.x_m.hypot(o.y_m))
                         })
                         .map(|o| origin.inverse() * (before * o * (before.inverse() * predicted)));
                     if let Some(own_prior) = own {
@@ -1407,7 +1410,9 @@ impl Mapper {
                 score,
                 wheels_silent: sample.wheels_silent,
             };
-            if let Some(heard) = match_before_pull {
+            if let Some(heard) = match_before_pull
+                && self.cfg.slip_check_match_to_match
+            {
                 self.heard_from_pose = Some(self.pose.inverse() * heard);
             }
             if let Some(t) = self.health.observe(&observed) {
@@ -3121,17 +3126,23 @@ mod tests {
     }
 
     /// [`slip_burst_seen`] a metre and a half from a long wall, with one small rock in view,
-    /// the slip check hearing the matches `without_prior` or not: when first reported.
-    fn slip_beside_a_wall_reported_at(without_prior: bool) -> Option<f64> {
+    /// the mapper set up by `change`.
+    fn slip_beside_a_wall(change: impl FnOnce(&mut MapperConfig)) -> (Option<f64>, f64) {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
-        cfg.slip_check_without_prior = without_prior;
         cfg.frontend.densify = Some(Densify {
             max_gap_m: 0.3,
             spacing_m: 0.05,
         });
+        change(&mut cfg);
         let wall = [(-20.0, 1.5, 40.0, 1.5)];
-        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)]).0
+        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)])
+    }
+
+    /// [`slip_beside_a_wall`], the slip check hearing the matches `without_prior` or not:
+    /// when first reported.
+    fn slip_beside_a_wall_reported_at(without_prior: bool) -> Option<f64> {
+        slip_beside_a_wall(|cfg| cfg.slip_check_without_prior = without_prior).0
     }
 
     #[test]
@@ -3147,29 +3158,23 @@ mod tests {
         );
     }
 
-    /// [`slip_burst_seen`] beside the wall of [`slip_beside_a_wall_reported_at`], the slip
-    /// check hearing the matches without the matcher's pull, the match held to the wheels'
-    /// prediction where the map pins it weakly at `floor` (gated at `gate_m`), and the slip
-    /// check hearing each match from the previous one (`match_to_match`) or from the pose.
+    /// [`slip_beside_a_wall`], the slip check hearing the matches without the matcher's
+    /// pull, the match held to the wheels' prediction where the map pins it weakly at
+    /// `floor` (gated at `gate_m`), and the slip check hearing each match from the previous
+    /// one (`match_to_match`, its own if `own_match`) or from the pose.
     fn slip_beside_a_wall_held(
         floor: Option<f64>,
         gate_m: Option<f64>,
         match_to_match: bool,
         own_match: bool,
     ) -> (Option<f64>, f64) {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.slip_check_without_prior = true;
-        cfg.weak_direction_floor = floor;
-        cfg.weak_direction_gate_m = gate_m;
-        cfg.slip_check_match_to_match = match_to_match;
-        cfg.slip_check_own_match = own_match;
-        cfg.frontend.densify = Some(Densify {
-            max_gap_m: 0.3,
-            spacing_m: 0.05,
-        });
-        let wall = [(-20.0, 1.5, 40.0, 1.5)];
-        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)])
+        slip_beside_a_wall(|cfg| {
+            cfg.slip_check_without_prior = true;
+            cfg.weak_direction_floor = floor;
+            cfg.weak_direction_gate_m = gate_m;
+            cfg.slip_check_match_to_match = match_to_match;
+            cfg.slip_check_own_match = own_match;
+        })
     }
 
     #[test]
