@@ -153,7 +153,7 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         s.validate(&source)?;
         scenarios.push(s);
     }
-    let source = match variant {
+    let source = match &variant {
         Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
         None => source,
     };
@@ -162,7 +162,9 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         let wall = std::time::Instant::now();
         let options = MissionOptions {
             cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
-            mapping_change: variant.map(|v| v.apply),
+            mapping_changes: variant
+                .as_ref()
+                .map_or_else(Vec::new, |v| v.changes.clone()),
             ..MissionOptions::default()
         };
         let mut mission = Mission::with_options(World::new(scenario), options);

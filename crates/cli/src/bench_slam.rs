@@ -31,19 +31,52 @@ pub(crate) struct Variant {
     pub(crate) apply: fn(&mut MappingConfig),
 }
 
-/// The variant called `name`, or an error listing the known ones.
-pub(crate) fn variant(name: &str) -> Result<&'static Variant> {
-    match VARIANTS.iter().find(|v| v.name == name) {
-        Some(v) => Ok(v),
-        None => bail!(
-            "unknown variant `{name}`; known: {}",
-            VARIANTS
-                .iter()
-                .map(|v| v.name)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+/// A setup to compare against the one as it is: one variant, or several applied in turn.
+pub(crate) struct Setup {
+    /// The variants' names joined by `+`, as asked for.
+    pub(crate) name: String,
+    /// What each variant changes, in turn.
+    pub(crate) what: String,
+    /// The variants' changes, applied in the order they were named.
+    pub(crate) changes: Vec<fn(&mut MappingConfig)>,
+}
+
+impl Setup {
+    /// Applies every change of the setup to `c`.
+    pub(crate) fn apply(&self, c: &mut MappingConfig) {
+        for change in &self.changes {
+            change(c);
+        }
     }
+}
+
+/// The setup called `name`: a variant's name, or several joined by `+` (applied in that
+/// order, so a later one wins where two set the same field); an error names any unknown one
+/// and lists the known ones.
+pub(crate) fn variant(name: &str) -> Result<Setup> {
+    let mut parts = Vec::new();
+    for part in name.split('+') {
+        match VARIANTS.iter().find(|v| v.name == part) {
+            Some(v) => parts.push(v),
+            None => bail!(
+                "unknown variant `{part}` in `{name}`; known (join several with `+`): {}",
+                VARIANTS
+                    .iter()
+                    .map(|v| v.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+    Ok(Setup {
+        name: name.to_owned(),
+        what: parts
+            .iter()
+            .map(|v| v.what)
+            .collect::<Vec<_>>()
+            .join("; then "),
+        changes: parts.iter().map(|v| v.apply).collect(),
+    })
 }
 
 /// The position held to the wheels' prediction where the map pins it weakly (floor 100 per
@@ -655,7 +688,7 @@ const VARIANTS: &[Variant] = &[
 struct Replay {
     seed: u64,
     rover: RoverId,
-    variant: &'static str,
+    variant: String,
     /// The pose as tracked at each scan, against the truth.
     tracked: PoseErrors,
     /// The final trajectory (after every closure), against the truth.
@@ -719,7 +752,7 @@ fn with_twins(input: &[CapturedInput], twins: &[LaserScan]) -> Vec<CapturedInput
 fn replay(
     seed: u64,
     rover: RoverId,
-    variant: &'static str,
+    variant: &str,
     cfg: &MappingConfig,
     input: &[CapturedInput],
     truth: &GroundTruth,
@@ -842,7 +875,7 @@ fn replay(
     Replay {
         seed,
         rover,
-        variant,
+        variant: variant.to_owned(),
         tracked: pose_errors(scans.iter().map(|(_, truth, est)| (*est, *truth))),
         last: pose_errors(last.into_iter()),
         aligned_rms_m: aligned_rmse(&positions).unwrap_or(f64::NAN),
@@ -1010,7 +1043,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     // Every replayed setup by name, the setup as it is first.
     let names: Vec<&str> = std::iter::once("baseline")
         .chain(args.lidar_twins.then_some(AT_ONCE_TWIN))
-        .chain(variants.iter().map(|v| v.name))
+        .chain(variants.iter().map(|v| v.name.as_str()))
         .collect();
     let workers = crate::bench::workers(args.jobs);
     let with_csv = args.trajectories.is_some();
@@ -1071,6 +1104,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         let cfg = rover_mapping_config(&world, &options);
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let biases: Vec<f64> = world.rovers().map(|b| b.gyro_bias_rad_s).collect();
+        let gyro_calibration = options.gyro_calibration;
         let mut mission = Mission::with_options(world, options);
         mission.capture_slam_inputs();
         if args.lidar_twins {
@@ -1087,7 +1121,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         }
         if args.exact_gyro_bias {
             for (input, bias) in capture.iter_mut().zip(&biases) {
-                exact_gyro_bias(input, *bias, options.gyro_calibration);
+                exact_gyro_bias(input, *bias, gyro_calibration);
             }
         }
         let mut replays = Vec::new();
@@ -1107,8 +1141,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             }
             for v in &variants {
                 let mut changed = cfg.clone();
-                (v.apply)(&mut changed);
-                replays.push(replay(seed, *id, v.name, &changed, input, &truth, with_csv));
+                v.apply(&mut changed);
+                replays.push(replay(
+                    seed, *id, &v.name, &changed, input, &truth, with_csv,
+                ));
             }
         }
         replays
@@ -1249,8 +1285,53 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         println!("| --- | --- | --- | --- | --- |");
         for v in &variants {
             let of: Vec<&Replay> = all.iter().filter(|r| r.variant == v.name).collect();
-            relief_table(v.name, &of);
+            relief_table(&v.name, &of);
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rovers' setup as it is, in the small scenario (quick to build).
+    fn base() -> MappingConfig {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
+        let scenario = realms_sim::Scenario::load(&path).expect("the small scenario loads");
+        rover_mapping_config(&World::new(&scenario), &MissionOptions::default())
+    }
+
+    #[test]
+    fn variants_joined_by_a_plus_apply_each_in_turn() {
+        let setup = variant("weak-floor-100-own+gaps-to-6m").expect("both are known");
+        assert_eq!(setup.name, "weak-floor-100-own+gaps-to-6m");
+        let (before, mut after) = (base(), base());
+        setup.apply(&mut after);
+        assert_eq!(before.mapper.weak_direction_floor, None);
+        assert_eq!(after.mapper.weak_direction_floor, Some(100.0));
+        assert!(after.mapper.slip_check_own_match);
+        assert_ne!(before.traversability.gap_reach_m, 6.0);
+        assert_eq!(after.traversability.gap_reach_m, 6.0);
+        // A later variant wins where two set the same field.
+        let mut both = base();
+        variant("weak-floor-30+weak-floor-100")
+            .expect("both are known")
+            .apply(&mut both);
+        assert_eq!(both.mapper.weak_direction_floor, Some(100.0));
+    }
+
+    #[test]
+    fn an_unknown_part_of_a_joined_variant_is_named_in_the_error() {
+        let err = variant("weak-floor-100+no-such-thing")
+            .err()
+            .expect("an unknown variant is an error")
+            .to_string();
+        assert!(err.contains("`no-such-thing`"), "{err}");
+        assert!(
+            err.contains("weak-floor-100-own"),
+            "lists the known ones: {err}"
+        );
+    }
 }

@@ -278,7 +278,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         .transpose()?;
     println!("# realms bench slip");
     println!();
-    if let Some(v) = variant {
+    if let Some(v) = &variant {
         println!("SLAM variant {}: {}", v.name, v.what);
         println!();
     }
@@ -300,7 +300,9 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         let t0 = Instant::now();
         let options = MissionOptions {
             ideal_comms: true,
-            mapping_change: variant.map(|v| v.apply),
+            mapping_changes: variant
+                .as_ref()
+                .map_or_else(Vec::new, |v| v.changes.clone()),
             ..MissionOptions::default()
         };
         let mission = crate::bench::explore_to_end(&s, options, limit_s);

@@ -219,7 +219,8 @@ pub struct BenchMissionsArgs {
     #[arg(long)]
     pub json: bool,
     /// Run the rovers with this SLAM variant of `realms bench slam` instead of the setup as
-    /// it is (the missions' paths then differ too).
+    /// it is (the missions' paths then differ too); join several with `+`, e.g.
+    /// `weak-floor-100-own+gaps-to-6m`.
     #[arg(long)]
     pub variant: Option<String>,
 }
@@ -247,7 +248,8 @@ pub struct BenchSlamArgs {
     /// Length of each mission, e.g. `10m`.
     #[arg(long, default_value = "10m")]
     pub duration: String,
-    /// SLAM variants to replay beside the setup as it is (repeat the flag for several).
+    /// SLAM variants to replay beside the setup as it is (repeat the flag for several); join
+    /// variants with `+` to replay them together, e.g. `weak-floor-100-own+gaps-to-6m`.
     #[arg(long)]
     pub variant: Vec<String>,
     /// Drop the scenario's scheduled faults (slip bursts, sensor dropouts, power loss).
@@ -301,7 +303,8 @@ pub struct BenchSlipArgs {
     #[arg(long, default_value_t = 120.0)]
     pub period_s: f64,
     /// Run the rovers with this SLAM variant of `realms bench slam` instead of the setup as
-    /// it is (the missions' paths then differ too).
+    /// it is (the missions' paths then differ too); join several with `+`, e.g.
+    /// `weak-floor-100-own+gaps-to-6m`.
     #[arg(long)]
     pub variant: Option<String>,
     /// Missions run at once (default: one per core).

@@ -54,7 +54,7 @@ pub const TRAJECTORY_PERIOD: Duration = Duration::from_secs(1);
 pub use realms_node::cost::CostClock;
 
 /// How a mission is run, beyond its scenario.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct MissionOptions {
     /// Rovers hear each other's navigation messages (targets, explored ground). Off, each
     /// explores as if alone: what allocation falls back to when the radio is silent.
@@ -68,9 +68,9 @@ pub struct MissionOptions {
     /// Lent to the rovers to time their SLAM (`mission.json`'s `slam_wall_s`); without it
     /// that time reads zero.
     pub cost_clock: CostClock,
-    /// A change to every rover's SLAM setup, for benches that compare setups over whole
-    /// missions (`None`: the setup as it is).
-    pub mapping_change: Option<fn(&mut MappingConfig)>,
+    /// Changes to every rover's SLAM setup, applied in turn, for benches that compare setups
+    /// over whole missions (none: the setup as it is).
+    pub mapping_changes: Vec<fn(&mut MappingConfig)>,
 }
 
 impl Default for MissionOptions {
@@ -80,7 +80,7 @@ impl Default for MissionOptions {
             ideal_comms: false,
             gyro_calibration: GYRO_CALIBRATION,
             cost_clock: CostClock::default(),
-            mapping_change: None,
+            mapping_changes: Vec::new(),
         }
     }
 }
@@ -117,7 +117,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         depth_features: false,
         relief_odometry: None,
     };
-    if let Some(change) = options.mapping_change {
+    for change in &options.mapping_changes {
         change(&mut cfg);
     }
     cfg
