@@ -394,6 +394,15 @@ const VARIANTS: &[Variant] = &[
         apply: |c| on_refinement(c, |n| n.min_line_hits = 20),
     },
     Variant {
+        name: "no-weak-floor",
+        what: "the position not held to the prediction where the map is weak, and the slip check hearing each match from the pose (the rovers' setup before the fifty-sixth session)",
+        apply: |c| {
+            c.mapper.weak_direction_floor = None;
+            c.mapper.slip_check_match_to_match = false;
+            c.mapper.slip_check_own_match = false;
+        },
+    },
+    Variant {
         name: "weak-floor-30",
         what: "where the map pins the position less than 30 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
         apply: |c| c.mapper.weak_direction_floor = Some(30.0),
@@ -670,6 +679,11 @@ const VARIANTS: &[Variant] = &[
             c.traversability.gap_reach_m = 6.0;
             c.traversability.gap_drop_m = 0.06;
         },
+    },
+    Variant {
+        name: "gaps-to-4m",
+        what: "hidden ground ends only at points within 4 m, where frames are judged (the rovers' setup before the fifty-sixth session; it is 6 m)",
+        apply: |c| c.traversability.gap_reach_m = 4.0,
     },
     Variant {
         name: "gaps-to-6m",
@@ -1305,15 +1319,15 @@ mod tests {
 
     #[test]
     fn variants_joined_by_a_plus_apply_each_in_turn() {
-        let setup = variant("weak-floor-100-own+gaps-to-6m").expect("both are known");
-        assert_eq!(setup.name, "weak-floor-100-own+gaps-to-6m");
+        let setup = variant("no-weak-floor+gaps-to-4m").expect("both are known");
+        assert_eq!(setup.name, "no-weak-floor+gaps-to-4m");
         let (before, mut after) = (base(), base());
         setup.apply(&mut after);
-        assert_eq!(before.mapper.weak_direction_floor, None);
-        assert_eq!(after.mapper.weak_direction_floor, Some(100.0));
-        assert!(after.mapper.slip_check_own_match);
-        assert_ne!(before.traversability.gap_reach_m, 6.0);
-        assert_eq!(after.traversability.gap_reach_m, 6.0);
+        assert_eq!(before.mapper.weak_direction_floor, Some(100.0));
+        assert_eq!(after.mapper.weak_direction_floor, None);
+        assert!(before.mapper.slip_check_own_match && !after.mapper.slip_check_own_match);
+        assert_eq!(before.traversability.gap_reach_m, 6.0);
+        assert_eq!(after.traversability.gap_reach_m, 4.0);
         // A later variant wins where two set the same field.
         let mut both = base();
         variant("weak-floor-30+weak-floor-100")

@@ -35,12 +35,12 @@ pub struct TraversabilityConfig {
     pub min_points: usize,
     /// Points up to this far may end a stretch of hidden ground in [`shadow_gaps`]: beyond a
     /// large crater the ground resumes farther off than frames are judged, metres. The
-    /// stretch is still marked only within `max_range_m`. The rovers keep it at
-    /// `max_range_m`: reaching to the depth camera's 6 m marks more of the crater cells near
-    /// their paths, but in whole missions the longer routes round the marked craters left
-    /// worse maps (BENCHMARKS.md, "Hidden ground ended as far as the camera sees", and over
-    /// sixteen missions "The 6 m hidden-ground rule over sixteen whole missions", and its
-    /// third time).
+    /// stretch is still marked only within `max_range_m`. The rovers reach to their depth
+    /// camera's range (6 m), which marks more of the crater cells near their paths; alone it
+    /// left whole missions' maps worse, with their pose held to the wheels where the map is
+    /// weak it did not (BENCHMARKS.md, "Hidden ground ended as far as the camera sees", "The
+    /// 6 m hidden-ground rule over sixteen whole missions", and "The pose held to the wheels
+    /// where the map is weak, as the rovers' default").
     pub gap_reach_m: f64,
     /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
     /// much lower than the ground before it (the rovers take their step limit), metres.
