@@ -146,8 +146,11 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "graph-later-100",
-        what: "the pose graph's Gauss-Newton steps after the first stopped after 100 block-Jacobi iterations, not 500",
-        apply: |c| c.mapper.graph_later_cap = Some(100),
+        what: "block-jacobi, with the Gauss-Newton steps after the first stopped after 100 iterations, not 500",
+        apply: |c| {
+            c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::BlockJacobi;
+            c.mapper.graph_later_cap = Some(100);
+        },
     },
     Variant {
         name: "closures-every-4",
@@ -229,22 +232,13 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "chain-solver",
-        what: "the pose graph solved by conjugate gradients preconditioned by the chain of poses, to the optimum, not stopped after 500 block-Jacobi iterations",
+        what: "the pose graph solved by conjugate gradients preconditioned by the chain of poses, to the optimum, not exactly by elimination",
         apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Chain,
     },
     Variant {
-        name: "elimination",
-        what: "the pose graph solved exactly by block elimination in minimum-degree order",
-        apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Elimination,
-    },
-    Variant {
-        name: "elimination-dcs",
-        what: "the pose graph solved exactly by elimination, closures discounted by dynamic covariance scaling (phi 5) rather than Huber's loss",
-        apply: |c| {
-            c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::Elimination;
-            c.mapper.graph_loss =
-                realms_slam::posegraph::RobustLoss::DynamicCovarianceScaling { phi: 5.0 };
-        },
+        name: "block-jacobi",
+        what: "the pose graph's Gauss-Newton steps solved by conjugate gradients preconditioned by block-Jacobi, stopped after 500 iterations, not exactly by elimination (the rovers' default before the fifty-seventh session)",
+        apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::BlockJacobi,
     },
     Variant {
         name: "dcs",
@@ -532,6 +526,11 @@ const VARIANTS: &[Variant] = &[
                 rotation_rad: 0.4f64.to_radians(),
             })
         },
+    },
+    Variant {
+        name: "closure-from-nearest",
+        what: "a loop closure measured from the submap's keyframe drawn nearest where it matched, not from the submap's first keyframe",
+        apply: |c| c.mapper.closure_from_nearest_drawn = true,
     },
     Variant {
         name: "surface-turn-10deg",

@@ -13,7 +13,7 @@
 //!   3 degrees around the prior, as the rovers search);
 //! - `graph_optimize`: one Gauss-Newton step of a rover's pose graph after an hour of
 //!   driving (1,500 keyframes on laps of a 10 m square, 273 closures), by the rovers'
-//!   capped block-Jacobi conjugate gradients.
+//!   capped block-Jacobi conjugate gradients, and by block elimination (the rovers' solver).
 //!
 //! `cargo bench -p realms-slam --bench slam`. Figures in BENCHMARKS.md.
 
@@ -26,7 +26,7 @@ use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::ndt::{NdtConfig, NdtMap};
 use realms_slam::occupancy::MissRule;
-use realms_slam::posegraph::{Edge, PoseGraph};
+use realms_slam::posegraph::{Edge, GraphSolver, PoseGraph};
 use std::hint::black_box;
 
 /// A scene to match in: a map of a few scans, the scan to match, where it truly is, and the
@@ -310,6 +310,13 @@ fn lapped_graph() -> PoseGraph {
 fn graph_bench(c: &mut Criterion) {
     let graph = lapped_graph();
     c.bench_function("graph_optimize/lapped_square", |b| {
+        b.iter_batched_ref(|| graph.clone(), |g| g.optimize(1), BatchSize::LargeInput)
+    });
+    let graph = PoseGraph {
+        solver: GraphSolver::Elimination,
+        ..graph
+    };
+    c.bench_function("graph_optimize/lapped_square_elimination", |b| {
         b.iter_batched_ref(|| graph.clone(), |g| g.optimize(1), BatchSize::LargeInput)
     });
 }

@@ -501,6 +501,14 @@ pub struct MapperConfig {
     /// [`Mapper::redraw_finished_submaps`]). Closures are then searched against cells that
     /// agree with the graph.
     pub redraw_bent_submaps: Option<SubmapBend>,
+    /// A loop closure joins the new keyframe to the submap's keyframe drawn nearest where it
+    /// matched, measured from where that keyframe was drawn, not to the submap's first
+    /// keyframe (`false`). A submap drawn while tracking drifted is bent: its far end sits
+    /// off its first keyframe by the drift, and a closure measured from the first keyframe
+    /// carries that bend into the graph at a closure's weight. Near the cells it matched,
+    /// the submap agrees with the keyframe that drew them (Karto links a closure to the
+    /// nearest scan of the chain it matched, for the same reason).
+    pub closure_from_nearest_drawn: bool,
     /// Long straight runs of a keyframe's scan along a direction the first keyframe's
     /// scan saw (from the start pose, known exactly) measure its heading absolutely, as a
     /// [`HeadingPrior`] in the graph ([`crate::walls`]; `None`: no such measurement). In a
@@ -784,6 +792,7 @@ impl Default for MapperConfig {
             closure_min_information: None,
             closure_ridges: None,
             redraw_bent_submaps: None,
+            closure_from_nearest_drawn: false,
             wall_headings: None,
         }
     }
@@ -1788,10 +1797,13 @@ impl Mapper {
                     }
                     _ => closure_information(&m, self.cfg.closure_weighting),
                 };
+                let (from, measurement) = self.closure_anchor(s, m.pose);
+                // The information's axes are turned from the measured pose's own, which
+                // stay where they are when the measurement is re-expressed.
                 let closure = Edge {
-                    from: self.submaps[s].origin_node,
+                    from,
                     to: node,
-                    measurement: m.pose,
+                    measurement,
                     information,
                     information_axis_rad,
                     robust: true,
@@ -1818,6 +1830,28 @@ impl Mapper {
             }
         }
         added
+    }
+
+    /// The keyframe a closure that matched at `matched` in submap `s`'s frame is measured
+    /// from, and the measurement from it (see [`MapperConfig::closure_from_nearest_drawn`]).
+    fn closure_anchor(&self, s: usize, matched: Pose2) -> (usize, Pose2) {
+        let sub = &self.submaps[s];
+        if !self.cfg.closure_from_nearest_drawn {
+            return (sub.origin_node, matched);
+        }
+        let nearest = sub
+            .drawn
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                let d = |p: &Pose2| p.position().distance_m(matched.position());
+                d(a.1).total_cmp(&d(b.1))
+            })
+            .map(|(k, drawn)| (k, *drawn));
+        match nearest {
+            Some((k, drawn)) => (sub.origin_node + k, drawn.inverse() * matched),
+            None => (sub.origin_node, matched),
+        }
     }
 
     /// The closure search window for joining keyframe `to` to the submap begun at keyframe
@@ -2423,6 +2457,43 @@ mod tests {
     fn a_submap_is_dropped_only_for_a_newer_one_that_knows_its_ground() {
         assert!(older_dropped(true));
         assert!(!older_dropped(false));
+    }
+
+    #[test]
+    fn a_closure_into_a_bent_submap_is_measured_from_the_keyframe_that_drew_its_cells() {
+        // The truth and the graph: a straight drive along x. The submap of its first 30
+        // keyframes was drawn while tracking drifted sideways, 0.2 m by its end.
+        let mut mapper = straight_drive(60);
+        let f = mapper.cfg.frontend;
+        let bend = |k: usize| 0.2 * (k as f64 / 29.0).powi(2);
+        mapper.submaps.push(Submap {
+            origin_node: 0,
+            map: MultiResMap::new(f.resolution_m, f.levels),
+            keyframes: 30,
+            finished: true,
+            precomputed: None,
+            trimmed: false,
+            hits: None,
+            drawn: (0..30)
+                .map(|k| Pose2::new(0.25 * k as f64, bend(k), 0.0))
+                .collect(),
+        });
+        // Keyframe 59 comes back 0.5 m beside keyframe 28 and matches into the cells it drew.
+        let truth = Pose2::new(0.25 * 28.0, 0.5, 0.3);
+        let matched = mapper.submaps[0].drawn[28] * (mapper.graph.nodes[28].inverse() * truth);
+        let placed = |mapper: &Mapper| {
+            let (from, measurement) = mapper.closure_anchor(0, matched);
+            let at = mapper.graph.nodes[from] * measurement;
+            (from, at.position().distance_m(truth.position()))
+        };
+        // From the submap's first keyframe the closure carries the bend.
+        let (from, off_m) = placed(&mapper);
+        assert_eq!(from, 0);
+        assert!((off_m - bend(28)).abs() < 1e-9, "{off_m}");
+        mapper.cfg.closure_from_nearest_drawn = true;
+        let (from, off_m) = placed(&mapper);
+        assert_eq!(from, 28);
+        assert!(off_m < 1e-9, "{off_m}");
     }
 
     #[test]
