@@ -66,7 +66,6 @@ impl Costmap {
             .map(|&v| v >= OCCUPIED_THRESHOLD)
             .collect();
         let known: Vec<bool> = map.cells().iter().map(|&v| v >= 0).collect();
-        let dist2 = squared_distance_transform(&lethal, geometry.width, geometry.height);
         let res = geometry.resolution_m;
         let cost_of = |d2: f32| inflation_cost((d2 as f64).sqrt() * res, cfg);
         // Squared distances in cells are sums of two whole squares, so the cost of each is
@@ -80,6 +79,13 @@ impl Costmap {
         } else {
             Vec::new()
         };
+        // Distances past the table cost 0 whatever they are.
+        let reach_d2 = table
+            .len()
+            .checked_sub(1)
+            .map_or(f32::INFINITY, |k| k as f32);
+        let dist2 =
+            squared_distance_transform_within(&lethal, geometry.width, geometry.height, reach_d2);
         let inflated_of = |d2: f32| match table.get(d2 as usize) {
             Some(&c) => {
                 debug_assert_eq!(d2.fract(), 0.0, "whole cells' squared distances");
@@ -164,7 +170,21 @@ fn inflation_cost(d_m: f64, cfg: &CostmapConfig) -> u8 {
 /// first down every column (for seeds, by sweeps: `column_distances`), then along every
 /// row by the lower envelope of parabolas.
 pub fn squared_distance_transform(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
-    let mut d = column_distances(seeds, width, height);
+    squared_distance_transform_within(seeds, width, height, f32::INFINITY)
+}
+
+/// [`squared_distance_transform`], exact where the distance is at most `max_d2` (squared
+/// cells); every cell farther from all seeds reads more than `max_d2` (mostly `INFINITY`).
+/// The costmap needs distances out to the inflation radius only: a column's seed farther
+/// than that cannot be any cell's nearest within reach, so it is left out, and the row
+/// pass skips the open floor's long empty runs instead of fitting parabolas to them.
+pub fn squared_distance_transform_within(
+    seeds: &[bool],
+    width: usize,
+    height: usize,
+    max_d2: f32,
+) -> Vec<f32> {
+    let mut d = column_distances(seeds, width, height, max_d2);
     let mut f = vec![0.0f32; width];
     let mut out = vec![0.0f32; width];
     let mut v = vec![0usize; width];
@@ -183,7 +203,7 @@ pub fn squared_distance_transform(seeds: &[bool], width: usize, height: usize) -
 /// envelope is that and no more, so two sweeps over the rows give it without the
 /// envelope's divisions and without reading the grid a column at a time; the squares of
 /// whole cells are the envelope's own products, so the values are its to the bit.
-fn column_distances(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
+fn column_distances(seeds: &[bool], width: usize, height: usize, max_d2: f32) -> Vec<f32> {
     let mut d = vec![f32::INFINITY; width * height];
     // Rows since each column's last seed, in the sweep's direction (None: none yet).
     let mut since: Vec<Option<u32>> = vec![None; width];
@@ -192,7 +212,10 @@ fn column_distances(seeds: &[bool], width: usize, height: usize) -> Vec<f32> {
         for ((out, &seed), run) in d[row.clone()].iter_mut().zip(&seeds[row]).zip(since) {
             *run = if seed { Some(0) } else { run.map(|r| r + 1) };
             if let Some(r) = *run {
-                *out = out.min(r as f32 * r as f32);
+                let d2 = r as f32 * r as f32;
+                if d2 <= max_d2 {
+                    *out = out.min(d2);
+                }
             }
         }
     };
@@ -285,6 +308,26 @@ mod tests {
                         })
                         .fold(f32::INFINITY, f32::min);
                     prop_assert_eq!(d[y * width + x], brute, "cell ({}, {})", x, y);
+                }
+            }
+        }
+
+        #[test]
+        fn the_distance_transform_within_a_reach_is_exact_inside_it_and_beyond_it_outside(
+            width in 1usize..40,
+            height in 1usize..40,
+            seeds in proptest::collection::vec(proptest::bool::weighted(0.02), 40 * 40),
+            max_d2 in 0u32..60,
+        ) {
+            let seeds = &seeds[..width * height];
+            let full = squared_distance_transform(seeds, width, height);
+            let within =
+                squared_distance_transform_within(seeds, width, height, max_d2 as f32);
+            for (k, (w, f)) in within.iter().zip(&full).enumerate() {
+                if *f <= max_d2 as f32 {
+                    prop_assert_eq!(w, f, "cell {}", k);
+                } else {
+                    prop_assert!(*w > max_d2 as f32, "cell {}: {} within, {} in full", k, w, f);
                 }
             }
         }

@@ -95,6 +95,19 @@ pub struct Planner {
     /// The search generation that marked each cell a target of a flood.
     target: Vec<u32>,
     heap: RadixHeap,
+    /// The cost the last search's bound stopped it at, if it did.
+    flood_limit: Option<f32>,
+}
+
+/// Where a flood towards targets may stop before it has reached them all (see
+/// [`Planner::travel_costs_bounded`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FloodBound {
+    /// Stop this much dearer than the first target reached ...
+    pub beyond_first: f32,
+    /// ... but not before this cell is reached (or found unreachable); it counts as one of
+    /// the targets.
+    pub must_reach: Option<Cell>,
 }
 
 /// One cell's state in a search.
@@ -224,7 +237,8 @@ impl Planner {
     }
 
     /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
-    /// A flood (no `goal`) given `targets` stops once it has closed them all.
+    /// A flood (no `goal`) given `targets` stops once it has closed them all, or where their
+    /// bound, if any, lets it stop (see [`Planner::travel_costs_bounded`]).
     fn search(
         &mut self,
         map: &Costmap,
@@ -232,15 +246,17 @@ impl Planner {
         goal: Option<Cell>,
         heuristic: bool,
         known_only: bool,
-        targets: Option<&[Cell]>,
+        targets: Option<(&[Cell], Option<FloodBound>)>,
     ) -> usize {
         let geo = *map.geometry();
         let (w, h) = (geo.width, geo.height);
         self.begin(geo.len());
         let mut targets_open = usize::MAX;
-        if let Some(cells) = targets {
+        let bound = targets.and_then(|(_, b)| b);
+        let must_reach = bound.and_then(|b| b.must_reach);
+        if let Some((cells, _)) = targets {
             targets_open = 0;
-            for c in cells {
+            for c in cells.iter().chain(must_reach.as_ref()) {
                 let i = geo.index(*c);
                 if self.target[i] != self.generation {
                     self.target[i] = self.generation;
@@ -293,19 +309,35 @@ impl Planner {
         self.heap
             .push(key(estimate(start.x, start.y), 0.0), s as u32);
         let goal_index = goal.map(|g| geo.index(g));
+        let must_close = must_reach.map(|c| geo.index(c));
+        let mut limit = f32::INFINITY;
+        let mut last_closed = 0.0f32;
+        self.flood_limit = None;
         let mut expanded = 0usize;
         while let Some(i) = self.heap.pop() {
             let i = i as usize;
             if self.cells[i].closed == gen_ {
                 continue;
             }
+            // A flood pops cells in order of cost: past the limit, nothing nearer is left.
+            if self.cells[i].g > limit && must_close.is_none_or(|m| self.cells[m].closed == gen_) {
+                // Past the limit if the cell it had to reach lay farther.
+                self.flood_limit = Some(limit.max(last_closed));
+                break;
+            }
             self.cells[i].closed = gen_;
+            last_closed = self.cells[i].g;
             expanded += 1;
             if Some(i) == goal_index {
                 break;
             }
             if self.target[i] == gen_ {
                 targets_open -= 1;
+                if let Some(b) = bound
+                    && limit.is_infinite()
+                {
+                    limit = self.cells[i].g + b.beyond_first;
+                }
             }
             if targets_open == 0 {
                 break;
@@ -435,13 +467,49 @@ impl Planner {
                 x_m: start.x_m,
                 y_m: start.y_m,
             })?;
-        self.search(map, s, None, false, known_only, targets);
+        self.search(map, s, None, false, known_only, targets.map(|t| (t, None)));
+        Ok(self.field())
+    }
+
+    /// [`travel_costs_until`](Self::travel_costs_until), but the flood also stops once it
+    /// is `bound.beyond_first` dearer than the first target it reached, provided it has
+    /// reached `bound.must_reach`: a frontier that much farther than another cannot be
+    /// worth more, whatever it would reveal. Also returns the cost the flood stopped at,
+    /// if the bound stopped it (every cell cheaper reads its exact cost, every dearer one
+    /// `INFINITY`, one as dear either); `None` when it ran as `travel_costs_until` would.
+    pub fn travel_costs_bounded(
+        &mut self,
+        map: &Costmap,
+        start: Point2,
+        known_only: bool,
+        targets: &[Cell],
+        bound: FloodBound,
+    ) -> Result<(Vec<f32>, Option<f32>), PlanError> {
+        let s = map
+            .geometry()
+            .world_to_cell(start)
+            .ok_or(PlanError::StartOutside {
+                x_m: start.x_m,
+                y_m: start.y_m,
+            })?;
+        self.search(
+            map,
+            s,
+            None,
+            false,
+            known_only,
+            Some((targets, Some(bound))),
+        );
+        Ok((self.field(), self.flood_limit))
+    }
+
+    /// The last search's costs, `INFINITY` where it did not close a cell.
+    fn field(&self) -> Vec<f32> {
         let gen_ = self.generation;
-        Ok(self
-            .cells
+        self.cells
             .iter()
             .map(|c| if c.closed == gen_ { c.g } else { f32::INFINITY })
-            .collect())
+            .collect()
     }
 
     /// The path to `goal` from the start of the last [`travel_costs`](Self::travel_costs).
@@ -641,6 +709,71 @@ mod tests {
             }
             if targets.is_empty() {
                 prop_assert_eq!(part.iter().filter(|c| c.is_finite()).count(), 1);
+            }
+        }
+
+        /// A flood bounded past its first target settles every cell up to its limit at the
+        /// full flood's cost and none beyond, the limit lies the bound past the nearest
+        /// target, and the cell it must reach is reached wherever the full flood reaches it.
+        #[test]
+        fn a_bounded_flood_settles_everything_within_its_limit_and_nothing_past_it(
+            width in 2usize..40,
+            height in 2usize..30,
+            raw in proptest::collection::vec(0u8..=255, 40 * 30),
+            start in (0usize..40, 0usize..30),
+            picks in proptest::collection::vec((0usize..40, 0usize..30), 1..6),
+            must in proptest::option::of((0usize..40, 0usize..30)),
+            beyond_first in 0.0f32..3.0,
+        ) {
+            let mut costs: Vec<u8> = raw[..width * height]
+                .iter()
+                .map(|&r| if r < 70 { LETHAL } else { r - 70 })
+                .collect();
+            let (sx, sy) = (start.0 % width, start.1 % height);
+            costs[sy * width + sx] = 0;
+            let map = costmap(width, height, costs);
+            let mut planner = Planner::new(PlannerConfig::default());
+            let s = centre(&map, sx, sy);
+            let full = planner.travel_costs(&map, s, false).expect("start inside");
+            let targets: Vec<Cell> =
+                picks.iter().map(|(x, y)| Cell { x: x % width, y: y % height }).collect();
+            let must_reach = must.map(|(x, y)| Cell { x: x % width, y: y % height });
+            let bound = FloodBound { beyond_first, must_reach };
+            let (part, limit) = planner
+                .travel_costs_bounded(&map, s, false, &targets, bound)
+                .expect("start inside");
+            let at = |c: Cell| c.y * width + c.x;
+            // The cell it must reach is a target too.
+            let nearest = targets
+                .iter()
+                .chain(must_reach.as_ref())
+                .map(|t| full[at(*t)])
+                .fold(f32::INFINITY, f32::min);
+            match limit {
+                Some(limit) => {
+                    let past = must_reach.map_or(0.0, |m| full[at(m)]);
+                    prop_assert_eq!(limit.to_bits(), (nearest + beyond_first).max(past).to_bits());
+                    for (p, f) in part.iter().zip(&full) {
+                        if *f < limit {
+                            prop_assert_eq!(p.to_bits(), f.to_bits());
+                        } else if *f > limit {
+                            prop_assert!(!p.is_finite());
+                        } else {
+                            prop_assert!(!p.is_finite() || p.to_bits() == f.to_bits());
+                        }
+                    }
+                }
+                None => {
+                    for (p, f) in part.iter().zip(&full) {
+                        prop_assert!(!p.is_finite() || p.to_bits() == f.to_bits());
+                    }
+                    for t in &targets {
+                        prop_assert_eq!(part[at(*t)].to_bits(), full[at(*t)].to_bits());
+                    }
+                }
+            }
+            if let Some(m) = must_reach {
+                prop_assert_eq!(part[at(m)].to_bits(), full[at(m)].to_bits());
             }
         }
     }

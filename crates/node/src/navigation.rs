@@ -18,7 +18,7 @@ use realms_core::{Cell, CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Ti
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
 use realms_nav::frontier::{FrontierTracker, still_to_explore};
-use realms_nav::planner::{PlannerConfig, smooth};
+use realms_nav::planner::{FloodBound, PlannerConfig, smooth};
 use realms_nav::{Costmap, CostmapConfig, Planner};
 use std::collections::{BTreeMap, VecDeque};
 
@@ -181,6 +181,10 @@ const BUMP_LIFETIME: Duration = Duration::from_secs(600);
 const BUMP_RADIUS_M: f64 = 0.1;
 /// ... centred this far ahead of the rover's centre (half the Leo Rover's length and 5 cm).
 const BUMP_AHEAD_M: f64 = 0.275;
+/// A rover keeps its frontier while it is worth no less than the best by more than this
+/// (in the planner's cost, metres of easy ground), so it does not dither between two.
+const KEEP_GOAL_MARGIN: f64 = 2.0;
+
 /// The guard forces a replan at most this often.
 const FORCED_REPLAN_PERIOD: Duration = Duration::from_secs(1);
 
@@ -418,39 +422,66 @@ impl Navigator {
             Vec::new()
         };
         // The travel costs are read at the frontiers and at the goal only, so the flood
-        // stops once it has reached them (at once, for a rover with none).
+        // stops once it has reached them (at once, for a rover with none) or once it is so
+        // far past the nearest frontier that no farther one can be worth more (a frontier
+        // the rover cannot reach would otherwise have it flood all its known ground at every
+        // replan: half the default mission's time).
+        let goal_cell = current.and_then(|p| geo.world_to_cell(p));
         let targets: Vec<Cell> = frontiers
             .iter()
             .flat_map(|f| f.cells.iter().copied())
-            .chain(current.and_then(|p| geo.world_to_cell(p)))
+            .chain(goal_cell)
             .collect();
-        let Ok(field) = self
+        let bound = FloodBound {
+            beyond_first: (self.cfg.explore.gain_per_m * self.cfg.explore.max_gain_m
+                + KEEP_GOAL_MARGIN) as f32,
+            must_reach: goal_cell,
+        };
+        let Ok((mut field, mut flood_limit)) = self
             .planner
-            .travel_costs_until(&costmap, here, true, Some(&targets))
+            .travel_costs_bounded(&costmap, here, true, &targets, bound)
         else {
             return self.off_map(now, costmap);
         };
-        let reachable = |p: Point2| {
-            geo.world_to_cell(p)
-                .is_some_and(|c| field[geo.index(c)].is_finite())
-        };
         if exploring {
             let claims = self.claims(now, current);
-            let options = candidates(
-                &frontiers,
-                &geo,
-                &field,
-                &claims,
-                &self.blacklist,
-                &self.cfg.explore,
-            );
-            // Frontiers a peer is about to map are left to it; if those are all that is
-            // left, the rover waits rather than going home (the peer may yet fail).
-            let free: Vec<Candidate> = options
-                .iter()
-                .filter(|c| !c.taken_by_peer())
-                .copied()
-                .collect();
+            let mut options;
+            let mut free: Vec<Candidate>;
+            loop {
+                options = candidates(
+                    &frontiers,
+                    &geo,
+                    &field,
+                    &claims,
+                    &self.blacklist,
+                    &self.cfg.explore,
+                );
+                // Frontiers a peer is about to map are left to it; if those are all that
+                // is left, the rover waits rather than going home (the peer may yet fail).
+                free = options
+                    .iter()
+                    .filter(|c| !c.taken_by_peer())
+                    .copied()
+                    .collect();
+                // A frontier the bounded flood did not reach costs more than its limit, so
+                // is worth less than the best gain less that; if the best it did reach is
+                // worth less than that (the near ones blacklisted or a peer's), flood on.
+                let best_unreached = self.cfg.explore.gain_per_m * self.cfg.explore.max_gain_m
+                    - flood_limit.map_or(f64::NEG_INFINITY, f64::from);
+                match flood_limit {
+                    Some(_) if free.first().is_none_or(|c| c.utility < best_unreached) => {
+                        let Ok(full) =
+                            self.planner
+                                .travel_costs_until(&costmap, here, true, Some(&targets))
+                        else {
+                            return self.off_map(now, costmap);
+                        };
+                        field = full;
+                        flood_limit = None;
+                    }
+                    _ => break,
+                }
+            }
             if stalled {
                 if self.goal.is_some() {
                     self.goal = None;
@@ -472,6 +503,10 @@ impl Navigator {
                 }
             }
         }
+        let reachable = |p: Point2| {
+            geo.world_to_cell(p)
+                .is_some_and(|c| field[geo.index(c)].is_finite())
+        };
         let Some(goal) = self.goal else {
             self.costmap = Some(costmap);
             return;
@@ -586,7 +621,7 @@ impl Navigator {
         if let Some(g) = self.goal {
             let still = options.iter().find(|c| same_target(c.goal, g.point));
             if let Some(c) = still
-                && c.utility >= best.utility - 2.0
+                && c.utility >= best.utility - KEEP_GOAL_MARGIN
             {
                 // The frontier's reachable cell may have moved a little as the map filled in.
                 if let Some(goal) = self.goal.as_mut() {
