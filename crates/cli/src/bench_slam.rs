@@ -237,7 +237,7 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "block-jacobi",
-        what: "the pose graph's Gauss-Newton steps solved by conjugate gradients preconditioned by block-Jacobi, stopped after 500 iterations, not exactly by elimination (the rovers' default before the fifty-seventh session)",
+        what: "the pose graph's Gauss-Newton steps solved by conjugate gradients preconditioned by block-Jacobi, stopped after 500 iterations, not exactly by elimination (the rovers' default before the fifty-eighth session)",
         apply: |c| c.mapper.graph_solver = realms_slam::posegraph::GraphSolver::BlockJacobi,
     },
     Variant {
