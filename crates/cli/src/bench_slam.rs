@@ -533,6 +533,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.closure_from_nearest_drawn = true,
     },
     Variant {
+        name: "closure-share-30",
+        what: "the n-th loop closure joining keyframes within 30 of an earlier closure's two ends weighs 1/n",
+        apply: |c| c.mapper.closure_share_span = Some(30),
+    },
+    Variant {
+        name: "closure-share-10",
+        what: "closure-share-30 within 10 keyframes",
+        apply: |c| c.mapper.closure_share_span = Some(10),
+    },
+    Variant {
         name: "surface-turn-10deg",
         what: "a scan point on a straight run of the scan not paired with a line cell whose line turns more than 10 deg from the run (a wall drawn at two offsets tilts its cells)",
         apply: |c| on_refinement(c, |n| n.max_surface_turn_rad = Some(10f64.to_radians())),

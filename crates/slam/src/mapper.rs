@@ -509,6 +509,12 @@ pub struct MapperConfig {
     /// the submap agrees with the keyframe that drew them (Karto links a closure to the
     /// nearest scan of the chain it matched, for the same reason).
     pub closure_from_nearest_drawn: bool,
+    /// Loop closures joining keyframes within this many of an accepted closure's two ends
+    /// are weighed 1/2, 1/3, ... of it in turn (`None`: every closure weighs the same).
+    /// Closures between the same two stretches of path match the same cells: where the map
+    /// slid there, they are all wrong the same way, and counted as independent they outvote
+    /// the path between.
+    pub closure_share_span: Option<usize>,
     /// Long straight runs of a keyframe's scan along a direction the first keyframe's
     /// scan saw (from the start pose, known exactly) measure its heading absolutely, as a
     /// [`HeadingPrior`] in the graph ([`crate::walls`]; `None`: no such measurement). In a
@@ -793,6 +799,7 @@ impl Default for MapperConfig {
             closure_ridges: None,
             redraw_bent_submaps: None,
             closure_from_nearest_drawn: false,
+            closure_share_span: None,
             wall_headings: None,
         }
     }
@@ -2034,7 +2041,23 @@ impl Mapper {
     }
 
     /// Puts a confirmed closure into the graph and marks its record accepted.
-    fn accept_closure(&mut self, closure: Edge) {
+    fn accept_closure(&mut self, mut closure: Edge) {
+        if let Some(span) = self.cfg.closure_share_span {
+            // The n-th closure between the same two stretches weighs 1/n: their matches
+            // share the cells and the slide of the map there, so their errors are one error
+            // counted many times, not many that average out.
+            let near = |a: usize, b: usize| a.abs_diff(b) <= span;
+            let earlier = self
+                .graph
+                .edges
+                .iter()
+                .filter(|e| e.robust && near(e.from, closure.from) && near(e.to, closure.to))
+                .count();
+            let share = 1.0 / (1 + earlier) as f64;
+            for i in &mut closure.information {
+                *i *= share;
+            }
+        }
         self.graph.edges.push(closure);
         self.closures += 1;
         if let Some(r) = self
@@ -2457,6 +2480,26 @@ mod tests {
     fn a_submap_is_dropped_only_for_a_newer_one_that_knows_its_ground() {
         assert!(older_dropped(true));
         assert!(!older_dropped(false));
+    }
+
+    #[test]
+    fn closures_between_the_same_stretches_share_their_weight_if_so_asked() {
+        let mut mapper = straight_drive(200);
+        mapper.cfg.closure_share_span = Some(30);
+        for (from, to) in [(10, 150), (20, 160), (45, 185), (100, 199)] {
+            let c = closure(&mapper, from, to, 0.0);
+            mapper.accept_closure(c);
+        }
+        let weights: Vec<f64> = mapper
+            .graph
+            .edges
+            .iter()
+            .filter(|e| e.robust)
+            .map(|e| e.information[0] / CLOSURE_INFORMATION[0])
+            .collect();
+        // The second within 30 of the first; the third within 30 of the second only; the
+        // fourth near none.
+        assert_eq!(weights, vec![1.0, 0.5, 0.5, 1.0]);
     }
 
     #[test]
