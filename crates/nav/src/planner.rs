@@ -460,13 +460,7 @@ impl Planner {
         known_only: bool,
         targets: Option<&[Cell]>,
     ) -> Result<Vec<f32>, PlanError> {
-        let s = map
-            .geometry()
-            .world_to_cell(start)
-            .ok_or(PlanError::StartOutside {
-                x_m: start.x_m,
-                y_m: start.y_m,
-            })?;
+        let s = start_cell(map, start)?;
         self.search(map, s, None, false, known_only, targets.map(|t| (t, None)));
         Ok(self.field())
     }
@@ -485,13 +479,7 @@ impl Planner {
         targets: &[Cell],
         bound: FloodBound,
     ) -> Result<(Vec<f32>, Option<f32>), PlanError> {
-        let s = map
-            .geometry()
-            .world_to_cell(start)
-            .ok_or(PlanError::StartOutside {
-                x_m: start.x_m,
-                y_m: start.y_m,
-            })?;
+        let s = start_cell(map, start)?;
         self.search(
             map,
             s,
@@ -516,6 +504,16 @@ impl Planner {
     pub fn path_from_field(&self, map: &Costmap, goal: Cell) -> Result<Plan, PlanError> {
         self.path_to(map.geometry(), goal, 0)
     }
+}
+
+/// The cell a flood starts from, or why there is none.
+fn start_cell(map: &Costmap, start: Point2) -> Result<Cell, PlanError> {
+    map.geometry()
+        .world_to_cell(start)
+        .ok_or(PlanError::StartOutside {
+            x_m: start.x_m,
+            y_m: start.y_m,
+        })
 }
 
 /// Whether the rover may drive the straight leg from `a` to `b` without going anywhere
@@ -617,6 +615,35 @@ mod tests {
         map.geometry().cell_center(Cell { x, y })
     }
 
+    /// A random flood's scene: a costmap with a fifth of its cells blocked (the start
+    /// open), a planner, the start, the full flood from it, and the target cells picked.
+    fn flood_scene(
+        width: usize,
+        height: usize,
+        raw: &[u8],
+        start: (usize, usize),
+        picks: &[(usize, usize)],
+    ) -> (Costmap, Planner, Point2, Vec<f32>, Vec<Cell>) {
+        let mut costs: Vec<u8> = raw[..width * height]
+            .iter()
+            .map(|&r| if r < 70 { LETHAL } else { r - 70 })
+            .collect();
+        let (sx, sy) = (start.0 % width, start.1 % height);
+        costs[sy * width + sx] = 0;
+        let map = costmap(width, height, costs);
+        let mut planner = Planner::new(PlannerConfig::default());
+        let s = centre(&map, sx, sy);
+        let full = planner.travel_costs(&map, s, false).expect("start inside");
+        let targets: Vec<Cell> = picks
+            .iter()
+            .map(|(x, y)| Cell {
+                x: x % width,
+                y: y % height,
+            })
+            .collect();
+        (map, planner, s, full, targets)
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
         /// A* finds Dijkstra's optimum, never crosses a blocked cell, and agrees with it on
@@ -686,18 +713,8 @@ mod tests {
             start in (0usize..40, 0usize..30),
             picks in proptest::collection::vec((0usize..40, 0usize..30), 0..6),
         ) {
-            let mut costs: Vec<u8> = raw[..width * height]
-                .iter()
-                .map(|&r| if r < 70 { LETHAL } else { r - 70 })
-                .collect();
-            let (sx, sy) = (start.0 % width, start.1 % height);
-            costs[sy * width + sx] = 0;
-            let map = costmap(width, height, costs);
-            let mut planner = Planner::new(PlannerConfig::default());
-            let s = centre(&map, sx, sy);
-            let full = planner.travel_costs(&map, s, false).expect("start inside");
-            let targets: Vec<Cell> =
-                picks.iter().map(|(x, y)| Cell { x: x % width, y: y % height }).collect();
+            let (map, mut planner, s, full, targets) =
+                flood_scene(width, height, &raw, start, &picks);
             let part = planner
                 .travel_costs_until(&map, s, false, Some(&targets))
                 .expect("start inside");
@@ -725,18 +742,8 @@ mod tests {
             must in proptest::option::of((0usize..40, 0usize..30)),
             beyond_first in 0.0f32..3.0,
         ) {
-            let mut costs: Vec<u8> = raw[..width * height]
-                .iter()
-                .map(|&r| if r < 70 { LETHAL } else { r - 70 })
-                .collect();
-            let (sx, sy) = (start.0 % width, start.1 % height);
-            costs[sy * width + sx] = 0;
-            let map = costmap(width, height, costs);
-            let mut planner = Planner::new(PlannerConfig::default());
-            let s = centre(&map, sx, sy);
-            let full = planner.travel_costs(&map, s, false).expect("start inside");
-            let targets: Vec<Cell> =
-                picks.iter().map(|(x, y)| Cell { x: x % width, y: y % height }).collect();
+            let (map, mut planner, s, full, targets) =
+                flood_scene(width, height, &raw, start, &picks);
             let must_reach = must.map(|(x, y)| Cell { x: x % width, y: y % height });
             let bound = FloodBound { beyond_first, must_reach };
             let (part, limit) = planner
