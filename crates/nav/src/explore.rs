@@ -45,6 +45,12 @@ impl Candidate {
 }
 
 impl ExploreConfig {
+    /// The most any frontier can be worth (a frontier of [`max_gain_m`](Self::max_gain_m)
+    /// or longer), in the planner's cost.
+    pub fn max_gain(&self) -> f64 {
+        self.gain_per_m * self.max_gain_m
+    }
+
     /// A single peer target this close to a frontier takes it (see
     /// [`Candidate::taken_by_peer`]), metres.
     pub fn taken_radius_m(&self) -> f64 {
@@ -138,7 +144,7 @@ fn score(
     let unjudged = f.cells.len() - f.beside_unknown;
     let length_m =
         (f.beside_unknown as f64 + cfg.unjudged_gain_fraction * unjudged as f64) * geo.resolution_m;
-    let gain = cfg.gain_per_m * length_m.min(cfg.max_gain_m);
+    let gain = (cfg.gain_per_m * length_m).min(cfg.max_gain());
     let discount: f64 = peers
         .iter()
         .map(|p| {

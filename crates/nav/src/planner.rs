@@ -95,8 +95,6 @@ pub struct Planner {
     /// The search generation that marked each cell a target of a flood.
     target: Vec<u32>,
     heap: RadixHeap,
-    /// The cost the last search's bound stopped it at, if it did.
-    flood_limit: Option<f32>,
 }
 
 /// Where a flood towards targets may stop before it has reached them all (see
@@ -238,7 +236,8 @@ impl Planner {
 
     /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
     /// A flood (no `goal`) given `targets` stops once it has closed them all, or where their
-    /// bound, if any, lets it stop (see [`Planner::travel_costs_bounded`]).
+    /// bound, if any, lets it stop (see [`Planner::travel_costs_bounded`]). Returns the cells
+    /// it expanded and the cost the bound stopped it at, if it did.
     fn search(
         &mut self,
         map: &Costmap,
@@ -247,7 +246,7 @@ impl Planner {
         heuristic: bool,
         known_only: bool,
         targets: Option<(&[Cell], Option<FloodBound>)>,
-    ) -> usize {
+    ) -> (usize, Option<f32>) {
         let geo = *map.geometry();
         let (w, h) = (geo.width, geo.height);
         self.begin(geo.len());
@@ -312,7 +311,7 @@ impl Planner {
         let must_close = must_reach.map(|c| geo.index(c));
         let mut limit = f32::INFINITY;
         let mut last_closed = 0.0f32;
-        self.flood_limit = None;
+        let mut stopped_at = None;
         let mut expanded = 0usize;
         while let Some(i) = self.heap.pop() {
             let i = i as usize;
@@ -322,7 +321,7 @@ impl Planner {
             // A flood pops cells in order of cost: past the limit, nothing nearer is left.
             if self.cells[i].g > limit && must_close.is_none_or(|m| self.cells[m].closed == gen_) {
                 // Past the limit if the cell it had to reach lay farther.
-                self.flood_limit = Some(limit.max(last_closed));
+                stopped_at = Some(limit.max(last_closed));
                 break;
             }
             self.cells[i].closed = gen_;
@@ -370,7 +369,7 @@ impl Planner {
                 }
             }
         }
-        expanded
+        (expanded, stopped_at)
     }
 
     fn cells(map: &Costmap, start: Point2, goal: Point2) -> Result<(Cell, Cell), PlanError> {
@@ -419,7 +418,7 @@ impl Planner {
     /// The cheapest path from `start` to `goal` (A*).
     pub fn plan(&mut self, map: &Costmap, start: Point2, goal: Point2) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), true, false, None);
+        let (expanded, _) = self.search(map, s, Some(g), true, false, None);
         self.path_to(map.geometry(), g, expanded)
     }
 
@@ -431,7 +430,7 @@ impl Planner {
         goal: Point2,
     ) -> Result<Plan, PlanError> {
         let (s, g) = Self::cells(map, start, goal)?;
-        let expanded = self.search(map, s, Some(g), false, false, None);
+        let (expanded, _) = self.search(map, s, Some(g), false, false, None);
         self.path_to(map.geometry(), g, expanded)
     }
 
@@ -480,15 +479,9 @@ impl Planner {
         bound: FloodBound,
     ) -> Result<(Vec<f32>, Option<f32>), PlanError> {
         let s = start_cell(map, start)?;
-        self.search(
-            map,
-            s,
-            None,
-            false,
-            known_only,
-            Some((targets, Some(bound))),
-        );
-        Ok((self.field(), self.flood_limit))
+        let targets = Some((targets, Some(bound)));
+        let (_, stopped_at) = self.search(map, s, None, false, known_only, targets);
+        Ok((self.field(), stopped_at))
     }
 
     /// The last search's costs, `INFINITY` where it did not close a cell.

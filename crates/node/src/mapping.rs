@@ -208,10 +208,11 @@ pub fn rover_mapper_config() -> MapperConfig {
     // stopped after 500 block-Jacobi iterations: over sixteen whole missions the final
     // trajectory error went from 0.088 to 0.080 m per rover on average, 40 rovers of 48
     // under 0.10 m (32 before), the maps from 92.5 to 93.0 % (7 under 90 % where there were
-    // 12), the crater cells near the paths marked 90.2 -> 88.6 %, and the fleet's SLAM ran
-    // 87x real time where it ran 39x (BENCHMARKS.md, "The pose graph solved exactly, as the
-    // rovers' default"). The map it once bent on seed 3 (22nd session) now holds: the wall
-    // headings and the closure gates keep the false closures out of the graph.
+    // 12), the crater cells near the paths marked 90.2 -> 88.6 %; rover by rover within
+    // chance, but the fleet's SLAM ran 87x real time where it ran 72x the same day
+    // (BENCHMARKS.md, "The pose graph solved exactly, as the rovers' default"). The map it
+    // once bent on seed 3 (22nd session) now holds: the wall headings and the closure gates
+    // keep the false closures out of the graph.
     cfg.graph_solver = realms_slam::posegraph::GraphSolver::Elimination;
     // Keeping the active submaps' keyframes as they were drawn helps on the recorded logs,
     // but on the rovers' replays it left the final trajectory as it was and the pose as

@@ -14,10 +14,10 @@
 //! beside the lander) and stops there.
 
 use realms_core::msgs::ExploredArea;
-use realms_core::{Cell, CentreLookup, Duration, Grid, Point2, Pose2, RoverId, Time};
+use realms_core::{Cell, CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_nav::explore::{Candidate, ExploreConfig, PeerClaim, candidates};
 use realms_nav::follower::{Follower, FollowerConfig, Steer};
-use realms_nav::frontier::{FrontierTracker, still_to_explore};
+use realms_nav::frontier::{Frontier, FrontierTracker, still_to_explore};
 use realms_nav::planner::{FloodBound, PlannerConfig, smooth};
 use realms_nav::{Costmap, CostmapConfig, Planner};
 use std::collections::{BTreeMap, VecDeque};
@@ -187,6 +187,26 @@ const KEEP_GOAL_MARGIN: f64 = 2.0;
 
 /// The guard forces a replan at most this often.
 const FORCED_REPLAN_PERIOD: Duration = Duration::from_secs(1);
+
+/// The frontiers worth going to, best first, by the travel costs `field`, and those of them
+/// no peer is about to map: those are left to the peer, and if they are all that is left the
+/// rover waits rather than going home (the peer may yet fail).
+fn rank_frontiers(
+    frontiers: &[Frontier],
+    geo: &GridGeometry,
+    field: &[f32],
+    claims: &[PeerClaim],
+    blacklist: &[Point2],
+    cfg: &ExploreConfig,
+) -> (Vec<Candidate>, Vec<Candidate>) {
+    let options = candidates(frontiers, geo, field, claims, blacklist, cfg);
+    let free = options
+        .iter()
+        .filter(|c| !c.taken_by_peer())
+        .copied()
+        .collect();
+    (options, free)
+}
 
 /// Whether two points are the same target.
 fn same_target(a: Point2, b: Point2) -> bool {
@@ -432,12 +452,12 @@ impl Navigator {
             .flat_map(|f| f.cells.iter().copied())
             .chain(goal_cell)
             .collect();
+        let max_gain = self.cfg.explore.max_gain();
         let bound = FloodBound {
-            beyond_first: (self.cfg.explore.gain_per_m * self.cfg.explore.max_gain_m
-                + KEEP_GOAL_MARGIN) as f32,
+            beyond_first: (max_gain + KEEP_GOAL_MARGIN) as f32,
             must_reach: goal_cell,
         };
-        let Ok((mut field, mut flood_limit)) = self
+        let Ok((mut field, flood_limit)) = self
             .planner
             .travel_costs_bounded(&costmap, here, true, &targets, bound)
         else {
@@ -445,42 +465,27 @@ impl Navigator {
         };
         if exploring {
             let claims = self.claims(now, current);
-            let mut options;
-            let mut free: Vec<Candidate>;
-            loop {
-                options = candidates(
-                    &frontiers,
-                    &geo,
-                    &field,
-                    &claims,
-                    &self.blacklist,
-                    &self.cfg.explore,
-                );
-                // Frontiers a peer is about to map are left to it; if those are all that
-                // is left, the rover waits rather than going home (the peer may yet fail).
-                free = options
-                    .iter()
-                    .filter(|c| !c.taken_by_peer())
-                    .copied()
-                    .collect();
-                // A frontier the bounded flood did not reach costs more than its limit, so
-                // is worth less than the best gain less that; if the best it did reach is
-                // worth less than that (the near ones blacklisted or a peer's), flood on.
-                let best_unreached = self.cfg.explore.gain_per_m * self.cfg.explore.max_gain_m
-                    - flood_limit.map_or(f64::NEG_INFINITY, f64::from);
-                match flood_limit {
-                    Some(_) if free.first().is_none_or(|c| c.utility < best_unreached) => {
-                        let Ok(full) =
-                            self.planner
-                                .travel_costs_until(&costmap, here, true, Some(&targets))
-                        else {
-                            return self.off_map(now, costmap);
-                        };
-                        field = full;
-                        flood_limit = None;
-                    }
-                    _ => break,
-                }
+            let rank = |field: &[f32]| {
+                let explore = &self.cfg.explore;
+                rank_frontiers(&frontiers, &geo, field, &claims, &self.blacklist, explore)
+            };
+            let (mut options, mut free) = rank(&field);
+            // A frontier the bounded flood did not reach costs more than its limit, so is
+            // worth less than the greatest gain less that; if the best it did reach is worth
+            // less (the near ones blacklisted or a peer's), flood on to the end.
+            if let Some(limit) = flood_limit
+                && free
+                    .first()
+                    .is_none_or(|c| c.utility < max_gain - f64::from(limit))
+            {
+                let Ok(full) =
+                    self.planner
+                        .travel_costs_until(&costmap, here, true, Some(&targets))
+                else {
+                    return self.off_map(now, costmap);
+                };
+                field = full;
+                (options, free) = rank(&field);
             }
             if stalled {
                 if self.goal.is_some() {

@@ -1846,19 +1846,14 @@ impl Mapper {
         if !self.cfg.closure_from_nearest_drawn {
             return (sub.origin_node, matched);
         }
-        let nearest = sub
-            .drawn
+        let distance = |p: &Pose2| p.position().distance_m(matched.position());
+        sub.drawn
             .iter()
             .enumerate()
-            .min_by(|a, b| {
-                let d = |p: &Pose2| p.position().distance_m(matched.position());
-                d(a.1).total_cmp(&d(b.1))
+            .min_by(|a, b| distance(a.1).total_cmp(&distance(b.1)))
+            .map_or((sub.origin_node, matched), |(k, drawn)| {
+                (sub.origin_node + k, drawn.inverse() * matched)
             })
-            .map(|(k, drawn)| (k, *drawn));
-        match nearest {
-            Some((k, drawn)) => (sub.origin_node + k, drawn.inverse() * matched),
-            None => (sub.origin_node, matched),
-        }
     }
 
     /// The closure search window for joining keyframe `to` to the submap begun at keyframe
