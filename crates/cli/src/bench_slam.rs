@@ -700,6 +700,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.traversability.gap_reach_m = 6.0,
     },
     Variant {
+        name: "silent-rays",
+        what: "a depth pixel without a return above one with a return ends hidden ground where its ray reaches the camera's 6 m, when that lies below the floor before the gap",
+        apply: |c| c.silent_pixels = true,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

@@ -25,7 +25,7 @@ use realms_node::rover::{RoverConfig, RoverNode};
 use realms_node::station::{StationNode, StationRole};
 use realms_node::{Node, Outgoing};
 use realms_sim::{Scenario, World};
-use realms_slam::traversability::TraversabilityConfig;
+use realms_slam::traversability::{PinholeDepth, TraversabilityConfig};
 use slam_record::RoverSlamRecord;
 
 /// Lidar returns lower than this above the ground under the rover are floor hits, metres:
@@ -117,6 +117,15 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
             gap_reach_m: spec.depth.range_max_m,
             ..TraversabilityConfig::default()
         },
+        depth_camera: Some(PinholeDepth::from_fov(
+            spec.depth.width,
+            spec.depth.height,
+            spec.depth.hfov_deg,
+            spec.depth.vfov_deg,
+            spec.depth.range_min_m,
+            spec.depth.range_max_m,
+        )),
+        silent_pixels: false,
         // The rovers' lidar is noisy at a centimetre or more; smoothed, the median rover's
         // trajectory error fell by a sixth (BENCHMARKS.md, "Ranges smoothed along the scan").
         smooth_ranges: true,

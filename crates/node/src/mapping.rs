@@ -25,7 +25,9 @@ use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::occupancy::CellState;
 use realms_slam::odometry::OdomSample;
 use realms_slam::relief::{self, ElevationPatch, Registration, ReliefConfig};
-use realms_slam::traversability::{SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps};
+use realms_slam::traversability::{
+    PinholeDepth, SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps,
+};
 
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
 const SHADOW_MIN_GAP_M: f64 = 0.5;
@@ -65,6 +67,15 @@ pub struct MappingConfig {
     pub depth_origin_m: [f64; 3],
     /// What the rover can drive over, for the hazard layer.
     pub traversability: TraversabilityConfig,
+    /// The depth camera's pinhole model, for [`silent_pixels`](Self::silent_pixels).
+    pub depth_camera: Option<PinholeDepth>,
+    /// A pixel that returned nothing above one that did tells the hazard layer the ground
+    /// along its ray lies lower than the ray ([`shadow_gaps`]; needs
+    /// [`depth_camera`](Self::depth_camera)); `false` leaves such pixels unread. Off for
+    /// the rovers: it marks more of the crater cells near the paths on the same paths, but
+    /// whole missions' maps came out worse with it (BENCHMARKS.md, "Pixels that returned
+    /// nothing").
+    pub silent_pixels: bool,
     /// Each range is averaged with its two neighbours (weights 1, 2, 1) where all three lie
     /// on one surface, before the scan is matched and mapped: the lidar's noise shrinks to
     /// 0.6 of itself, and the 1-degree curve of a wall moves the average by under a
@@ -556,23 +567,23 @@ impl Mapping {
             return;
         }
         let level = self.levelling();
-        let (r, o) = (&self.cfg.depth_rot, &self.cfg.depth_origin_m);
+        let (r, o) = (self.cfg.depth_rot, self.cfg.depth_origin_m);
+        let levelled_from_optical = |p: [f64; 3]| {
+            let b = [
+                r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + o[0],
+                r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + o[1],
+                r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + o[2],
+            ];
+            [
+                level[0][0] * b[0] + level[0][1] * b[1] + level[0][2] * b[2],
+                level[1][0] * b[0] + level[1][1] * b[1] + level[1][2] * b[2],
+                level[2][0] * b[0] + level[2][1] * b[1] + level[2][2] * b[2],
+            ]
+        };
         let levelled: Vec<[f64; 3]> = cloud
             .points_in_sensor
             .iter()
-            .map(|p| {
-                let v = [p[0] as f64, p[1] as f64, p[2] as f64];
-                let b = [
-                    r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2] + o[0],
-                    r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2] + o[1],
-                    r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2] + o[2],
-                ];
-                [
-                    level[0][0] * b[0] + level[0][1] * b[1] + level[0][2] * b[2],
-                    level[1][0] * b[0] + level[1][1] * b[1] + level[1][2] * b[2],
-                    level[2][0] * b[0] + level[2][1] * b[1] + level[2][2] * b[2],
-                ]
-            })
+            .map(|p| levelled_from_optical([p[0] as f64, p[1] as f64, p[2] as f64]))
             .collect();
         let points: Vec<[f64; 3]> = levelled
             .iter()
@@ -589,8 +600,17 @@ impl Mapping {
             let columns: Vec<Vec<[f64; 3]>> = (0..w)
                 .map(|c| (0..h).map(|r| levelled[r * w + c]).collect())
                 .collect();
+            let silent: Vec<Vec<[f64; 3]>> = match &self.cfg.depth_camera {
+                Some(camera) if self.cfg.silent_pixels => camera
+                    .silent_ends(&cloud.points_in_sensor, w, h)
+                    .into_iter()
+                    .map(|ends| ends.into_iter().map(levelled_from_optical).collect())
+                    .collect(),
+                _ => Vec::new(),
+            };
             verdicts.extend(shadow_gaps(
                 &columns,
+                &silent,
                 &self.cfg.traversability,
                 SHADOW_MIN_GAP_M,
             ));
@@ -948,6 +968,8 @@ mod tests {
                 depth_rot: [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]],
                 depth_origin_m: [0.2, 0.0, 0.3],
                 traversability: TraversabilityConfig::default(),
+                depth_camera: None,
+                silent_pixels: false,
                 smooth_ranges: false,
                 deskew: true,
                 depth_features: false,

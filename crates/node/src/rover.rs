@@ -369,6 +369,8 @@ mod tests {
                     depth_rot,
                     depth_origin_m: [0.2, 0.0, 0.3],
                     traversability: TraversabilityConfig::default(),
+                    depth_camera: None,
+                    silent_pixels: false,
                     smooth_ranges: false,
                     deskew: true,
                     depth_features: false,

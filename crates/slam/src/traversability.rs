@@ -9,7 +9,8 @@
 //! Crater bowls seen from outside are mostly hidden behind the rim; [`shadow_gaps`] marks
 //! the hidden ground as hazardous when the visible ground resumes lower beyond it (if so
 //! configured, even where that is farther off than frames are judged: a large crater's far
-//! wall).
+//! wall), or when a ray over the rim returns nothing though it ran below the floor before
+//! the camera's depth ran out (a far wall beyond the camera's reach).
 //!
 //! The approach is the elevation-mapping family's (e.g. Fankhauser et al., "Robot-Centric
 //! Elevation Mapping", 2014) reduced to what a slow rover on a known floor needs.
@@ -221,8 +222,15 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
 /// point as far as `cfg.gap_reach_m`. A rock hides the ground behind it too, but
 /// there the ground resumes at the height of the ground in front of it, only lower than the
 /// rock's top: that shadow is left to [`judge_frame`].
+///
+/// `silent[c]` (empty if unknown) holds column `c`'s rays that returned nothing, each as the
+/// point where it reaches the camera's greatest depth ([`PinholeDepth::silent_end`]): the
+/// ground along such a ray lies below it all the way, so its end may end a gap as a seen
+/// point would, however far off, but never starts one. Beside a large crater the far wall
+/// lies beyond the camera's reach, and the rays over the near rim return nothing.
 pub fn shadow_gaps(
     columns: &[Vec<[f64; 3]>],
+    silent: &[Vec<[f64; 3]>],
     cfg: &TraversabilityConfig,
     min_gap_m: f64,
 ) -> Vec<(Point2, bool)> {
@@ -230,29 +238,41 @@ pub fn shadow_gaps(
     // One buffer for every column, and an unstable sort whose ties fall in the column's
     // order (as a stable sort's would) but that needs no scratch: a frame has a hundred
     // columns, and each column allocated twice before. Each point: its distance, its place
-    // in the column, the point.
-    let mut pts: Vec<(f64, usize, [f64; 3])> = Vec::new();
-    for col in columns {
+    // in the column (the silent rays' ends after the seen points), the point, and whether it
+    // was seen (not a silent ray's end).
+    let mut pts: Vec<(f64, usize, [f64; 3], bool)> = Vec::new();
+    let no_silent = Vec::new();
+    for (c, col) in columns.iter().enumerate() {
         pts.clear();
         pts.extend(
             col.iter()
                 .filter(|p| p.iter().all(|v| v.is_finite()))
                 .map(|p| (p[0].hypot(p[1]), *p))
                 .filter(|(d, _)| *d <= cfg.gap_reach_m.max(cfg.max_range_m))
+                .map(|(d, p)| (d, p, true))
+                .chain(
+                    silent
+                        .get(c)
+                        .unwrap_or(&no_silent)
+                        .iter()
+                        .filter(|p| p.iter().all(|v| v.is_finite()))
+                        .map(|p| (p[0].hypot(p[1]), *p, false)),
+                )
                 .enumerate()
-                .map(|(k, (d, p))| (d, k, p)),
+                .map(|(k, (d, p, seen))| (d, k, p, seen)),
         );
         pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for (k, w) in pts.windows(2).enumerate() {
-            let ((d0, _, near), (d1, _, far)) = (w[0], w[1]);
-            if d1 - d0 < min_gap_m || d0 >= cfg.max_range_m {
+            let ((d0, _, near, near_seen), (d1, _, far, _)) = (w[0], w[1]);
+            if !near_seen || d1 - d0 < min_gap_m || d0 >= cfg.max_range_m {
                 continue;
             }
             let ground_before = pts[..=k]
                 .iter()
                 .rev()
-                .take_while(|(d, _, _)| *d >= d0 - GROUND_BEFORE_GAP_M)
-                .fold(near[2], |low, (_, _, p)| low.min(p[2]));
+                .take_while(|(d, ..)| *d >= d0 - GROUND_BEFORE_GAP_M)
+                .filter(|(.., seen)| *seen)
+                .fold(near[2], |low, (_, _, p, _)| low.min(p[2]));
             if far[2] > ground_before - cfg.gap_drop_m {
                 continue;
             }
@@ -274,6 +294,94 @@ pub fn shadow_gaps(
         }
     }
     out
+}
+
+/// A pixel without a return counts as silent (nothing within the camera's greatest depth)
+/// only above a return at least this much deeper than the least depth, metres. On a
+/// heightfield each ray of an image column meets the ground no nearer than the ray below it,
+/// so over such a return the pixel cannot have been too near; over a nearer one it may: a
+/// rock's face 0.4 m off, above the floor at its foot.
+const SILENT_ABOVE_DEPTH_M: f64 = 0.25;
+
+/// A depth camera's pinhole model, as its driver's CameraInfo gives it, and the depths it
+/// returns: what a pixel without a return says about the ground.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PinholeDepth {
+    /// Focal length in pixels, horizontal.
+    pub fx: f64,
+    /// Focal length in pixels, vertical.
+    pub fy: f64,
+    /// Principal point, x (pixels from the left edge).
+    pub cx: f64,
+    /// Principal point, y (pixels from the top edge).
+    pub cy: f64,
+    /// Nothing nearer than this is returned (optical depth, metres) ...
+    pub min_depth_m: f64,
+    /// ... and nothing deeper than this.
+    pub max_depth_m: f64,
+}
+
+impl PinholeDepth {
+    /// A centred pinhole of `width x height` pixels and the given fields of view, degrees.
+    pub fn from_fov(
+        width: u32,
+        height: u32,
+        hfov_deg: f64,
+        vfov_deg: f64,
+        min_depth_m: f64,
+        max_depth_m: f64,
+    ) -> Self {
+        PinholeDepth {
+            fx: width as f64 / 2.0 / (hfov_deg.to_radians() / 2.0).tan(),
+            fy: height as f64 / 2.0 / (vfov_deg.to_radians() / 2.0).tan(),
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
+            min_depth_m,
+            max_depth_m,
+        }
+    }
+
+    /// The silent rays of an organised cloud (`width x height` optical-frame points, rows
+    /// top-down, NaN where nothing returned), per column, as [`silent_end`](Self::silent_end)s:
+    /// for each run of at least two pixels without a return that starts right above a return
+    /// (deep enough that the run cannot be ground too near to see, see
+    /// [`SILENT_ABOVE_DEPTH_M`]), the run's lowest ray. A lone pixel without a return is a
+    /// real camera's speckle; pixels below a column's lowest return saw ground too near.
+    pub fn silent_ends(
+        &self,
+        cloud: &[[f32; 3]],
+        width: usize,
+        height: usize,
+    ) -> Vec<Vec<[f64; 3]>> {
+        let at = |row: usize, col: usize| cloud[row * width + col];
+        let seen = |row: usize, col: usize| at(row, col).iter().all(|v| v.is_finite());
+        (0..width)
+            .map(|col| {
+                (1..height)
+                    .rev()
+                    .filter(|&row| {
+                        seen(row, col)
+                            && f64::from(at(row, col)[2]) >= self.min_depth_m + SILENT_ABOVE_DEPTH_M
+                            && !seen(row - 1, col)
+                            && (row < 2 || !seen(row - 2, col))
+                    })
+                    .map(|row| self.silent_end(col as u32, row as u32 - 1))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Where the ray through pixel `(u, v)`'s centre reaches the greatest depth, in the
+    /// optical frame (z forward, x right, y down): a pixel without a return saw nothing
+    /// nearer on that ray.
+    pub fn silent_end(&self, u: u32, v: u32) -> [f64; 3] {
+        let z = self.max_depth_m;
+        [
+            (u as f64 + 0.5 - self.cx) / self.fx * z,
+            (v as f64 + 0.5 - self.cy) / self.fy * z,
+            z,
+        ]
+    }
 }
 
 /// The fused hazard layer, in the map frame.
@@ -506,7 +614,7 @@ mod tests {
         let cfg = TraversabilityConfig::default();
         // One column: floor to 2.0 m, nothing seen until 3.6 m, then ground 12 cm lower.
         let mut col = floor_then_ground_beyond(3.6, -0.12);
-        let v = shadow_gaps(&[col.clone()], &cfg, 0.5);
+        let v = shadow_gaps(&[col.clone()], &[], &cfg, 0.5);
         assert!(
             v.iter().any(|(p, h)| *h && (p.x_m - 3.0).abs() < 0.1),
             "{v:?}"
@@ -516,16 +624,16 @@ mod tests {
         for p in col.iter_mut().skip(20) {
             p[2] = 0.0;
         }
-        assert!(shadow_gaps(&[col.clone()], &cfg, 0.5).is_empty());
+        assert!(shadow_gaps(&[col.clone()], &[], &cfg, 0.5).is_empty());
         // A rock 15 cm tall ends the near stretch: its top is higher than the ground that
         // resumes beyond its shadow, but that ground is the floor in front of it.
         col.extend((0..3).map(|k| [2.0 + k as f64 * 0.08, 0.0, 0.15]));
-        assert!(shadow_gaps(&[col.clone()], &cfg, 0.5).is_empty());
+        assert!(shadow_gaps(&[col.clone()], &[], &cfg, 0.5).is_empty());
         // Behind a raised rim the ground resumes lower than the floor: a hazard again.
         for p in col.iter_mut().skip(20).take(4) {
             p[2] = -0.12;
         }
-        assert!(shadow_gaps(&[col], &cfg, 0.5).iter().any(|(_, h)| *h));
+        assert!(shadow_gaps(&[col], &[], &cfg, 0.5).iter().any(|(_, h)| *h));
     }
 
     #[test]
@@ -537,7 +645,7 @@ mod tests {
         // Floor to 2.0 m, then a large crater's bowl hidden until its far wall at 5.2 m,
         // seen 0.3 m below the floor: past the 4 m frames are judged to.
         let col = floor_then_ground_beyond(5.2, -0.3);
-        let v = shadow_gaps(std::slice::from_ref(&col), &cfg, 0.5);
+        let v = shadow_gaps(std::slice::from_ref(&col), &[], &cfg, 0.5);
         assert!(
             v.iter().any(|(p, h)| *h && (p.x_m - 3.9).abs() < 0.1),
             "{v:?}"
@@ -551,7 +659,81 @@ mod tests {
             gap_reach_m: cfg.max_range_m,
             ..cfg
         };
-        assert!(shadow_gaps(&[col], &near_only, 0.5).is_empty());
+        assert!(shadow_gaps(&[col], &[], &near_only, 0.5).is_empty());
+    }
+
+    #[test]
+    fn a_silent_run_is_read_from_its_lowest_ray_above_a_return_deep_enough() {
+        // 2 columns x 9 rows, 90 x 90 degrees, depths 0.4-6 m.
+        let camera = PinholeDepth::from_fov(2, 9, 90.0, 90.0, 0.4, 6.0);
+        let (silent, deep, near) = ([f32::NAN; 3], [0.0, 0.5, 2.0], [0.0, 0.5, 0.5]);
+        // Column 0, rows top-down: two silent pixels above a deep return; a lone silent
+        // pixel between returns; a silent pair above a return too near to rule out a face
+        // nearer than the least depth; two silent pixels below the lowest return.
+        let col0 = [
+            silent, silent, deep, silent, deep, silent, silent, near, silent,
+        ];
+        // Column 1: every pixel returned.
+        let cloud: Vec<[f32; 3]> = col0.iter().flat_map(|p| [*p, deep]).collect();
+        let ends = camera.silent_ends(&cloud, 2, 9);
+        assert_eq!(ends.len(), 2);
+        assert_eq!(ends[0], vec![camera.silent_end(0, 1)]);
+        assert!(ends[1].is_empty());
+        // The end lies on the pixel's ray at the greatest depth: row 1 of 9 looks up by
+        // atan(3 / 4.5) through a 90-degree field, column 0 of 2 left by atan(0.5).
+        let [x, y, z] = ends[0][0];
+        assert!((z - 6.0).abs() < 1e-12);
+        assert!((y / z + 3.0 / 4.5).abs() < 1e-12 && (x / z + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_silent_ray_ends_hidden_ground_when_it_runs_below_the_floor_but_never_starts_one() {
+        let cfg = TraversabilityConfig {
+            gap_reach_m: 6.0,
+            ..TraversabilityConfig::default()
+        };
+        // Floor every 8 cm to 2.0 m, and nothing seen beyond: the far wall lies past the
+        // camera's reach.
+        let col: Vec<[f64; 3]> = (0..20).map(|k| [0.5 + k as f64 * 0.08, 0.0, 0.0]).collect();
+        assert!(shadow_gaps(std::slice::from_ref(&col), &[], &cfg, 0.5).is_empty());
+        // The ray over the rim ran on to 7.5 m (past the reach of seen points) and 0.2 m
+        // below the floor without meeting the ground: the hidden stretch is a drop, marked
+        // to the judged range.
+        let low = vec![vec![[7.5, 0.0, -0.2]]];
+        let v = shadow_gaps(std::slice::from_ref(&col), &low, &cfg, 0.5);
+        assert!(
+            v.iter().any(|(p, h)| *h && (p.x_m - 2.5).abs() < 0.1),
+            "{v:?}"
+        );
+        assert!(
+            v.iter()
+                .all(|(p, h)| *h && p.x_m > 1.9 && p.x_m <= cfg.max_range_m)
+        );
+        // A ray that ends 5 cm below the floor says only that the ground beyond is not
+        // much lower: a dip the rover drives through.
+        assert!(
+            shadow_gaps(
+                std::slice::from_ref(&col),
+                &[vec![[6.0, 0.0, -0.05]]],
+                &cfg,
+                0.5
+            )
+            .is_empty()
+        );
+        // A silent ray's end is not ground: it is not the ground before a gap (at 1 m below
+        // the floor, it would have hidden the drop to the ground seen at 3.0 m), and it
+        // starts none (here one ending 0.7 m lower, 1 m farther).
+        let mut far = col.clone();
+        far.push([3.0, 0.0, -0.5]);
+        let silent_first = vec![vec![[1.9, 0.0, -1.0]]];
+        let v = shadow_gaps(std::slice::from_ref(&far), &silent_first, &cfg, 0.5);
+        assert!(
+            v.iter().any(|(p, h)| *h && (p.x_m - 2.5).abs() < 0.1),
+            "{v:?}"
+        );
+        let ahead = vec![vec![[2.0, 0.0, 0.5]]];
+        let floor_beyond = vec![[3.0, 0.0, -0.2]];
+        assert!(shadow_gaps(&[floor_beyond], &ahead, &cfg, 0.5).is_empty());
     }
 
     #[test]
