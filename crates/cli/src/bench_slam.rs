@@ -700,6 +700,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.traversability.gap_reach_m = 6.0,
     },
     Variant {
+        name: "no-tilt-gate",
+        what: "returns taken for the floor by the ground clearance alone, not also within what the tilt's latest change could have moved them (the rovers' setup before the fifty-ninth session)",
+        apply: |c| c.tilt_gate = false,
+    },
+    Variant {
         name: "silent-rays",
         what: "a depth pixel without a return above one with a return ends hidden ground where its ray reaches the camera's 6 m, when that lies below the floor before the gap",
         apply: |c| c.silent_pixels = true,

@@ -15,11 +15,23 @@ fn value_at(map: &OccupancyGrid, p: Point2) -> i8 {
     map.data[y * map.info.width as usize + x]
 }
 
-#[test]
-fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
+/// The map a lone rover publishes after standing through its gyro's calibration (4.5 s) on
+/// `terrain`, its SLAM set up as `options` say.
+fn map_after_standing(terrain: Terrain, options: MissionOptions) -> OccupancyGrid {
     let mut s = Scenario::default();
     s.rovers.count = 1;
     s.faults.clear();
+    let mut mission = Mission::with_options(World::with_terrain(&s, terrain), options);
+    mission.run_until(Time::from_secs_f64(4.5));
+    mission.finish();
+    mission.slam_records()[0]
+        .map
+        .clone()
+        .expect("the map was published")
+}
+
+#[test]
+fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
     let crater = Crater {
         center: Point2::new(7.5, 10.0),
         radius_m: 1.0,
@@ -36,14 +48,8 @@ fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
     t.add_crater(crater);
     t.add_boulder(rock);
     t.rover_starts = vec![Pose2::new(4.5, 10.0, 0.0)];
-    // The rover stands still for its first minute (measuring the gyro), looking at both.
-    let mut mission = Mission::with_world(World::with_terrain(&s, t));
-    mission.run_until(Time::from_secs_f64(4.5));
-    mission.finish();
-    let map = mission.slam_records()[0]
-        .map
-        .clone()
-        .expect("the map was published");
+    // The rover stands still (measuring the gyro), looking at both.
+    let map = map_after_standing(t, MissionOptions::default());
     let at = |x, y| value_at(&map, Point2::new(x, y));
     assert_eq!(at(7.5, 10.0), OccupancyGrid::HAZARD, "the crater's centre");
     assert_eq!(at(7.0, 10.2), OccupancyGrid::HAZARD, "inside the crater");
@@ -55,9 +61,6 @@ fn a_crater_bowl_and_a_low_rock_are_hazards_and_the_floor_between_is_free() {
 /// radius, 0.8 m deep, its rim 0.16 m high), looking at its centre, through its gyro's
 /// calibration; `options` sets up its SLAM.
 fn map_beside_a_large_crater(options: MissionOptions) -> OccupancyGrid {
-    let mut s = Scenario::default();
-    s.rovers.count = 1;
-    s.faults.clear();
     let mut t = Terrain::flat(20.0, 20.0, 0.05);
     t.add_perimeter_walls(0.2, 1.0);
     t.add_crater(Crater {
@@ -67,13 +70,7 @@ fn map_beside_a_large_crater(options: MissionOptions) -> OccupancyGrid {
         rim_m: 0.16,
     });
     t.rover_starts = vec![Pose2::new(6.0, 10.0, 0.0)];
-    let mut mission = Mission::with_options(World::with_terrain(&s, t), options);
-    mission.run_until(Time::from_secs_f64(4.5));
-    mission.finish();
-    mission.slam_records()[0]
-        .map
-        .clone()
-        .expect("the map was published")
+    map_after_standing(t, options)
 }
 
 #[test]
@@ -107,9 +104,6 @@ fn a_tall_rock_too_near_to_see_leaves_no_hazard_behind_it_with_silent_pixels_rea
     // The camera 0.4 m from an 0.85 m rock's face: the face above the floor at its foot is
     // nearer than the camera's least depth, and those pixels return nothing, like rays
     // that met nothing; the floor behind the rock is no hazard.
-    let mut s = Scenario::default();
-    s.rovers.count = 1;
-    s.faults.clear();
     let rock = Point2::new(10.0, 10.0);
     let mut t = Terrain::flat(20.0, 20.0, 0.05);
     t.add_perimeter_walls(0.2, 1.0);
@@ -121,13 +115,7 @@ fn a_tall_rock_too_near_to_see_leaves_no_hazard_behind_it_with_silent_pixels_rea
     t.rover_starts = vec![Pose2::new(8.7, 10.0, 0.0)];
     let mut options = MissionOptions::default();
     options.mapping_changes.push(|c| c.silent_pixels = true);
-    let mut mission = Mission::with_options(World::with_terrain(&s, t), options);
-    mission.run_until(Time::from_secs_f64(4.5));
-    mission.finish();
-    let map = mission.slam_records()[0]
-        .map
-        .clone()
-        .expect("the map was published");
+    let map = map_after_standing(t, options);
     let r = map.info.resolution_m as f64;
     let origin = Point2::new(map.info.origin.position.x, map.info.origin.position.y);
     let far_hazards = map

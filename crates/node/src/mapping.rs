@@ -32,6 +32,18 @@ use realms_slam::traversability::{
 /// Ground hidden for longer than this behind a rim, and resuming lower, is a drop, metres.
 const SHADOW_MIN_GAP_M: f64 = 0.5;
 
+/// The angle between two vectors, radians (0 if either is zero).
+fn angle_between(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let cross = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let sin = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+    let cos = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    sin.atan2(cos)
+}
+
 /// The wheels count as silent once this many of their readings are overdue.
 const WHEELS_SILENT_READINGS: f64 = 4.0;
 
@@ -53,6 +65,13 @@ pub struct MappingConfig {
     /// lidar's returns and the depth camera's points (1: the newest sample alone). A wheel
     /// climbing a rock tilts the rover within one physics step; a smoothed tilt lags it.
     pub tilt_smoothing: f64,
+    /// A return is dropped as the floor too when its levelled height is within what the
+    /// tilt's latest change, not yet in the smoothed gravity, could have moved it: the
+    /// ground clearance plus the range times the angle between the smoothed gravity and
+    /// the newest sample. Right after a wheel climbs a rock the lidar's plane meets the
+    /// floor metres ahead, and the smoothed levelling would keep those hits as an arc of
+    /// obstacles across open ground (`false`: the clearance alone).
+    pub tilt_gate: bool,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -315,6 +334,8 @@ pub struct Mapping {
     gyro_bias_rad_s: Option<f64>,
     /// Smoothed specific force in the body frame (gravity, for a slow rover), m/s^2.
     gravity: [f64; 3],
+    /// The newest accelerometer sample, m/s^2.
+    newest_accel: [f64; 3],
     /// Returns dropped as floor hits, for the record.
     floor_hits: u64,
     next_map: Time,
@@ -358,6 +379,7 @@ impl Mapping {
             bias_samples: 0,
             gyro_bias_rad_s: None,
             gravity: [0.0, 0.0, 9.81],
+            newest_accel: [0.0, 0.0, 9.81],
             floor_hits: 0,
             next_map: Time::ZERO,
             next_delta: Time::ZERO,
@@ -495,6 +517,7 @@ impl Mapping {
     pub fn on_imu(&mut self, imu: &Imu) {
         if imu.linear_acceleration_covariance[0][0] >= 0.0 {
             let a = imu.linear_acceleration;
+            self.newest_accel = [a.x, a.y, a.z];
             let g = &mut self.gravity;
             let k = self.cfg.tilt_smoothing.clamp(0.0, 1.0);
             *g = [
@@ -733,6 +756,13 @@ impl Mapping {
         // (the unit gravity reaction in the body frame) applied to it.
         let up = self.levelling()[2];
         let (lx, lh) = (self.cfg.lidar_x_m, self.cfg.lidar_height_m);
+        // How far a return's levelled height may be off per metre of range, for the tilt
+        // the smoothed gravity has not caught up with.
+        let unsettled_per_m = if self.cfg.tilt_gate {
+            angle_between(&self.gravity, &self.newest_accel).sin()
+        } else {
+            0.0
+        };
         let mut points = Vec::with_capacity(scan.ranges_m.len());
         let mut heights = Vec::with_capacity(scan.ranges_m.len());
         let mut offsets = Vec::with_capacity(if deskewing { scan.ranges_m.len() } else { 0 });
@@ -750,7 +780,7 @@ impl Mapping {
             let (x, y) = (lx + r * a.cos(), r * a.sin());
             // Height of the return above the ground under the rover, levelled.
             let height = up[0] * x + up[1] * y + up[2] * lh;
-            if height < self.cfg.ground_clearance_m {
+            if height < self.cfg.ground_clearance_m + r * unsettled_per_m {
                 self.floor_hits += 1;
                 continue;
             }
@@ -961,6 +991,7 @@ mod tests {
                 lidar_height_m: 0.3,
                 ground_clearance_m: 0.12,
                 tilt_smoothing: 0.2,
+                tilt_gate: false,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),
@@ -1007,6 +1038,52 @@ mod tests {
         crate::test_scan(t, ranges)
     }
 
+    /// The returns `m` drops as the floor from one scan with a return `range_m` ahead, taken
+    /// after 0.4 s of accelerometer samples of a level rover whose last sample is at
+    /// `last_pitch_rad` (a wheel just climbed a rock).
+    fn floor_hits_after_a_tilt(mut m: Mapping, last_pitch_rad: f64, range_m: f32) -> u64 {
+        for k in 0..=20 {
+            let pitch_rad = if k == 20 { last_pitch_rad } else { 0.0 };
+            m.on_imu(&imu(Time::from_secs_f64(k as f64 * 0.02), 0.0, pitch_rad));
+        }
+        m.on_odometry(&odom(Time::from_secs_f64(0.4)));
+        m.on_scan(
+            &scan_ahead(Time::from_secs_f64(0.4), range_m),
+            &mut Vec::new(),
+        );
+        m.floor_hits()
+    }
+
+    #[test]
+    fn a_return_the_unsettled_tilt_could_have_moved_off_the_floor_is_dropped_with_the_tilt_gate() {
+        // As in the test below: a wheel climbs a rock at the last sample, 5 degrees nose
+        // down, and the smoothed levelling holds the rover at 1 degree. With the gate the
+        // floor 3.34 m ahead is dropped; with the tilt settled, a wall 8 m ahead (a return at
+        // the lidar's height) is kept.
+        let gated = || {
+            let mut m = mapping();
+            m.cfg.tilt_gate = true;
+            m
+        };
+        assert_eq!(floor_hits_after_a_tilt(gated(), 5f64.to_radians(), 3.34), 1);
+        assert_eq!(
+            floor_hits_after_a_tilt(mapping(), 5f64.to_radians(), 3.34),
+            0
+        );
+        assert_eq!(floor_hits_after_a_tilt(gated(), 0.0, 8.0), 0);
+    }
+
+    #[test]
+    fn the_angle_between_two_vectors_is_read_without_losing_small_angles() {
+        let a = [0.0, 0.0, 9.81];
+        for deg in [1e-6, 0.5, 5.0, 90.0, 179.0] {
+            let t = f64::to_radians(deg);
+            let b = [2.0 * t.sin(), 0.0, 2.0 * t.cos()];
+            assert!((angle_between(&a, &b) - t).abs() < 1e-12, "{deg}");
+        }
+        assert_eq!(angle_between(&a, &[0.0; 3]), 0.0);
+    }
+
     #[test]
     fn a_return_from_the_floor_ahead_of_a_nose_down_rover_is_dropped() {
         // Pitched 5 degrees nose down (REP 103: positive pitch), the beam ahead meets flat
@@ -1030,19 +1107,11 @@ mod tests {
         // Level for 0.4 s, then a wheel climbs a rock: 5 degrees nose down from the last
         // accelerometer sample before the scan on. Smoothed to a fifth, the levelling still
         // holds the rover at 1 degree, and the floor ahead passes for a return 0.24 m up.
-        let pitch = 5f64.to_radians();
         for (tilt_smoothing, expect_drop) in [(1.0, true), (0.2, false)] {
             let mut m = mapping();
             m.cfg.tilt_smoothing = tilt_smoothing;
-            for k in 0..=20 {
-                let pitch_rad = if k == 20 { pitch } else { 0.0 };
-                m.on_imu(&imu(Time::from_secs_f64(k as f64 * 0.02), 0.0, pitch_rad));
-            }
-            m.on_odometry(&odom(Time::from_secs_f64(0.4)));
-            let mut out = Vec::new();
-            m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.34), &mut out);
             assert_eq!(
-                m.floor_hits() == 1,
+                floor_hits_after_a_tilt(m, 5f64.to_radians(), 3.34) == 1,
                 expect_drop,
                 "smoothing {tilt_smoothing}"
             );

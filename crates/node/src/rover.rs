@@ -362,6 +362,7 @@ mod tests {
                     lidar_height_m: 0.3,
                     ground_clearance_m: 0.12,
                     tilt_smoothing: 0.2,
+                    tilt_gate: false,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),
