@@ -145,6 +145,42 @@ impl Vec3 {
     }
 }
 
+/// Pinhole intrinsics for a field of view and resolution (the K of a ROS CameraInfo): the
+/// simulator casts its cameras' pixels through them, and the rover reads a depth pixel's ray
+/// from them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Focal length in pixels, horizontal.
+    pub fx: f64,
+    /// Focal length in pixels, vertical.
+    pub fy: f64,
+    /// Principal point, x.
+    pub cx: f64,
+    /// Principal point, y.
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    /// Intrinsics of a centred pinhole camera.
+    pub fn from_fov(width: u32, height: u32, hfov_deg: f64, vfov_deg: f64) -> Self {
+        Intrinsics {
+            fx: width as f64 / 2.0 / (hfov_deg.to_radians() / 2.0).tan(),
+            fy: height as f64 / 2.0 / (vfov_deg.to_radians() / 2.0).tan(),
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
+        }
+    }
+
+    /// The optical-frame ray through a pixel centre, with z = 1.
+    pub fn ray(&self, u: u32, v: u32) -> [f64; 3] {
+        [
+            (u as f64 + 0.5 - self.cx) / self.fx,
+            (v as f64 + 0.5 - self.cy) / self.fy,
+            1.0,
+        ]
+    }
+}
+
 /// A unit quaternion (geometry_msgs/Quaternion), Hamilton convention, `w` the scalar part.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Quaternion {

@@ -17,6 +17,7 @@
 
 use crate::assembly::Assembly;
 use crate::occupancy::{CellState, OccupancyGrid};
+use realms_core::geometry::Intrinsics;
 use realms_core::{Grid, Point2, Pose2};
 
 /// Limits and sampling.
@@ -307,14 +308,8 @@ const SILENT_ABOVE_DEPTH_M: f64 = 0.25;
 /// returns: what a pixel without a return says about the ground.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PinholeDepth {
-    /// Focal length in pixels, horizontal.
-    pub fx: f64,
-    /// Focal length in pixels, vertical.
-    pub fy: f64,
-    /// Principal point, x (pixels from the left edge).
-    pub cx: f64,
-    /// Principal point, y (pixels from the top edge).
-    pub cy: f64,
+    /// The pixels' rays.
+    pub intrinsics: Intrinsics,
     /// Nothing nearer than this is returned (optical depth, metres) ...
     pub min_depth_m: f64,
     /// ... and nothing deeper than this.
@@ -332,10 +327,7 @@ impl PinholeDepth {
         max_depth_m: f64,
     ) -> Self {
         PinholeDepth {
-            fx: width as f64 / 2.0 / (hfov_deg.to_radians() / 2.0).tan(),
-            fy: height as f64 / 2.0 / (vfov_deg.to_radians() / 2.0).tan(),
-            cx: width as f64 / 2.0,
-            cy: height as f64 / 2.0,
+            intrinsics: Intrinsics::from_fov(width, height, hfov_deg, vfov_deg),
             min_depth_m,
             max_depth_m,
         }
@@ -375,12 +367,7 @@ impl PinholeDepth {
     /// optical frame (z forward, x right, y down): a pixel without a return saw nothing
     /// nearer on that ray.
     pub fn silent_end(&self, u: u32, v: u32) -> [f64; 3] {
-        let z = self.max_depth_m;
-        [
-            (u as f64 + 0.5 - self.cx) / self.fx * z,
-            (v as f64 + 0.5 - self.cy) / self.fy * z,
-            z,
-        ]
+        self.intrinsics.ray(u, v).map(|c| c * self.max_depth_m)
     }
 }
 

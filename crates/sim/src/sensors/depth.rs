@@ -8,41 +8,8 @@ use crate::raycast::HeightPyramid;
 use crate::rng::SimRng;
 use crate::scenario::DepthCamera;
 use realms_core::Time;
+pub use realms_core::geometry::Intrinsics;
 use realms_core::msgs::{Header, PointCloud};
-
-/// Pinhole intrinsics for a field of view and resolution.
-#[derive(Clone, Copy, Debug)]
-pub struct Intrinsics {
-    /// Focal length in pixels, horizontal.
-    pub fx: f64,
-    /// Focal length in pixels, vertical.
-    pub fy: f64,
-    /// Principal point, x.
-    pub cx: f64,
-    /// Principal point, y.
-    pub cy: f64,
-}
-
-impl Intrinsics {
-    /// Intrinsics of a centred pinhole camera.
-    pub fn from_fov(width: u32, height: u32, hfov_deg: f64, vfov_deg: f64) -> Self {
-        Intrinsics {
-            fx: width as f64 / 2.0 / (hfov_deg.to_radians() / 2.0).tan(),
-            fy: height as f64 / 2.0 / (vfov_deg.to_radians() / 2.0).tan(),
-            cx: width as f64 / 2.0,
-            cy: height as f64 / 2.0,
-        }
-    }
-
-    /// The optical-frame ray through a pixel centre, with z = 1.
-    pub fn ray(&self, u: u32, v: u32) -> [f64; 3] {
-        [
-            (u as f64 + 0.5 - self.cx) / self.fx,
-            (v as f64 + 0.5 - self.cy) / self.fy,
-            1.0,
-        ]
-    }
-}
 
 /// The optical frame (z forward, x right, y down) as a child of a body frame (x forward,
 /// y left, z up).
