@@ -352,8 +352,8 @@ impl Discretised {
 
 /// Finds the best pose of `points` (robot frame) in `map` within `window` around `prior`,
 /// among poses scoring at least `min_score`; `None` if none does. The rival is looked for
-/// only down to `rival_margin` below the winner, and no further once one comes closer
-/// than that.
+/// only down to `rival_margin` below the winner and not below `min_score`, and no further
+/// once one comes closer than that.
 pub fn search(
     map: &PrecomputedMap,
     points: &[Point2],
@@ -498,7 +498,10 @@ fn search_rivals(
             && ((c.angle as f64 - winner.angle as f64) * angle_step).abs() <= RIVAL_RAD
     };
     // Only rivals that come within `rival_margin` matter, and looking for nothing lower
-    // lets the bound prune almost everything when the winner stands out.
+    // lets the bound prune almost everything when the winner stands out. Nor is a rival
+    // looked for below `min_score`, so a winner within the margin of it is judged against
+    // the rivals above it only. Looking below it too refused a few wrong closures and many
+    // more right ones, and the rovers' maps came out worse (sixtieth session, BENCHMARKS.md).
     let rival_threshold = threshold.max(
         winner
             .score
