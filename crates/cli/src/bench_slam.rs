@@ -482,6 +482,11 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "same-submap-confirmation",
+        what: "a loop closure asking to move its keyframe more than 0.5 m may be confirmed by a partner into the same submap (the rovers' setup before the sixtieth session)",
+        apply: |c| c.mapper.distinct_confirmation_beyond_m = None,
+    },
+    Variant {
         name: "closure-min-information-500",
         what: "loop closures whose refined match's weakest translation information is under 500 not taken",
         apply: |c| c.mapper.closure_min_information = Some(500.0),

@@ -532,6 +532,11 @@ pub struct MapperConfig {
     /// (squared Mahalanobis error) are dropped from it and the graph optimised again
     /// (`None`: every accepted closure stays).
     pub drop_closures_beyond: Option<f64>,
+    /// A closure asking to move its keyframe farther than this, metres, is confirmed only by
+    /// a partner into another submap (`None`: a partner into the same submap will do). A
+    /// look-alike place in one submap fits every keyframe that sees it alike, so its false
+    /// closures confirm each other (the lander's east face on its west face).
+    pub distinct_confirmation_beyond_m: Option<f64>,
 }
 
 /// Over a scan whose predicted turn exceeds `turn_rad`, the headings within
@@ -794,6 +799,7 @@ impl Default for MapperConfig {
             graph_iterations: 3,
             graph_later_cap: None,
             drop_closures_beyond: None,
+            distinct_confirmation_beyond_m: None,
             closure_weighting: None,
             closure_min_information: None,
             closure_ridges: None,
@@ -2007,10 +2013,14 @@ impl Mapper {
         let mine = self.correction(&closure);
         // Compare the corrections where they act: at this keyframe.
         let at = self.graph.nodes[node];
+        let asks_far = self
+            .cfg
+            .distinct_confirmation_beyond_m
+            .is_some_and(|far_m| (mine * at).position().distance_m(at.position()) > far_m);
         let mut confirmed = false;
         let mut to_accept = Vec::new();
         for (i, (other, accepted)) in self.recent_closures.iter().enumerate() {
-            if other.to == node && other.from == closure.from {
+            if (other.to == node || asks_far) && other.from == closure.from {
                 continue;
             }
             let d = (mine * at).relative_to(&(self.correction(other) * at));
@@ -2410,6 +2420,25 @@ mod tests {
             information_axis_rad: 0.0,
             robust: true,
         }
+    }
+
+    #[test]
+    fn a_far_correction_is_confirmed_only_from_another_submap_if_so_asked() {
+        // Keyframes 100 and 101 both closed 1 m to the side into the submap begun at 0: they
+        // confirm each other unless the far correction must come from another submap.
+        let accepted = |distinct: Option<f64>, partner_from: usize| -> usize {
+            let mut mapper = straight_drive(120);
+            mapper.cfg.distinct_confirmation_beyond_m = distinct;
+            let before = mapper.graph.edges.len();
+            mapper.propose_closure(closure(&mapper, 0, 100, 1.0));
+            mapper.propose_closure(closure(&mapper, partner_from, 101, 1.0));
+            mapper.graph.edges.len() - before
+        };
+        assert_eq!(accepted(None, 0), 2);
+        assert_eq!(accepted(Some(0.5), 0), 0);
+        assert_eq!(accepted(Some(0.5), 40), 2);
+        // A near correction is confirmed within one submap as before.
+        assert_eq!(accepted(Some(1.5), 0), 2);
     }
 
     #[test]
