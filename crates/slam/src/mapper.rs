@@ -902,6 +902,16 @@ pub struct ClosureRecord {
     pub accepted: bool,
 }
 
+/// A closure waiting for (or given) a partner's confirmation.
+#[derive(Clone, Copy, Debug)]
+struct ProposedClosure {
+    edge: Edge,
+    /// The submap it matched in.
+    submap: usize,
+    /// Whether it is in the graph.
+    accepted: bool,
+}
+
 /// The mapper.
 #[derive(Debug)]
 pub struct Mapper {
@@ -928,8 +938,8 @@ pub struct Mapper {
     /// Odometry at the last scan that was matched (for the motion filter).
     last_matched_odom: Option<Pose2>,
     pending_closures: bool,
-    /// Closures found in the last few keyframes, and whether each is in the graph.
-    recent_closures: Vec<(Edge, bool)>,
+    /// Closures found in the last few keyframes.
+    recent_closures: Vec<ProposedClosure>,
     health: HealthMonitor,
     transitions: Vec<(f64, Transition)>,
     lost_at: Option<Pose2>,
@@ -1838,7 +1848,7 @@ impl Mapper {
                     accepted: false,
                 });
                 if within_drift && pinned {
-                    added |= self.propose_closure(closure);
+                    added |= self.propose_closure(closure, s);
                 }
             }
         }
@@ -1933,10 +1943,7 @@ impl Mapper {
         let Some(bound) = self.cfg.closure_drift else {
             return true;
         };
-        let wanted = self.graph.nodes[closure.from] * closure.measurement;
-        let asked_m = wanted
-            .position()
-            .distance_m(self.graph.nodes[closure.to].position());
+        let asked_m = self.asked_shift_m(closure);
         let always_m = bound.base_m + self.weak_slide_m(closure.from, closure.to);
         if asked_m <= always_m {
             return true;
@@ -1995,6 +2002,14 @@ impl Mapper {
         }
     }
 
+    /// How far `closure` asks to move its keyframe from where the graph has it, metres.
+    fn asked_shift_m(&self, closure: &Edge) -> f64 {
+        let wanted = self.graph.nodes[closure.from] * closure.measurement;
+        wanted
+            .position()
+            .distance_m(self.graph.nodes[closure.to].position())
+    }
+
     /// The correction a closure asks of its keyframe: where the closure puts the keyframe,
     /// relative to where the graph has it now (in the world frame).
     fn correction(&self, closure: &Edge) -> Pose2 {
@@ -2005,22 +2020,25 @@ impl Mapper {
     /// A closure enters the graph only when another closure found within the last few
     /// keyframes asks for the same correction: drift changes slowly, so two true closures
     /// from nearby keyframes agree, while a false match in a look-alike place rarely has a
-    /// partner that is wrong in the same way. Returns whether edges were added.
-    fn propose_closure(&mut self, closure: Edge) -> bool {
+    /// partner that is wrong in the same way. `closure` matched in submap `submap`. Returns
+    /// whether edges were added.
+    fn propose_closure(&mut self, closure: Edge, submap: usize) -> bool {
         let node = closure.to;
         self.recent_closures
-            .retain(|(c, _)| c.to + CONFIRM_WITHIN_KEYFRAMES >= node);
+            .retain(|c| c.edge.to + CONFIRM_WITHIN_KEYFRAMES >= node);
         let mine = self.correction(&closure);
         // Compare the corrections where they act: at this keyframe.
         let at = self.graph.nodes[node];
         let asks_far = self
             .cfg
             .distinct_confirmation_beyond_m
-            .is_some_and(|far_m| (mine * at).position().distance_m(at.position()) > far_m);
+            .is_some_and(|far_m| self.asked_shift_m(&closure) > far_m);
         let mut confirmed = false;
         let mut to_accept = Vec::new();
-        for (i, (other, accepted)) in self.recent_closures.iter().enumerate() {
-            if (other.to == node || asks_far) && other.from == closure.from {
+        for (i, c) in self.recent_closures.iter().enumerate() {
+            let other = &c.edge;
+            let same_pair = other.to == node && other.from == closure.from;
+            if same_pair || (asks_far && c.submap == submap) {
                 continue;
             }
             let d = (mine * at).relative_to(&(self.correction(other) * at));
@@ -2028,20 +2046,24 @@ impl Mapper {
                 && d.yaw_rad.abs() <= CONFIRM_ROTATION_RAD
             {
                 confirmed = true;
-                if !accepted {
+                if !c.accepted {
                     to_accept.push(i);
                 }
             }
         }
         for i in to_accept {
-            self.recent_closures[i].1 = true;
-            let edge = self.recent_closures[i].0;
+            self.recent_closures[i].accepted = true;
+            let edge = self.recent_closures[i].edge;
             self.accept_closure(edge);
         }
         if confirmed {
             self.accept_closure(closure);
         }
-        self.recent_closures.push((closure, confirmed));
+        self.recent_closures.push(ProposedClosure {
+            edge: closure,
+            submap,
+            accepted: confirmed,
+        });
         confirmed
     }
 
@@ -2426,12 +2448,15 @@ mod tests {
     fn a_far_correction_is_confirmed_only_from_another_submap_if_so_asked() {
         // Keyframes 100 and 101 both closed 1 m to the side into the submap begun at 0: they
         // confirm each other unless the far correction must come from another submap.
+        // The partner's submap begins at keyframe `partner_from`: the first submap at 0, the
+        // second at 40.
         let accepted = |distinct: Option<f64>, partner_from: usize| -> usize {
             let mut mapper = straight_drive(120);
             mapper.cfg.distinct_confirmation_beyond_m = distinct;
             let before = mapper.graph.edges.len();
-            mapper.propose_closure(closure(&mapper, 0, 100, 1.0));
-            mapper.propose_closure(closure(&mapper, partner_from, 101, 1.0));
+            mapper.propose_closure(closure(&mapper, 0, 100, 1.0), 0);
+            let partner_submap = usize::from(partner_from > 0);
+            mapper.propose_closure(closure(&mapper, partner_from, 101, 1.0), partner_submap);
             mapper.graph.edges.len() - before
         };
         assert_eq!(accepted(None, 0), 2);
