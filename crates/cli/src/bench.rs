@@ -226,12 +226,13 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         };
         let fast = time_each(frames.len(), &mut |i| run(world.pyramid(), &frames[i].0));
         let driving = time_each(drive.len(), &mut |i| run(world.pyramid(), &drive[i].0));
-        let base = time_each(frames.len(), &mut |i| run(&baseline, &frames[i].0));
+        let base = (!args.no_plain)
+            .then(|| time_each(frames.len(), &mut |i| run(&baseline, &frames[i].0)));
         let name = format!(
             "lidar scan ({} beams, {} m)",
             spec.lidar.beams, spec.lidar.range_max_m
         );
-        rows.push((name, fast, driving, Some(base)));
+        rows.push((name, fast, driving, base));
     }
     if wants(BenchSensor::Depth) {
         let mut run = |p: &HeightPyramid, at: &Frame3| {
@@ -246,13 +247,14 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         };
         let fast = time_each(frames.len(), &mut |i| run(world.pyramid(), &frames[i].1));
         let driving = time_each(drive.len(), &mut |i| run(world.pyramid(), &drive[i].1));
-        let base = time_each(frames.len(), &mut |i| run(&baseline, &frames[i].1));
+        let base = (!args.no_plain)
+            .then(|| time_each(frames.len(), &mut |i| run(&baseline, &frames[i].1)));
         let d = &spec.depth;
         let name = format!(
             "depth frame ({}x{}, {} m)",
             d.width, d.height, d.range_max_m
         );
-        rows.push((name, fast, driving, Some(base)));
+        rows.push((name, fast, driving, base));
     }
     if wants(BenchSensor::Camera) {
         let c = &spec.camera;

@@ -443,8 +443,8 @@ pub struct BenchSimArgs {
     /// Which sensors to time (the speed trials always run unless `--trials 0`).
     #[arg(long, value_enum, default_value_t = BenchSensor::All)]
     pub sensor: BenchSensor,
-    /// Skip the paired trials on plain ray casting (for profiling the fast path alone; no
-    /// ratio is then reported).
+    /// Skip plain ray casting, in the paired trials and in the sensor timings (for profiling
+    /// the fast path alone; no ratio or speedup is then reported).
     #[arg(long)]
     pub no_plain: bool,
 }

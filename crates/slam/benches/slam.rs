@@ -312,6 +312,15 @@ fn graph_bench(c: &mut Criterion) {
     c.bench_function("graph_optimize/lapped_square", |b| {
         b.iter_batched_ref(|| graph.clone(), |g| g.optimize(1), BatchSize::LargeInput)
     });
+    // The closure checks' question: how far along the graph from the newest keyframe to one
+    // a lap back (a closure's partner), asked with a limit the search gives up at.
+    let newest = graph.nodes.len() - 1;
+    let lap_back = newest - 4 * 33;
+    c.bench_function("graph_path_length/lapped_square", |b| {
+        b.iter(|| {
+            graph.path_length_within(newest, lap_back, 6.0, |e| PoseGraph::travelled_m(e, 0.5))
+        })
+    });
     let graph = PoseGraph {
         solver: GraphSolver::Elimination,
         ..graph

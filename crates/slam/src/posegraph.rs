@@ -148,7 +148,10 @@ impl PoseGraph {
         }
         // The adjacency in two flat arrays (node `k`'s neighbours are
         // `neighbours[start[k]..start[k + 1]]`, in the order of the edges): a list per node
-        // cost more in allocations than the search itself.
+        // cost more in allocations than the search itself. Each neighbour keeps its edge, and
+        // an edge's length is asked only when the search reaches it: the search abandoned at
+        // the limit reaches few, and the length (a root, for a sequential edge) cost more
+        // than the rest of the build.
         let within = |e: &&Edge| e.from < n && e.to < n;
         let mut start = vec![0usize; n + 1];
         for e in self.edges.iter().filter(within) {
@@ -158,13 +161,12 @@ impl PoseGraph {
         for k in 0..n {
             start[k + 1] += start[k];
         }
-        let mut neighbours = vec![(0usize, 0f64); start[n]];
+        let mut neighbours = vec![(0usize, 0usize); start[n]];
         let mut filled = start.clone();
-        for e in self.edges.iter().filter(within) {
-            let length_m = edge_length_m(e);
-            neighbours[filled[e.from]] = (e.to, length_m);
+        for (i, e) in self.edges.iter().enumerate().filter(|(_, e)| within(e)) {
+            neighbours[filled[e.from]] = (e.to, i);
             filled[e.from] += 1;
-            neighbours[filled[e.to]] = (e.from, length_m);
+            neighbours[filled[e.to]] = (e.from, i);
             filled[e.to] += 1;
         }
         let mut best = vec![f64::INFINITY; n];
@@ -180,8 +182,8 @@ impl PoseGraph {
             if node == b {
                 return Some(d);
             }
-            for &(next, length_m) in &neighbours[start[node]..start[node + 1]] {
-                let via = d + length_m;
+            for &(next, edge) in &neighbours[start[node]..start[node + 1]] {
+                let via = d + edge_length_m(&self.edges[edge]);
                 if via <= limit_m && via < best[next] {
                     best[next] = via;
                     frontier.push(Reverse((via.to_bits(), next)));
