@@ -181,9 +181,16 @@ fn hazards_differ(
     let hx1 = (cell(x1, source.origin.x_m, h.origin.x_m, h.width) + 1).min(h.width - 1);
     let hy0 = cell(y0, source.origin.y_m, h.origin.y_m, h.height).saturating_sub(1);
     let hy1 = (cell(y1, source.origin.y_m, h.origin.y_m, h.height) + 1).min(h.height - 1);
+    // Each row compared without an early exit: a slice of an enum compares cell by cell
+    // with a branch each (no byte-wise comparison for it), where a fold of the differences
+    // runs many cells to an instruction. Most tiles are unchanged, so all their cells are
+    // read either way.
     (hy0..=hy1).any(|y| {
         let row = y * h.width;
-        old.cells()[row + hx0..=row + hx1] != new.cells()[row + hx0..=row + hx1]
+        old.cells()[row + hx0..=row + hx1]
+            .iter()
+            .zip(&new.cells()[row + hx0..=row + hx1])
+            .fold(false, |differ, (a, b)| differ | (*a as u8 != *b as u8))
     })
 }
 
