@@ -695,6 +695,11 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "crater-discs",
+        what: "craters inferred from the hazard layer's crescents (a circle fitted to each), their whole discs marked hazard",
+        apply: |c| c.traversability.crater_discs = Some(Default::default()),
+    },
+    Variant {
         name: "gaps-to-4m",
         what: "hidden ground ends only at points within 4 m, where frames are judged (the rovers' setup before the fifty-sixth session; it is 6 m)",
         apply: |c| c.traversability.gap_reach_m = 4.0,

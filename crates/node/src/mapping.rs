@@ -931,7 +931,11 @@ impl Mapping {
 
     /// The hazard layer drawn at the submaps' poses now.
     fn hazard_states(&mut self) -> Grid<CellState> {
-        self.hazards.states(&self.mapper.submap_origins())
+        let mut states = self.hazards.states(&self.mapper.submap_origins());
+        if let Some(discs) = &self.cfg.traversability.crater_discs {
+            realms_slam::craters::fill_crater_discs(&mut states, discs);
+        }
+        states
     }
 
     /// The map at `factor` times the SLAM resolution (a power of two up to

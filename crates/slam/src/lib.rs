@@ -16,6 +16,7 @@
 //! - `elimination`: the pose graph's normal equations solved exactly, in minimum-degree order.
 //! - [`relief`]: the travel between two depth frames, from the relief of the ground they see.
 //! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
+//! - [`craters`]: craters inferred from the hazard layer's crescents, their discs marked.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`walls`]: long straight walls along directions seen from the start, as a heading reference.
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.
@@ -24,6 +25,7 @@
 pub mod assembly;
 pub mod bnb;
 pub mod carmen;
+pub mod craters;
 mod elimination;
 pub mod eval;
 pub mod frontend;

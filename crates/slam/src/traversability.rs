@@ -47,6 +47,9 @@ pub struct TraversabilityConfig {
     /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
     /// much lower than the ground before it (the rovers take their step limit), metres.
     pub gap_drop_m: f64,
+    /// Craters inferred from the layer's crescents of hazard, their whole discs marked
+    /// ([`crate::craters`]); `None` marks only what the camera judged.
+    pub crater_discs: Option<crate::craters::CraterDiscs>,
 }
 
 impl Default for TraversabilityConfig {
@@ -60,6 +63,7 @@ impl Default for TraversabilityConfig {
             min_points: 1,
             gap_reach_m: 4.0,
             gap_drop_m: 0.08,
+            crater_discs: None,
         }
     }
 }

@@ -1,0 +1,304 @@
+//! Craters inferred from the hazard layer. Seen from outside, a crater shows the depth camera
+//! its far inner wall, a crescent of hazard cells; its near inner wall hides behind the rim,
+//! and the lidar passes over the bowl and calls it free. A circle fitted to a crescent that
+//! goes far enough round gives the crater's rim, and the whole disc inside it is hazard: a
+//! rover that enters the bowl cannot be sure to climb out of it.
+//!
+//! The circle is the algebraic fit of Kåsa ("A circle fitting procedure and its error
+//! analysis", IEEE Trans. Instrumentation and Measurement, 1976) to the crescent's cells;
+//! the disc reaches the crescent's farthest cell from its centre.
+//!
+//! Not the rovers' default (`--variant crater-discs` of `realms bench slam`): in the rovers'
+//! layers a crater's wall joins the hazard along the hall's walls into one cluster as wide as
+//! the hall, which no circle fits, so most craters go unfound, while the discs it does mark
+//! elsewhere cost precision (BENCHMARKS.md, sixty-first session). Clusters must first be cut
+//! from what the lidar sees as walls.
+
+use crate::occupancy::CellState;
+use realms_core::{Cell, Grid, Point2};
+
+/// Which clusters of hazard cells count as a crater's wall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CraterDiscs {
+    /// Fewest cells in a cluster.
+    pub min_cells: usize,
+    /// Smallest rim radius taken for a crater, metres.
+    pub min_radius_m: f64,
+    /// Largest rim radius taken for a crater, metres.
+    pub max_radius_m: f64,
+    /// How far round its centre the cluster must reach (the angle it spans), radians: a
+    /// straight slope's edge or a rock's face fits a circle too, but covers little of it.
+    pub min_span_rad: f64,
+    /// The cells' spread about the fitted circle, as a share of its radius, at most: a
+    /// crater's wall is a ring, a blob of rocks is not.
+    pub max_spread: f64,
+}
+
+impl Default for CraterDiscs {
+    fn default() -> Self {
+        CraterDiscs {
+            min_cells: 20,
+            min_radius_m: 0.5,
+            max_radius_m: 4.0,
+            min_span_rad: 150f64.to_radians(),
+            max_spread: 0.3,
+        }
+    }
+}
+
+/// A crater found in a hazard layer: its centre and the radius its disc is marked to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crater {
+    /// Centre, in the layer's frame.
+    pub centre: Point2,
+    /// Radius of the marked disc, metres.
+    pub radius_m: f64,
+}
+
+/// Finds the craters among the hazard (`Occupied`) clusters of `states` and marks each one's
+/// disc hazard; returns them.
+pub fn fill_crater_discs(states: &mut Grid<CellState>, cfg: &CraterDiscs) -> Vec<Crater> {
+    let craters: Vec<Crater> = clusters(states)
+        .iter()
+        .filter(|c| c.len() >= cfg.min_cells)
+        .filter_map(|c| crater_of(states, c, cfg))
+        .collect();
+    let g = *states.geometry();
+    for crater in &craters {
+        let reach = (crater.radius_m / g.resolution_m).ceil() as i64 + 1;
+        let Some(centre) = g.world_to_cell(crater.centre) else {
+            continue;
+        };
+        let (cx, cy) = (centre.x as i64, centre.y as i64);
+        for y in (cy - reach).max(0)..(cy + reach + 1).min(g.height as i64) {
+            for x in (cx - reach).max(0)..(cx + reach + 1).min(g.width as i64) {
+                let cell = Cell {
+                    x: x as usize,
+                    y: y as usize,
+                };
+                if g.cell_center(cell).distance_m(crater.centre) <= crater.radius_m {
+                    states.cells_mut()[g.index(cell)] = CellState::Occupied;
+                }
+            }
+        }
+    }
+    craters
+}
+
+/// The 8-connected clusters of `Occupied` cells, as cell indices.
+fn clusters(states: &Grid<CellState>) -> Vec<Vec<usize>> {
+    let g = states.geometry();
+    let (w, h) = (g.width, g.height);
+    let cells = states.cells();
+    let mut seen = vec![false; cells.len()];
+    let mut out = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..cells.len() {
+        if seen[start] || cells[start] != CellState::Occupied {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        let mut cluster = Vec::new();
+        while let Some(i) = stack.pop() {
+            cluster.push(i);
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                        continue;
+                    }
+                    let j = ny as usize * w + nx as usize;
+                    if !seen[j] && cells[j] == CellState::Occupied {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        out.push(cluster);
+    }
+    out
+}
+
+/// The crater a cluster is the wall of, if it is one.
+fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> Option<Crater> {
+    let g = states.geometry();
+    let points: Vec<Point2> = cluster
+        .iter()
+        .map(|&i| {
+            g.cell_center(Cell {
+                x: i % g.width,
+                y: i / g.width,
+            })
+        })
+        .collect();
+    let (centre, radius_m) = kasa_fit(&points)?;
+    if !(cfg.min_radius_m..=cfg.max_radius_m).contains(&radius_m) {
+        return None;
+    }
+    let distances: Vec<f64> = points.iter().map(|p| p.distance_m(centre)).collect();
+    let spread = (distances
+        .iter()
+        .map(|d| (d - radius_m).powi(2))
+        .sum::<f64>()
+        / distances.len() as f64)
+        .sqrt();
+    if spread > cfg.max_spread * radius_m {
+        return None;
+    }
+    let mut angles: Vec<f64> = points
+        .iter()
+        .map(|p| (p.y_m - centre.y_m).atan2(p.x_m - centre.x_m))
+        .collect();
+    angles.sort_by(f64::total_cmp);
+    let largest_gap = angles.windows(2).map(|w| w[1] - w[0]).fold(
+        angles[0] + std::f64::consts::TAU - angles[angles.len() - 1],
+        f64::max,
+    );
+    if std::f64::consts::TAU - largest_gap < cfg.min_span_rad {
+        return None;
+    }
+    let reach = distances.iter().copied().fold(0.0, f64::max) + g.resolution_m / 2.0;
+    (reach <= cfg.max_radius_m).then_some(Crater {
+        centre,
+        radius_m: reach,
+    })
+}
+
+/// Kåsa's circle: the centre and radius minimising the algebraic distances
+/// `x^2 + y^2 + D x + E y + F` of the points, or `None` for points on a line (or too few).
+fn kasa_fit(points: &[Point2]) -> Option<(Point2, f64)> {
+    if points.len() < 3 {
+        return None;
+    }
+    // Centred on the mean, so the sums stay small far from the origin.
+    let n = points.len() as f64;
+    let (mx, my) = (
+        points.iter().map(|p| p.x_m).sum::<f64>() / n,
+        points.iter().map(|p| p.y_m).sum::<f64>() / n,
+    );
+    let (mut a, mut b) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+    for p in points {
+        let (x, y) = (p.x_m - mx, p.y_m - my);
+        let row = [x, y, 1.0];
+        let z = -(x * x + y * y);
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += row[i] * row[j];
+            }
+            b[i] += row[i] * z;
+        }
+    }
+    let [d, e, f] = solve3(a, b)?;
+    let r2 = d * d / 4.0 + e * e / 4.0 - f;
+    (r2 > 0.0).then(|| (Point2::new(mx - d / 2.0, my - e / 2.0), r2.sqrt()))
+}
+
+/// `a x = b` by Cramer's rule, `None` if `a` is (nearly) singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    let scale = a.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
+    if d.abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut m = a;
+        for (row, bv) in m.iter_mut().zip(b) {
+            row[k] = bv;
+        }
+        *xk = det(m) / d;
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realms_core::GridGeometry;
+
+    /// A 10 m square of 10 cm cells, all unseen.
+    fn layer() -> Grid<CellState> {
+        Grid::new(
+            GridGeometry {
+                width: 100,
+                height: 100,
+                resolution_m: 0.1,
+                origin: Point2::new(0.0, 0.0),
+            },
+            CellState::Unknown,
+        )
+    }
+
+    /// Marks hazard every cell whose centre `inside` holds.
+    fn mark(g: &mut Grid<CellState>, inside: impl Fn(Point2) -> bool) {
+        let geo = *g.geometry();
+        for (i, c) in g.cells_mut().iter_mut().enumerate() {
+            let p = geo.cell_center(Cell {
+                x: i % geo.width,
+                y: i / geo.width,
+            });
+            if inside(p) {
+                *c = CellState::Occupied;
+            }
+        }
+    }
+
+    #[test]
+    fn a_crescent_of_a_craters_far_wall_marks_its_whole_disc() {
+        // A crater of 2 m radius at (5, 5): its inner wall from 1.3 to 2.0 m off the centre,
+        // seen only on the far side (x > 4.5) from a rover west of it.
+        let (c, r) = (Point2::new(5.0, 5.0), 2.0);
+        let mut g = layer();
+        mark(&mut g, |p| {
+            let d = p.distance_m(c);
+            d > 1.3 && d <= r && p.x_m > 4.5
+        });
+        let craters = fill_crater_discs(&mut g, &CraterDiscs::default());
+        assert_eq!(craters.len(), 1, "{craters:?}");
+        let found = craters[0];
+        assert!(found.centre.distance_m(c) < 0.15, "{found:?}");
+        assert!((found.radius_m - r).abs() < 0.15, "{found:?}");
+        // The near wall behind the rim and the bowl are marked now; outside the rim is not.
+        let at = |x: f64, y: f64| *g.at_world(Point2::new(x, y)).expect("inside");
+        assert_eq!(at(3.35, 5.05), CellState::Occupied);
+        assert_eq!(at(5.05, 5.05), CellState::Occupied);
+        assert_eq!(at(2.75, 5.05), CellState::Unknown);
+    }
+
+    #[test]
+    fn rocks_and_a_straight_slope_are_no_craters() {
+        let mut g = layer();
+        // A rock 0.3 m across, and the steep edge of a slope 4 m long.
+        mark(&mut g, |p| {
+            p.distance_m(Point2::new(2.0, 2.0)) < 0.15
+                || ((7.0..7.3).contains(&p.x_m) && (3.0..7.0).contains(&p.y_m))
+        });
+        let before = g.cells().to_vec();
+        assert!(fill_crater_discs(&mut g, &CraterDiscs::default()).is_empty());
+        assert_eq!(g.cells(), &before[..]);
+    }
+
+    #[test]
+    fn kasa_recovers_a_circle_from_an_arc() {
+        let points: Vec<Point2> = (0..20)
+            .map(|k| {
+                let a = 0.1 * k as f64;
+                Point2::new(3.0 + 1.5 * a.cos(), -2.0 + 1.5 * a.sin())
+            })
+            .collect();
+        let (c, r) = kasa_fit(&points).expect("a circle");
+        assert!(c.distance_m(Point2::new(3.0, -2.0)) < 1e-9 && (r - 1.5).abs() < 1e-9);
+        let line: Vec<Point2> = (0..10)
+            .map(|k| Point2::new(k as f64, 2.0 * k as f64))
+            .collect();
+        assert_eq!(kasa_fit(&line), None);
+    }
+}
