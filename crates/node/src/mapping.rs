@@ -932,8 +932,27 @@ impl Mapping {
     /// The hazard layer drawn at the submaps' poses now.
     fn hazard_states(&mut self) -> Grid<CellState> {
         let mut states = self.hazards.states(&self.mapper.submap_origins());
-        if let Some(discs) = &self.cfg.traversability.crater_discs {
-            realms_slam::craters::fill_crater_discs(&mut states, discs);
+        if let Some(discs) = self.cfg.traversability.crater_discs {
+            // A hazard cell within a cell of what the lidar sees as an obstacle is a wall's
+            // or a rock's foot, not a crater's wall.
+            let reach_m = states.resolution_m();
+            let view = self.mapper.live_map();
+            let g = view.geometry;
+            let occupied = |p: Point2| {
+                g.world_to_cell(p)
+                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Occupied)
+            };
+            let wall = |p: Point2| {
+                (-1..=1).any(|dy| {
+                    (-1..=1).any(|dx| {
+                        occupied(Point2::new(
+                            p.x_m + dx as f64 * reach_m,
+                            p.y_m + dy as f64 * reach_m,
+                        ))
+                    })
+                })
+            };
+            realms_slam::craters::fill_crater_discs(&mut states, &discs, wall);
         }
         states
     }

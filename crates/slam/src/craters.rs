@@ -8,11 +8,10 @@
 //! analysis", IEEE Trans. Instrumentation and Measurement, 1976) to the crescent's cells;
 //! the disc reaches the crescent's farthest cell from its centre.
 //!
-//! Not the rovers' default (`--variant crater-discs` of `realms bench slam`): in the rovers'
-//! layers a crater's wall joins the hazard along the hall's walls into one cluster as wide as
-//! the hall, which no circle fits, so most craters go unfound, while the discs it does mark
-//! elsewhere cost precision (BENCHMARKS.md, sixty-first session). Clusters must first be cut
-//! from what the lidar sees as walls.
+//! Not the rovers' default (`--variant crater-discs` of `realms bench slam`): the camera sees
+//! a large crater's far wall in pieces of 60-110 degrees, each too short an arc to be sure
+//! of, so the large craters go unfound; taking short thin arcs too marked many wrong discs
+//! (BENCHMARKS.md, sixty-first session). Pieces of one wall should be joined first.
 
 use crate::occupancy::CellState;
 use realms_core::{Cell, Grid, Point2};
@@ -56,9 +55,26 @@ pub struct Crater {
 }
 
 /// Finds the craters among the hazard (`Occupied`) clusters of `states` and marks each one's
-/// disc hazard; returns them.
-pub fn fill_crater_discs(states: &mut Grid<CellState>, cfg: &CraterDiscs) -> Vec<Crater> {
-    let craters: Vec<Crater> = clusters(states)
+/// disc hazard; returns them. Cells where `wall` holds (at their centres: what the lidar sees
+/// as an obstacle, and beside it) join no cluster, so a crater's wall is not taken together
+/// with the hazard at the foot of the hall's walls.
+pub fn fill_crater_discs(
+    states: &mut Grid<CellState>,
+    cfg: &CraterDiscs,
+    wall: impl Fn(Point2) -> bool,
+) -> Vec<Crater> {
+    let geo = *states.geometry();
+    // Asked of hazard cells only: the others join no cluster anyway.
+    let walls: Vec<bool> = (states.cells().iter().enumerate())
+        .map(|(i, s)| {
+            *s == CellState::Occupied
+                && wall(geo.cell_center(Cell {
+                    x: i % geo.width,
+                    y: i / geo.width,
+                }))
+        })
+        .collect();
+    let craters: Vec<Crater> = clusters(states, &walls)
         .iter()
         .filter(|c| c.len() >= cfg.min_cells)
         .filter_map(|c| crater_of(states, c, cfg))
@@ -85,12 +101,12 @@ pub fn fill_crater_discs(states: &mut Grid<CellState>, cfg: &CraterDiscs) -> Vec
     craters
 }
 
-/// The 8-connected clusters of `Occupied` cells, as cell indices.
-fn clusters(states: &Grid<CellState>) -> Vec<Vec<usize>> {
+/// The 8-connected clusters of `Occupied` cells outside `walls`, as cell indices.
+fn clusters(states: &Grid<CellState>, walls: &[bool]) -> Vec<Vec<usize>> {
     let g = states.geometry();
     let (w, h) = (g.width, g.height);
     let cells = states.cells();
-    let mut seen = vec![false; cells.len()];
+    let mut seen = walls.to_vec();
     let mut out = Vec::new();
     let mut stack = Vec::new();
     for start in 0..cells.len() {
@@ -261,7 +277,7 @@ mod tests {
             let d = p.distance_m(c);
             d > 1.3 && d <= r && p.x_m > 4.5
         });
-        let craters = fill_crater_discs(&mut g, &CraterDiscs::default());
+        let craters = fill_crater_discs(&mut g, &CraterDiscs::default(), |_| false);
         assert_eq!(craters.len(), 1, "{craters:?}");
         let found = craters[0];
         assert!(found.centre.distance_m(c) < 0.15, "{found:?}");
@@ -274,6 +290,25 @@ mod tests {
     }
 
     #[test]
+    fn a_crater_beside_a_wall_is_found_once_the_walls_foot_is_left_out() {
+        // The crater's far wall as above, and a band of hazard along a wall at x = 7.2 m
+        // that touches it (the wall's foot, seen as a step).
+        let (c, r) = (Point2::new(5.0, 5.0), 2.0);
+        let crescent_and_foot = |p: Point2| {
+            let d = p.distance_m(c);
+            (d > 1.3 && d <= r && p.x_m > 4.5) || (6.9..7.3).contains(&p.x_m)
+        };
+        let mut joined = layer();
+        mark(&mut joined, crescent_and_foot);
+        assert!(fill_crater_discs(&mut joined, &CraterDiscs::default(), |_| false).is_empty());
+        let mut g = layer();
+        mark(&mut g, crescent_and_foot);
+        let craters = fill_crater_discs(&mut g, &CraterDiscs::default(), |p| p.x_m > 6.85);
+        assert_eq!(craters.len(), 1, "{craters:?}");
+        assert!(craters[0].centre.distance_m(c) < 0.2, "{craters:?}");
+    }
+
+    #[test]
     fn rocks_and_a_straight_slope_are_no_craters() {
         let mut g = layer();
         // A rock 0.3 m across, and the steep edge of a slope 4 m long.
@@ -282,7 +317,7 @@ mod tests {
                 || ((7.0..7.3).contains(&p.x_m) && (3.0..7.0).contains(&p.y_m))
         });
         let before = g.cells().to_vec();
-        assert!(fill_crater_discs(&mut g, &CraterDiscs::default()).is_empty());
+        assert!(fill_crater_discs(&mut g, &CraterDiscs::default(), |_| false).is_empty());
         assert_eq!(g.cells(), &before[..]);
     }
 
