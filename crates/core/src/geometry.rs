@@ -278,9 +278,106 @@ impl LineFit {
     }
 }
 
+/// A circle fitted to points by Kåsa's algebraic least squares ("A circle fitting procedure
+/// and its error analysis", IEEE Trans. Instrumentation and Measurement, 1976): the circle
+/// minimising the sum of `x^2 + y^2 + D x + E y + F` over the points, worked out about their
+/// mean so the sums stay small far from the origin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CircleFit {
+    /// The points' mean.
+    pub mean: Point2,
+    /// The centre's offset from the mean, metres.
+    pub centre_from_mean: (f64, f64),
+    /// Radius, metres.
+    pub radius_m: f64,
+}
+
+impl CircleFit {
+    /// The circle through `points`, or `None` for fewer than three or points on a line.
+    pub fn of(points: &[Point2]) -> Option<CircleFit> {
+        if points.len() < 3 {
+            return None;
+        }
+        let n = points.len() as f64;
+        let (mx, my) = (
+            points.iter().map(|p| p.x_m).sum::<f64>() / n,
+            points.iter().map(|p| p.y_m).sum::<f64>() / n,
+        );
+        // Normal equations of x^2 + y^2 + d x + e y + f = 0 in least squares.
+        let mut m = [[0.0f64; 3]; 3];
+        let mut v = [0.0f64; 3];
+        for p in points {
+            let (x, y) = (p.x_m - mx, p.y_m - my);
+            let row = [x, y, 1.0];
+            let rhs = -(x * x + y * y);
+            for r in 0..3 {
+                v[r] += row[r] * rhs;
+                for c in 0..3 {
+                    m[r][c] += row[r] * row[c];
+                }
+            }
+        }
+        let [d, e, f] = solve3_scaled(&m, &v)?;
+        let (cx, cy) = (-d / 2.0, -e / 2.0);
+        let r2 = cx * cx + cy * cy - f;
+        (r2 > 0.0).then(|| CircleFit {
+            mean: Point2::new(mx, my),
+            centre_from_mean: (cx, cy),
+            radius_m: r2.sqrt(),
+        })
+    }
+
+    /// The centre.
+    pub fn centre(&self) -> Point2 {
+        Point2::new(
+            self.mean.x_m + self.centre_from_mean.0,
+            self.mean.y_m + self.centre_from_mean.1,
+        )
+    }
+}
+
+/// `m x = v` by Cramer's rule; `None` when `m` is singular against its own scale (points on a
+/// line, for [`CircleFit`]).
+fn solve3_scaled(m: &[[f64; 3]; 3], v: &[f64; 3]) -> Option<[f64; 3]> {
+    let det = |a: &[[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det(m);
+    let scale = m.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
+    if d.abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    Some(std::array::from_fn(|k| {
+        let mut mk = *m;
+        for r in 0..3 {
+            mk[r][k] = v[r];
+        }
+        det(&mk) / d
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_circle_is_fitted_to_an_arc_and_not_to_a_line() {
+        let arc: Vec<Point2> = (0..20)
+            .map(|k| {
+                let a = 0.1 * k as f64;
+                Point2::new(3.0 + 1.5 * a.cos(), -2.0 + 1.5 * a.sin())
+            })
+            .collect();
+        let c = CircleFit::of(&arc).expect("a circle");
+        assert!(c.centre().distance_m(Point2::new(3.0, -2.0)) < 1e-9);
+        assert!((c.radius_m - 1.5).abs() < 1e-9);
+        let line: Vec<Point2> = (0..10)
+            .map(|k| Point2::new(k as f64, 2.0 * k as f64))
+            .collect();
+        assert_eq!(CircleFit::of(&line), None);
+    }
 
     #[test]
     fn a_line_through_noisy_points_along_30_degrees() {

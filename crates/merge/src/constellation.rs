@@ -14,6 +14,7 @@
 //! map's origin votes 0.35 m astray.
 
 use crate::level::{Class, Level};
+use realms_core::geometry::CircleFit;
 use realms_core::{Point2, Pose2};
 
 /// A landmark: the centre and size of a blob of landmark cells.
@@ -115,38 +116,16 @@ pub fn landmarks(level: &Level) -> Vec<Landmark> {
 /// The circle through `outline` (the cells of a blob that face free ground), where it fits
 /// them within [`CIRCLE_RMS_CELLS`] and is at most [`CIRCLE_MAX_M`] across: a crater cut by
 /// the map's edge keeps its own centre and size, where its blob's centroid and area would
-/// shrink towards the part in view. The algebraic fit of Kasa (1976, "A circle fitting
-/// procedure and its error analysis"), on coordinates about the points' mean.
+/// shrink towards the part in view. The algebraic fit of Kasa ([`CircleFit`]).
 fn circle_through(outline: &[Point2], cell_m: f64) -> Option<Landmark> {
     if outline.len() < CIRCLE_MIN_POINTS {
         return None;
     }
     let n = outline.len() as f64;
-    let (mx, my) = (
-        outline.iter().map(|p| p.x_m).sum::<f64>() / n,
-        outline.iter().map(|p| p.y_m).sum::<f64>() / n,
-    );
-    // Normal equations of x^2 + y^2 + d x + e y + f = 0 in least squares.
-    let mut m = [[0.0f64; 3]; 3];
-    let mut v = [0.0f64; 3];
-    for p in outline {
-        let (x, y) = (p.x_m - mx, p.y_m - my);
-        let row = [x, y, 1.0];
-        let rhs = -(x * x + y * y);
-        for r in 0..3 {
-            v[r] += row[r] * rhs;
-            for c in 0..3 {
-                m[r][c] += row[r] * row[c];
-            }
-        }
-    }
-    let [d, e, f] = solve3(&m, &v)?;
-    let (cx, cy) = (-d / 2.0, -e / 2.0);
-    let r2 = cx * cx + cy * cy - f;
-    if r2 <= 0.0 {
-        return None;
-    }
-    let radius_m = r2.sqrt();
+    let fit = CircleFit::of(outline)?;
+    let (mx, my) = (fit.mean.x_m, fit.mean.y_m);
+    let (cx, cy) = fit.centre_from_mean;
+    let radius_m = fit.radius_m;
     let rms = (outline
         .iter()
         .map(|p| ((p.x_m - mx - cx).hypot(p.y_m - my - cy) - radius_m).powi(2))
@@ -157,27 +136,6 @@ fn circle_through(outline: &[Point2], cell_m: f64) -> Option<Landmark> {
         c: Point2::new(mx + cx, my + cy),
         radius_m,
     })
-}
-
-/// `m x = v` by Cramer's rule; `None` when `m` is (nearly) singular: points on a line.
-fn solve3(m: &[[f64; 3]; 3], v: &[f64; 3]) -> Option<[f64; 3]> {
-    let det = |a: &[[f64; 3]; 3]| {
-        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
-            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
-    };
-    let d = det(m);
-    let scale = m.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
-    if d.abs() <= 1e-12 * scale.powi(3) {
-        return None;
-    }
-    Some(std::array::from_fn(|k| {
-        let mut mk = *m;
-        for r in 0..3 {
-            mk[r][k] = v[r];
-        }
-        det(&mk) / d
-    }))
 }
 
 /// Whether two landmarks are of like size ([`SIZE_SLACK_M`], [`SIZE_SLACK_SHARE`]).

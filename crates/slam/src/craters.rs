@@ -4,9 +4,8 @@
 //! goes far enough round gives the crater's rim, and the whole disc inside it is hazard: a
 //! rover that enters the bowl cannot be sure to climb out of it.
 //!
-//! The circle is the algebraic fit of Kåsa ("A circle fitting procedure and its error
-//! analysis", IEEE Trans. Instrumentation and Measurement, 1976) to the crescent's cells;
-//! the disc reaches the crescent's farthest cell from its centre.
+//! The circle is the algebraic fit of Kåsa ([`CircleFit`]) to the crescent's cells; the disc
+//! reaches the crescent's farthest cell from its centre.
 //!
 //! Not the rovers' default (`--variant crater-discs` of `realms bench slam`): the camera sees
 //! a large crater's far wall in pieces of 60-110 degrees, each too short an arc to be sure
@@ -14,6 +13,7 @@
 //! (BENCHMARKS.md, sixty-first session). Pieces of one wall should be joined first.
 
 use crate::occupancy::CellState;
+use realms_core::geometry::CircleFit;
 use realms_core::{Cell, Grid, Point2};
 
 /// Which clusters of hazard cells count as a crater's wall.
@@ -150,7 +150,8 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
             })
         })
         .collect();
-    let (centre, radius_m) = kasa_fit(&points)?;
+    let fit = CircleFit::of(&points)?;
+    let (centre, radius_m) = (fit.centre(), fit.radius_m);
     if !(cfg.min_radius_m..=cfg.max_radius_m).contains(&radius_m) {
         return None;
     }
@@ -181,58 +182,6 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
         centre,
         radius_m: reach,
     })
-}
-
-/// Kåsa's circle: the centre and radius minimising the algebraic distances
-/// `x^2 + y^2 + D x + E y + F` of the points, or `None` for points on a line (or too few).
-fn kasa_fit(points: &[Point2]) -> Option<(Point2, f64)> {
-    if points.len() < 3 {
-        return None;
-    }
-    // Centred on the mean, so the sums stay small far from the origin.
-    let n = points.len() as f64;
-    let (mx, my) = (
-        points.iter().map(|p| p.x_m).sum::<f64>() / n,
-        points.iter().map(|p| p.y_m).sum::<f64>() / n,
-    );
-    let (mut a, mut b) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
-    for p in points {
-        let (x, y) = (p.x_m - mx, p.y_m - my);
-        let row = [x, y, 1.0];
-        let z = -(x * x + y * y);
-        for i in 0..3 {
-            for j in 0..3 {
-                a[i][j] += row[i] * row[j];
-            }
-            b[i] += row[i] * z;
-        }
-    }
-    let [d, e, f] = solve3(a, b)?;
-    let r2 = d * d / 4.0 + e * e / 4.0 - f;
-    (r2 > 0.0).then(|| (Point2::new(mx - d / 2.0, my - e / 2.0), r2.sqrt()))
-}
-
-/// `a x = b` by Cramer's rule, `None` if `a` is (nearly) singular.
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(a);
-    let scale = a.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
-    if d.abs() <= 1e-12 * scale.powi(3) {
-        return None;
-    }
-    let mut x = [0.0; 3];
-    for (k, xk) in x.iter_mut().enumerate() {
-        let mut m = a;
-        for (row, bv) in m.iter_mut().zip(b) {
-            row[k] = bv;
-        }
-        *xk = det(m) / d;
-    }
-    Some(x)
 }
 
 #[cfg(test)]
@@ -319,21 +268,5 @@ mod tests {
         let before = g.cells().to_vec();
         assert!(fill_crater_discs(&mut g, &CraterDiscs::default(), |_| false).is_empty());
         assert_eq!(g.cells(), &before[..]);
-    }
-
-    #[test]
-    fn kasa_recovers_a_circle_from_an_arc() {
-        let points: Vec<Point2> = (0..20)
-            .map(|k| {
-                let a = 0.1 * k as f64;
-                Point2::new(3.0 + 1.5 * a.cos(), -2.0 + 1.5 * a.sin())
-            })
-            .collect();
-        let (c, r) = kasa_fit(&points).expect("a circle");
-        assert!(c.distance_m(Point2::new(3.0, -2.0)) < 1e-9 && (r - 1.5).abs() < 1e-9);
-        let line: Vec<Point2> = (0..10)
-            .map(|k| Point2::new(k as f64, 2.0 * k as f64))
-            .collect();
-        assert_eq!(kasa_fit(&line), None);
     }
 }
