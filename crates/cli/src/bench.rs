@@ -150,7 +150,9 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     }
 
     let spec = &scenario.rovers;
-    let baseline = HeightPyramid::with_max_level(&world.terrain().heights, 0);
+    // Plain cell-by-cell casting, built only when compared against.
+    let baseline =
+        (!args.no_plain).then(|| HeightPyramid::with_max_level(&world.terrain().heights, 0));
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let free: Vec<Pose2> = {
         let g = *world.truth().explorable.geometry();
@@ -226,8 +228,9 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         };
         let fast = time_each(frames.len(), &mut |i| run(world.pyramid(), &frames[i].0));
         let driving = time_each(drive.len(), &mut |i| run(world.pyramid(), &drive[i].0));
-        let base = (!args.no_plain)
-            .then(|| time_each(frames.len(), &mut |i| run(&baseline, &frames[i].0)));
+        let base = baseline
+            .as_ref()
+            .map(|b| time_each(frames.len(), &mut |i| run(b, &frames[i].0)));
         let name = format!(
             "lidar scan ({} beams, {} m)",
             spec.lidar.beams, spec.lidar.range_max_m
@@ -247,8 +250,9 @@ fn sim(args: BenchSimArgs) -> Result<()> {
         };
         let fast = time_each(frames.len(), &mut |i| run(world.pyramid(), &frames[i].1));
         let driving = time_each(drive.len(), &mut |i| run(world.pyramid(), &drive[i].1));
-        let base = (!args.no_plain)
-            .then(|| time_each(frames.len(), &mut |i| run(&baseline, &frames[i].1)));
+        let base = baseline
+            .as_ref()
+            .map(|b| time_each(frames.len(), &mut |i| run(b, &frames[i].1)));
         let d = &spec.depth;
         let name = format!(
             "depth frame ({}x{}, {} m)",

@@ -280,8 +280,8 @@ impl LineFit {
 
 /// A circle fitted to points by Kåsa's algebraic least squares ("A circle fitting procedure
 /// and its error analysis", IEEE Trans. Instrumentation and Measurement, 1976): the circle
-/// minimising the sum of `x^2 + y^2 + D x + E y + F` over the points, worked out about their
-/// mean so the sums stay small far from the origin.
+/// minimising the sum of the squares of `x^2 + y^2 + D x + E y + F` over the points, worked
+/// out about their mean so the sums stay small far from the origin.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CircleFit {
     /// The points' mean.
@@ -293,7 +293,8 @@ pub struct CircleFit {
 }
 
 impl CircleFit {
-    /// The circle through `points`, or `None` for fewer than three or points on a line.
+    /// The circle through `points`, or `None` for fewer than three, points on a line, or a
+    /// fit with no real radius.
     pub fn of(points: &[Point2]) -> Option<CircleFit> {
         if points.len() < 3 {
             return None;

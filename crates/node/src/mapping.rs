@@ -933,8 +933,9 @@ impl Mapping {
     fn hazard_states(&mut self) -> Grid<CellState> {
         let mut states = self.hazards.states(&self.mapper.submap_origins());
         if let Some(discs) = self.cfg.traversability.crater_discs {
-            // A hazard cell within a cell of what the lidar sees as an obstacle is a wall's
-            // or a rock's foot, not a crater's wall.
+            // A hazard cell with what the lidar sees as an obstacle at its centre or one
+            // hazard cell away (eight points round it) is a wall's or a rock's foot, not a
+            // crater's wall.
             let reach_m = states.resolution_m();
             let view = self.mapper.live_map();
             let g = view.geometry;

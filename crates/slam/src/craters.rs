@@ -23,7 +23,8 @@ pub struct CraterDiscs {
     pub min_cells: usize,
     /// Smallest rim radius taken for a crater, metres.
     pub min_radius_m: f64,
-    /// Largest rim radius taken for a crater, metres.
+    /// Largest rim radius taken for a crater, metres, both as fitted and as marked (to the
+    /// wall's farthest cell).
     pub max_radius_m: f64,
     /// How far round its centre the cluster must reach (the angle it spans), radians: a
     /// straight slope's edge or a rock's face fits a circle too, but covers little of it.
@@ -79,23 +80,11 @@ pub fn fill_crater_discs(
         .filter(|c| c.len() >= cfg.min_cells)
         .filter_map(|c| crater_of(states, c, cfg))
         .collect();
-    let g = *states.geometry();
     for crater in &craters {
-        let reach = (crater.radius_m / g.resolution_m).ceil() as i64 + 1;
-        let Some(centre) = g.world_to_cell(crater.centre) else {
-            continue;
-        };
-        let (cx, cy) = (centre.x as i64, centre.y as i64);
-        for y in (cy - reach).max(0)..(cy + reach + 1).min(g.height as i64) {
-            for x in (cx - reach).max(0)..(cx + reach + 1).min(g.width as i64) {
-                let cell = Cell {
-                    x: x as usize,
-                    y: y as usize,
-                };
-                if g.cell_center(cell).distance_m(crater.centre) <= crater.radius_m {
-                    states.cells_mut()[g.index(cell)] = CellState::Occupied;
-                }
-            }
+        // Clipped to the grid: a crater whose centre lies past the layer's edge still has
+        // the part of its disc inside marked.
+        for cell in geo.cells_within(crater.centre, crater.radius_m) {
+            states.cells_mut()[geo.index(cell)] = CellState::Occupied;
         }
     }
     craters
