@@ -328,6 +328,21 @@ impl CircleFit {
         })
     }
 
+    /// The root mean square of the points' distances from the circle, metres: how thin
+    /// they lie about it.
+    pub fn rms_off_m(&self, points: &[Point2]) -> f64 {
+        let (cx, cy) = self.centre_from_mean;
+        (points
+            .iter()
+            .map(|p| {
+                ((p.x_m - self.mean.x_m - cx).hypot(p.y_m - self.mean.y_m - cy) - self.radius_m)
+                    .powi(2)
+            })
+            .sum::<f64>()
+            / points.len().max(1) as f64)
+            .sqrt()
+    }
+
     /// The centre.
     pub fn centre(&self) -> Point2 {
         Point2::new(
@@ -374,6 +389,7 @@ mod tests {
         let c = CircleFit::of(&arc).expect("a circle");
         assert!(c.centre().distance_m(Point2::new(3.0, -2.0)) < 1e-9);
         assert!((c.radius_m - 1.5).abs() < 1e-9);
+        assert!(c.rms_off_m(&arc) < 1e-9);
         let line: Vec<Point2> = (0..10)
             .map(|k| Point2::new(k as f64, 2.0 * k as f64))
             .collect();

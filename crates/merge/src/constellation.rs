@@ -121,17 +121,11 @@ fn circle_through(outline: &[Point2], cell_m: f64) -> Option<Landmark> {
     if outline.len() < CIRCLE_MIN_POINTS {
         return None;
     }
-    let n = outline.len() as f64;
     let fit = CircleFit::of(outline)?;
     let (mx, my) = (fit.mean.x_m, fit.mean.y_m);
     let (cx, cy) = fit.centre_from_mean;
     let radius_m = fit.radius_m;
-    let rms = (outline
-        .iter()
-        .map(|p| ((p.x_m - mx - cx).hypot(p.y_m - my - cy) - radius_m).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt();
+    let rms = fit.rms_off_m(outline);
     (radius_m <= CIRCLE_MAX_M / 2.0 && rms <= CIRCLE_RMS_CELLS * cell_m).then(|| Landmark {
         c: Point2::new(mx + cx, my + cy),
         radius_m,

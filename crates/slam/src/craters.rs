@@ -75,7 +75,7 @@ pub fn fill_crater_discs(
                 }))
         })
         .collect();
-    let craters: Vec<Crater> = clusters(states, &walls)
+    let craters: Vec<Crater> = clusters(states, walls)
         .iter()
         .filter(|c| c.len() >= cfg.min_cells)
         .filter_map(|c| crater_of(states, c, cfg))
@@ -91,11 +91,12 @@ pub fn fill_crater_discs(
 }
 
 /// The 8-connected clusters of `Occupied` cells outside `walls`, as cell indices.
-fn clusters(states: &Grid<CellState>, walls: &[bool]) -> Vec<Vec<usize>> {
+fn clusters(states: &Grid<CellState>, walls: Vec<bool>) -> Vec<Vec<usize>> {
     let g = states.geometry();
     let (w, h) = (g.width, g.height);
     let cells = states.cells();
-    let mut seen = walls.to_vec();
+    // Cells at a wall count as seen from the start: no cluster takes them in.
+    let mut seen = walls;
     let mut out = Vec::new();
     let mut stack = Vec::new();
     for start in 0..cells.len() {
@@ -144,14 +145,7 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
     if !(cfg.min_radius_m..=cfg.max_radius_m).contains(&radius_m) {
         return None;
     }
-    let distances: Vec<f64> = points.iter().map(|p| p.distance_m(centre)).collect();
-    let spread = (distances
-        .iter()
-        .map(|d| (d - radius_m).powi(2))
-        .sum::<f64>()
-        / distances.len() as f64)
-        .sqrt();
-    if spread > cfg.max_spread * radius_m {
+    if fit.rms_off_m(&points) > cfg.max_spread * radius_m {
         return None;
     }
     let mut angles: Vec<f64> = points
@@ -166,7 +160,8 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
     if std::f64::consts::TAU - largest_gap < cfg.min_span_rad {
         return None;
     }
-    let reach = distances.iter().copied().fold(0.0, f64::max) + g.resolution_m / 2.0;
+    let reach =
+        (points.iter().map(|p| p.distance_m(centre))).fold(0.0, f64::max) + g.resolution_m / 2.0;
     (reach <= cfg.max_radius_m).then_some(Crater {
         centre,
         radius_m: reach,
