@@ -710,6 +710,21 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.traversability.gap_reach_m = 6.0,
     },
     Variant {
+        name: "no-hollows",
+        what: "patches the lidar saw open and the camera never judged, walled in by hazard, left unjudged (the rovers' setup before the sixty-second session; they are marked hazard)",
+        apply: |c| c.traversability.hazard_hollows = None,
+    },
+    Variant {
+        name: "hollows-50",
+        what: "patches the lidar saw open and the camera never judged marked hazard when hazard makes up 50 % of their border (not 60 %)",
+        apply: |c| {
+            c.traversability.hazard_hollows = Some(realms_slam::hollows::HazardHollows {
+                min_hazard_share: 0.5,
+                ..Default::default()
+            })
+        },
+    },
+    Variant {
         name: "no-tilt-gate",
         what: "returns taken for the floor by the ground clearance alone, not also within what the tilt's latest change could have moved them (the rovers' setup before the fifty-ninth session)",
         apply: |c| c.tilt_gate = false,

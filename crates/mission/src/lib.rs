@@ -120,6 +120,10 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
             // wheels where the map is weak (`rover_mapper_config`), not (BENCHMARKS.md, "The
             // pose held to the wheels where the map is weak, as the rovers' default").
             gap_reach_m: spec.depth.range_max_m,
+            // What the lidar saw open and the camera never judged, walled in by hazard, is a
+            // crater's inside no viewpoint outside it shows (BENCHMARKS.md, "Hollows in the
+            // hazard layer").
+            hazard_hollows: Some(realms_slam::hollows::HazardHollows::default()),
             ..TraversabilityConfig::default()
         },
         depth_camera: Some(PinholeDepth::from_fov(

@@ -352,6 +352,8 @@ pub struct Mapping {
     snapshot_wanted: bool,
     /// The map as published, kept between publications.
     published_layer: TiledLayer,
+    /// Finds the hazard layer's hollows, if the rover infers them.
+    hollows: Option<realms_slam::hollows::HollowFinder>,
     /// The planner's map, kept between plans (once asked for).
     planner_layer: Option<TiledLayer>,
     /// The last depth frame's points in hazard cells (rover frame), its time and odometry
@@ -373,6 +375,10 @@ impl Mapping {
             mapper: Mapper::new(cfg.mapper),
             hazards: SubmapHazards::new(cfg.traversability.resolution_m),
             tracked_once: false,
+            hollows: cfg
+                .traversability
+                .hazard_hollows
+                .map(realms_slam::hollows::HollowFinder::new),
             cfg,
             odometry: Vec::new(),
             last_wheel: None,
@@ -929,7 +935,8 @@ impl Mapping {
         c
     }
 
-    /// The hazard layer drawn at the submaps' poses now.
+    /// The hazard layer drawn at the submaps' poses now, with the craters or hollows it
+    /// implies marked if the rover infers them.
     fn hazard_states(&mut self) -> Grid<CellState> {
         let mut states = self.hazards.states(&self.mapper.submap_origins());
         if let Some(discs) = self.cfg.traversability.crater_discs {
@@ -954,6 +961,15 @@ impl Mapping {
                 })
             };
             realms_slam::craters::fill_crater_discs(&mut states, &discs, wall);
+        }
+        if let Some(hollows) = &mut self.hollows {
+            let view = self.mapper.live_map();
+            let g = view.geometry;
+            let open = |p: Point2| {
+                g.world_to_cell(p)
+                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Free)
+            };
+            hollows.fill(&mut states, open);
         }
         states
     }

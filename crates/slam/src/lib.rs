@@ -30,6 +30,7 @@ mod elimination;
 pub mod eval;
 pub mod frontend;
 pub mod health;
+pub mod hollows;
 pub mod mapper;
 pub mod matcher;
 pub mod ndt;

@@ -50,6 +50,9 @@ pub struct TraversabilityConfig {
     /// Craters inferred from the layer's crescents of hazard, their whole discs marked
     /// ([`crate::craters`]); `None` marks only what the camera judged.
     pub crater_discs: Option<crate::craters::CraterDiscs>,
+    /// Patches of ground the lidar saw open and the camera never judged, walled in by
+    /// hazard, marked hazard ([`crate::hollows`]); `None` leaves them unjudged.
+    pub hazard_hollows: Option<crate::hollows::HazardHollows>,
 }
 
 impl Default for TraversabilityConfig {
@@ -64,6 +67,7 @@ impl Default for TraversabilityConfig {
             gap_reach_m: 4.0,
             gap_drop_m: 0.08,
             crater_discs: None,
+            hazard_hollows: None,
         }
     }
 }

@@ -1,0 +1,411 @@
+//! Ground hidden inside a depression. The lidar passes over a crater and calls its bowl
+//! free; the depth camera, looking over the rim from outside, sees the far inner wall and
+//! the bowl's hidden stretches it can prove lower than the floor, but from beside the rim
+//! (the camera looking along it) and across the bowl's middle it judges nothing. What is
+//! left is a patch of ground the lidar saw open and the camera never judged, walled in by
+//! hazard on nearly every side: a hollow in the hazard layer. No viewpoint outside the
+//! crater shows it, so a rover exploring until the ground is judged would drive round it
+//! for nothing; and ground enclosed by a crater's walls is its inside.
+//!
+//! Each patch (4-connected cells the layer has not judged and `open` holds at) that touches
+//! hazard is flooded; it is taken for a hollow, and marked hazard, when hazard makes up at
+//! least [`HazardHollows::min_hazard_share`] of its border and it is no larger than a
+//! crater's disc. A patch behind a rock or along a wall's foot is bordered by ground the
+//! camera judged safe too, and stays as it is.
+
+use crate::occupancy::CellState;
+use realms_core::{Cell, Grid, Point2};
+
+/// Which patches of unjudged ground count as hollows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HazardHollows {
+    /// The share of a patch's border (cell sides) that must be hazard.
+    pub min_hazard_share: f64,
+    /// The largest patch taken, square metres: a crater's disc at most.
+    pub max_area_m2: f64,
+}
+
+impl Default for HazardHollows {
+    fn default() -> Self {
+        HazardHollows {
+            min_hazard_share: 0.6,
+            // A disc of 4.5 m radius: the scenario's largest crater is 3 m.
+            max_area_m2: 64.0,
+        }
+    }
+}
+
+/// What a cell of the flood is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mark {
+    /// Not asked yet.
+    Unasked,
+    /// Unjudged and open: may join a patch.
+    Open,
+    /// Anything else (judged, or not open).
+    Closed,
+    /// Taken into a patch already.
+    Flooded,
+    /// Part of a patch too large to be a hollow, found so before it was flooded whole.
+    Big,
+}
+
+/// Cells of a layer's row tested for hazard at once: most rows hold none, and a chunk
+/// tested without an early exit is tested many cells at a time.
+const CHUNK: usize = 32;
+
+/// Finds hollows ([`HollowFinder::fill`]), keeping its buffers from one layer to the next:
+/// the layer is asked for every map the rover publishes.
+#[derive(Clone, Debug, Default)]
+pub struct HollowFinder {
+    cfg: HazardHollows,
+    marks: Vec<Mark>,
+    stack: Vec<usize>,
+    patch: Vec<usize>,
+    hollows: Vec<usize>,
+}
+
+impl HollowFinder {
+    /// A finder of hollows as `cfg` defines them.
+    pub fn new(cfg: HazardHollows) -> Self {
+        HollowFinder {
+            cfg,
+            ..HollowFinder::default()
+        }
+    }
+
+    /// Marks hazard (`Occupied`) every hollow of `states`: see the module's doc. `open(p)`
+    /// says whether the ground at `p` (a cell's centre) was seen open, by the lidar. Returns
+    /// the cells marked.
+    pub fn fill(&mut self, states: &mut Grid<CellState>, open: impl Fn(Point2) -> bool) -> usize {
+        let g = *states.geometry();
+        let (w, h) = (g.width, g.height);
+        let max_cells = (self.cfg.max_area_m2 / (g.resolution_m * g.resolution_m)) as usize;
+        let marks = &mut self.marks;
+        marks.clear();
+        marks.resize(w * h, Mark::Unasked);
+        let cells = states.cells();
+        // Asks `open` once a cell, and only of the cells a flood reaches.
+        let is_open = |marks: &mut [Mark], i: usize, cell: Cell| -> bool {
+            if marks[i] == Mark::Unasked {
+                marks[i] = if cells[i] == CellState::Unknown && open(g.cell_center(cell)) {
+                    Mark::Open
+                } else {
+                    Mark::Closed
+                };
+            }
+            marks[i] == Mark::Open
+        };
+        // Each neighbour's index and cell.
+        let neighbours = |i: usize| {
+            let (x, y) = (i % w, i / w);
+            [
+                (x > 0).then(|| (i - 1, Cell { x: x - 1, y })),
+                (x + 1 < w).then(|| (i + 1, Cell { x: x + 1, y })),
+                (y > 0).then(|| (i - w, Cell { x, y: y - 1 })),
+                (y + 1 < h).then(|| (i + w, Cell { x, y: y + 1 })),
+            ]
+        };
+        let (stack, patch) = (&mut self.stack, &mut self.patch);
+        self.hollows.clear();
+        for (chunk_at, chunk) in (0..).step_by(CHUNK).zip(cells.chunks(CHUNK)) {
+            let any_hazard = chunk
+                .iter()
+                .fold(false, |any, c| any | (*c == CellState::Occupied));
+            if !any_hazard {
+                continue;
+            }
+            for (seed, _) in (chunk_at..)
+                .zip(chunk)
+                .filter(|(_, c)| **c == CellState::Occupied)
+            {
+                for (start, cell) in neighbours(seed).into_iter().flatten() {
+                    if !is_open(marks, start, cell) {
+                        continue;
+                    }
+                    marks[start] = Mark::Flooded;
+                    stack.push(start);
+                    patch.clear();
+                    let (mut hazard_sides, mut sides) = (0usize, 0usize);
+                    // The ground the lidar sees beyond what the camera has judged is one
+                    // wide patch along the hall's walls: once a flood is too large for a
+                    // hollow it stops, and a later flood that meets it is the same patch.
+                    let mut big = false;
+                    'flood: while let Some(i) = stack.pop() {
+                        patch.push(i);
+                        if patch.len() > max_cells {
+                            big = true;
+                            break;
+                        }
+                        for n in neighbours(i) {
+                            let Some((j, cell)) = n else {
+                                // The layer's edge borders on nothing judged.
+                                sides += 1;
+                                continue;
+                            };
+                            match marks[j] {
+                                Mark::Flooded => continue,
+                                Mark::Big => {
+                                    big = true;
+                                    break 'flood;
+                                }
+                                _ => {}
+                            }
+                            if is_open(marks, j, cell) {
+                                marks[j] = Mark::Flooded;
+                                stack.push(j);
+                            } else {
+                                sides += 1;
+                                hazard_sides += usize::from(cells[j] == CellState::Occupied);
+                            }
+                        }
+                    }
+                    if big {
+                        for &i in patch.iter().chain(stack.iter()) {
+                            marks[i] = Mark::Big;
+                        }
+                        stack.clear();
+                    } else if hazard_sides as f64 >= self.cfg.min_hazard_share * sides as f64 {
+                        self.hollows.extend_from_slice(patch);
+                    }
+                }
+            }
+        }
+        let cells = states.cells_mut();
+        for &i in &self.hollows {
+            cells[i] = CellState::Occupied;
+        }
+        self.hollows.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realms_core::GridGeometry;
+
+    /// A 10 m square of 10 cm cells, all unseen.
+    fn layer() -> Grid<CellState> {
+        Grid::new(
+            GridGeometry {
+                width: 100,
+                height: 100,
+                resolution_m: 0.1,
+                origin: Point2::new(0.0, 0.0),
+            },
+            CellState::Unknown,
+        )
+    }
+
+    /// Sets every cell whose centre `inside` holds to `state`.
+    fn set(g: &mut Grid<CellState>, state: CellState, inside: impl Fn(Point2) -> bool) {
+        let geo = *g.geometry();
+        for (i, c) in g.cells_mut().iter_mut().enumerate() {
+            if inside(geo.cell_center(Cell {
+                x: i % geo.width,
+                y: i / geo.width,
+            })) {
+                *c = state;
+            }
+        }
+    }
+
+    fn state_at(g: &Grid<CellState>, x_m: f64, y_m: f64) -> CellState {
+        *g.at_world(Point2::new(x_m, y_m))
+            .expect("a point on the layer")
+    }
+
+    #[test]
+    fn the_unjudged_middle_of_a_crater_ringed_by_hazard_is_marked_and_the_floor_round_it_is_not() {
+        // A crater of 2 m radius at (5, 5): the camera judged its walls hazard (the outer
+        // metre of its radius) but for a gap of a few cells on the east, where it judged
+        // the rim safe; the floor round it is judged safe out to 3 m, beyond that unjudged.
+        // The lidar saw everything open.
+        let centre = Point2::new(5.0, 5.0);
+        let mut g = layer();
+        set(&mut g, CellState::Free, |p| p.distance_m(centre) <= 3.0);
+        set(&mut g, CellState::Occupied, |p| {
+            (1.0..=2.0).contains(&p.distance_m(centre))
+        });
+        set(&mut g, CellState::Unknown, |p| p.distance_m(centre) < 1.0);
+        set(&mut g, CellState::Free, |p| {
+            (1.0..=2.0).contains(&p.distance_m(centre)) && (p.y_m - 5.0).abs() < 0.2 && p.x_m > 5.0
+        });
+        let before = g.clone();
+        let marked = HollowFinder::new(HazardHollows::default()).fill(&mut g, |_| true);
+        let inside = before
+            .cells()
+            .iter()
+            .zip(g.cells())
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(marked, inside);
+        assert!(
+            marked > 250,
+            "a disc of 1 m radius is some 314 cells: {marked}"
+        );
+        assert_eq!(state_at(&g, 5.0, 5.0), CellState::Occupied);
+        assert_eq!(state_at(&g, 5.6, 5.6), CellState::Occupied);
+        // Judged ground is never changed, nor the unjudged floor far outside.
+        assert_eq!(state_at(&g, 6.5, 5.0), CellState::Free);
+        assert_eq!(state_at(&g, 9.0, 9.0), CellState::Unknown);
+    }
+
+    #[test]
+    fn unjudged_ground_behind_a_rock_or_along_a_walls_foot_is_left_unjudged() {
+        let mut g = layer();
+        // The floor judged safe, but for a shadow behind a rock (hazard at x 3.0-3.3) and a
+        // strip along a wall's hazard foot at y 8.0-8.2, unjudged beyond it.
+        set(&mut g, CellState::Free, |_| true);
+        set(&mut g, CellState::Occupied, |p| {
+            (3.0..3.3).contains(&p.x_m) && (4.0..4.6).contains(&p.y_m)
+        });
+        set(&mut g, CellState::Unknown, |p| {
+            (3.3..5.0).contains(&p.x_m) && (4.0..4.6).contains(&p.y_m)
+        });
+        set(&mut g, CellState::Occupied, |p| (8.0..8.2).contains(&p.y_m));
+        set(&mut g, CellState::Unknown, |p| p.y_m >= 8.2);
+        let before = g.clone();
+        assert_eq!(
+            HollowFinder::new(HazardHollows::default()).fill(&mut g, |_| true),
+            0
+        );
+        assert!(g == before);
+    }
+
+    #[test]
+    fn ground_the_lidar_never_saw_open_is_no_hollow() {
+        // The same ring as a crater's, but the lidar saw nothing inside it (a tall block's
+        // top, say): nothing to mark.
+        let centre = Point2::new(5.0, 5.0);
+        let mut g = layer();
+        set(&mut g, CellState::Occupied, |p| {
+            (1.0..=2.0).contains(&p.distance_m(centre))
+        });
+        let marked = HollowFinder::new(HazardHollows::default())
+            .fill(&mut g, |p| p.distance_m(centre) >= 1.0);
+        assert_eq!(marked, 0);
+        assert_eq!(state_at(&g, 5.0, 5.0), CellState::Unknown);
+    }
+
+    #[test]
+    fn a_patch_larger_than_a_crater_is_left_alone() {
+        // A ring of hazard round a 6 m square patch (36 square metres).
+        let mut g = layer();
+        set(&mut g, CellState::Occupied, |p| {
+            let inside =
+                |m: f64| (2.0 - m..8.0 + m).contains(&p.x_m) && (2.0 - m..8.0 + m).contains(&p.y_m);
+            inside(0.3) && !inside(0.0)
+        });
+        let within = HollowFinder::new(HazardHollows::default()).fill(&mut g.clone(), |_| true);
+        assert_eq!(within, 3600);
+        let cfg = HazardHollows {
+            max_area_m2: 30.0,
+            ..HazardHollows::default()
+        };
+        assert_eq!(HollowFinder::new(cfg).fill(&mut g, |_| true), 0);
+    }
+
+    /// The hollows by definition: every patch flooded whole, then judged by its size and
+    /// its border.
+    fn hollows_by_definition(
+        states: &Grid<CellState>,
+        cfg: &HazardHollows,
+        open: impl Fn(usize) -> bool,
+    ) -> Vec<bool> {
+        let g = states.geometry();
+        let (w, h) = (g.width as i64, g.height as i64);
+        let cells = states.cells();
+        let candidate = |i: usize| cells[i] == CellState::Unknown && open(i);
+        let max_cells = (cfg.max_area_m2 / (g.resolution_m * g.resolution_m)) as usize;
+        let mut patch_of = vec![usize::MAX; cells.len()];
+        let mut out = vec![false; cells.len()];
+        for start in 0..cells.len() {
+            if !candidate(start) || patch_of[start] != usize::MAX {
+                continue;
+            }
+            let (mut patch, mut stack) = (vec![], vec![start]);
+            patch_of[start] = start;
+            let (mut hazard_sides, mut sides, mut touches_hazard) = (0, 0, false);
+            while let Some(i) = stack.pop() {
+                patch.push(i);
+                let (x, y) = ((i as i64) % w, (i as i64) / w);
+                for (nx, ny) in [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)] {
+                    if nx < 0 || ny < 0 || nx >= w || ny >= h {
+                        sides += 1;
+                        continue;
+                    }
+                    let j = (ny * w + nx) as usize;
+                    if candidate(j) {
+                        if patch_of[j] == usize::MAX {
+                            patch_of[j] = start;
+                            stack.push(j);
+                        }
+                    } else {
+                        sides += 1;
+                        if cells[j] == CellState::Occupied {
+                            hazard_sides += 1;
+                            touches_hazard = true;
+                        }
+                    }
+                }
+            }
+            if touches_hazard
+                && patch.len() <= max_cells
+                && hazard_sides as f64 >= cfg.min_hazard_share * sides as f64
+            {
+                for i in patch {
+                    out[i] = true;
+                }
+            }
+        }
+        out
+    }
+
+    proptest::proptest! {
+        /// Floods stopped early, and started only beside hazard, find the same hollows as
+        /// whole floods: on random layers of 2 m square with crater-like rings, rocks and
+        /// judged ground, the largest hollow a few square metres at most.
+        #[test]
+        fn floods_stopped_early_find_the_hollows_the_definition_does(
+            rings in proptest::collection::vec((0.0f64..2.0, 0.0f64..2.0, 0.1f64..0.8), 0..4),
+            blobs in proptest::collection::vec((0.0f64..2.0, 0.0f64..2.0, 0.05f64..0.4, proptest::bool::ANY), 0..8),
+            shut in proptest::collection::vec(0usize..400, 0..40),
+            max_area_m2 in 0.05f64..1.5,
+            min_hazard_share in 0.3f64..0.9,
+        ) {
+            let mut g = Grid::new(
+                GridGeometry {
+                    width: 20,
+                    height: 20,
+                    resolution_m: 0.1,
+                    origin: Point2::new(0.0, 0.0),
+                },
+                CellState::Unknown,
+            );
+            for &(x, y, r) in &rings {
+                let c = Point2::new(x, y);
+                set(&mut g, CellState::Occupied, |p| (r..r + 0.25).contains(&p.distance_m(c)));
+            }
+            for &(x, y, r, hazard) in &blobs {
+                let c = Point2::new(x, y);
+                let state = if hazard { CellState::Occupied } else { CellState::Free };
+                set(&mut g, state, |p| p.distance_m(c) < r);
+            }
+            let cfg = HazardHollows { min_hazard_share, max_area_m2 };
+            let expected = hollows_by_definition(&g, &cfg, |i| !shut.contains(&i));
+            let geo = *g.geometry();
+            let open = |p: Point2| {
+                let c = geo.world_to_cell(p).expect("asked of cells of the layer");
+                !shut.contains(&geo.index(c))
+            };
+            let before = g.clone();
+            let marked = HollowFinder::new(cfg).fill(&mut g, open);
+            proptest::prop_assert_eq!(marked, expected.iter().filter(|h| **h).count());
+            for (i, (b, a)) in before.cells().iter().zip(g.cells()).enumerate() {
+                let want = if expected[i] { CellState::Occupied } else { *b };
+                proptest::prop_assert_eq!(*a, want, "cell {}", i);
+            }
+        }
+    }
+}
