@@ -171,33 +171,11 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use realms_core::GridGeometry;
-
-    /// A 10 m square of 10 cm cells, all unseen.
-    fn layer() -> Grid<CellState> {
-        Grid::new(
-            GridGeometry {
-                width: 100,
-                height: 100,
-                resolution_m: 0.1,
-                origin: Point2::new(0.0, 0.0),
-            },
-            CellState::Unknown,
-        )
-    }
+    use crate::test_layers::{layer, set};
 
     /// Marks hazard every cell whose centre `inside` holds.
     fn mark(g: &mut Grid<CellState>, inside: impl Fn(Point2) -> bool) {
-        let geo = *g.geometry();
-        for (i, c) in g.cells_mut().iter_mut().enumerate() {
-            let p = geo.cell_center(Cell {
-                x: i % geo.width,
-                y: i / geo.width,
-            });
-            if inside(p) {
-                *c = CellState::Occupied;
-            }
-        }
+        set(g, CellState::Occupied, inside);
     }
 
     #[test]

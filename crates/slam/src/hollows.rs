@@ -182,33 +182,8 @@ impl HollowFinder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_layers::{layer, set};
     use realms_core::GridGeometry;
-
-    /// A 10 m square of 10 cm cells, all unseen.
-    fn layer() -> Grid<CellState> {
-        Grid::new(
-            GridGeometry {
-                width: 100,
-                height: 100,
-                resolution_m: 0.1,
-                origin: Point2::new(0.0, 0.0),
-            },
-            CellState::Unknown,
-        )
-    }
-
-    /// Sets every cell whose centre `inside` holds to `state`.
-    fn set(g: &mut Grid<CellState>, state: CellState, inside: impl Fn(Point2) -> bool) {
-        let geo = *g.geometry();
-        for (i, c) in g.cells_mut().iter_mut().enumerate() {
-            if inside(geo.cell_center(Cell {
-                x: i % geo.width,
-                y: i / geo.width,
-            })) {
-                *c = state;
-            }
-        }
-    }
 
     fn state_at(g: &Grid<CellState>, x_m: f64, y_m: f64) -> CellState {
         *g.at_world(Point2::new(x_m, y_m))

@@ -40,6 +40,8 @@ pub mod odometry;
 pub mod posegraph;
 pub mod relief;
 pub mod slip;
+#[cfg(test)]
+mod test_layers;
 pub mod trajectory;
 pub mod traversability;
 pub mod walls;
