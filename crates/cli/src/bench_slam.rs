@@ -710,6 +710,17 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.traversability.gap_reach_m = 6.0,
     },
     Variant {
+        name: "crater-outlines",
+        what: "crater-discs with each circle fitted to its cluster's outline (cells beside a cell not hazard), after the hollows are marked, and the cells lying within 0.15 of the radius about it",
+        apply: |c| {
+            c.traversability.crater_discs = Some(realms_slam::craters::CraterDiscs {
+                fit_outline: true,
+                max_spread: 0.15,
+                ..Default::default()
+            })
+        },
+    },
+    Variant {
         name: "no-hollows",
         what: "patches the lidar saw open and the camera never judged, walled in by hazard, left unjudged (the rovers' setup before the sixty-second session; they are marked hazard)",
         apply: |c| c.traversability.hazard_hollows = None,

@@ -939,6 +939,15 @@ impl Mapping {
     /// implies marked if the rover infers them.
     fn hazard_states(&mut self) -> Grid<CellState> {
         let mut states = self.hazards.states(&self.mapper.submap_origins());
+        if let Some(hollows) = &mut self.hollows {
+            let view = self.mapper.live_map();
+            let g = view.geometry;
+            let open = |p: Point2| {
+                g.world_to_cell(p)
+                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Free)
+            };
+            hollows.fill(&mut states, open);
+        }
         if let Some(discs) = self.cfg.traversability.crater_discs {
             // A hazard cell with what the lidar sees as an obstacle at its centre or one
             // hazard cell away (eight points round it) is a wall's or a rock's foot, not a
@@ -961,15 +970,6 @@ impl Mapping {
                 })
             };
             realms_slam::craters::fill_crater_discs(&mut states, &discs, wall);
-        }
-        if let Some(hollows) = &mut self.hollows {
-            let view = self.mapper.live_map();
-            let g = view.geometry;
-            let open = |p: Point2| {
-                g.world_to_cell(p)
-                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Free)
-            };
-            hollows.fill(&mut states, open);
         }
         states
     }

@@ -10,7 +10,10 @@
 //! Not the rovers' default (`--variant crater-discs` of `realms bench slam`): the camera sees
 //! a large crater's far wall in pieces of 60-110 degrees, each too short an arc to be sure
 //! of, so the large craters go unfound; taking short thin arcs too marked many wrong discs
-//! (BENCHMARKS.md, sixty-first session). Pieces of one wall should be joined first.
+//! (BENCHMARKS.md, sixty-first session). With the hollows marked first ([`crate::hollows`])
+//! a crater seen from round it is a filled disc; fitted to its outline
+//! ([`CraterDiscs::fit_outline`]) it gives the rim, but other blobs' outlines fit wrong
+//! circles (BENCHMARKS.md, sixty-second session).
 
 use crate::occupancy::CellState;
 use realms_core::geometry::CircleFit;
@@ -32,6 +35,10 @@ pub struct CraterDiscs {
     /// The cells' spread about the fitted circle, as a share of its radius, at most: a
     /// crater's wall is a ring, a blob of rocks is not.
     pub max_spread: f64,
+    /// The circle is fitted to the cluster's outline (its cells beside a cell not hazard)
+    /// rather than to all its cells: with the hollows marked ([`crate::hollows`]) a crater
+    /// seen from round it is a filled disc, not a crescent, and its outline is the rim.
+    pub fit_outline: bool,
 }
 
 impl Default for CraterDiscs {
@@ -42,6 +49,7 @@ impl Default for CraterDiscs {
             max_radius_m: 4.0,
             min_span_rad: 150f64.to_radians(),
             max_spread: 0.3,
+            fit_outline: false,
         }
     }
 }
@@ -131,8 +139,21 @@ fn clusters(states: &Grid<CellState>, walls: Vec<bool>) -> Vec<Vec<usize>> {
 /// The crater a cluster is the wall of, if it is one.
 fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> Option<Crater> {
     let g = states.geometry();
+    let (w, h) = (g.width, g.height);
+    let cells = states.cells();
+    let on_outline = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        x == 0
+            || y == 0
+            || x + 1 == w
+            || y + 1 == h
+            || [i - 1, i + 1, i - w, i + w]
+                .iter()
+                .any(|&j| cells[j] != CellState::Occupied)
+    };
     let points: Vec<Point2> = cluster
         .iter()
+        .filter(|&&i| !cfg.fit_outline || on_outline(i))
         .map(|&i| {
             g.cell_center(Cell {
                 x: i % g.width,
@@ -217,6 +238,38 @@ mod tests {
         let craters = fill_crater_discs(&mut g, &CraterDiscs::default(), |p| p.x_m > 6.85);
         assert_eq!(craters.len(), 1, "{craters:?}");
         assert!(craters[0].centre.distance_m(c) < 0.2, "{craters:?}");
+    }
+
+    #[test]
+    fn a_filled_disc_is_a_crater_by_its_outline_and_its_crest_ring_is_marked() {
+        // A crater of 2 m radius at (5, 5) marked hazard out to 1.8 m but for a bite on the
+        // east (the crest ring the camera judged safe, and part of the wall): its cells
+        // fill a disc, not a ring.
+        let (c, r) = (Point2::new(5.0, 5.0), 2.0);
+        let blob = |p: Point2| {
+            let d = p.distance_m(c);
+            d <= r - 0.2 && !(p.x_m > 6.2 && (p.y_m - 5.0).abs() < 0.5) || (d <= r && p.x_m < 3.5)
+        };
+        let mut whole = layer();
+        mark(&mut whole, blob);
+        // Fitted to every cell, a filled disc lies thickly about its circle: refused.
+        assert!(
+            fill_crater_discs(&mut whole.clone(), &CraterDiscs::default(), |_| false).is_empty()
+        );
+        let cfg = CraterDiscs {
+            fit_outline: true,
+            max_spread: 0.15,
+            ..CraterDiscs::default()
+        };
+        let craters = fill_crater_discs(&mut whole, &cfg, |_| false);
+        assert_eq!(craters.len(), 1, "{craters:?}");
+        assert!(craters[0].centre.distance_m(c) < 0.2, "{craters:?}");
+        // The disc reaches the farthest outline cell, at the rim on the west: the ring
+        // short of the rim elsewhere and the bite are marked now, outside the rim is not.
+        let at = |x: f64, y: f64| *whole.at_world(Point2::new(x, y)).expect("inside");
+        assert_eq!(at(5.05, 6.85), CellState::Occupied);
+        assert_eq!(at(6.75, 5.05), CellState::Occupied);
+        assert_eq!(at(7.25, 5.05), CellState::Unknown);
     }
 
     #[test]
