@@ -28,6 +28,9 @@ pub struct HazardHollows {
 impl Default for HazardHollows {
     fn default() -> Self {
         HazardHollows {
+            // Half marked a little more of the crater cells near the rovers' paths on the
+            // same paths, and leaves more to chance where a patch's border is half floor
+            // (BENCHMARKS.md, "Hollows in the hazard layer").
             min_hazard_share: 0.6,
             // A disc of 4.5 m radius: the scenario's largest crater is 3 m.
             max_area_m2: 64.0,
@@ -50,8 +53,8 @@ enum Mark {
     Big,
 }
 
-/// Cells of a layer's row tested for hazard at once: most rows hold none, and a chunk
-/// tested without an early exit is tested many cells at a time.
+/// Cells of the layer (in row order) tested for hazard at once: most runs of cells hold
+/// none, and a run tested without an early exit is tested many cells at a time.
 const CHUNK: usize = 32;
 
 /// Finds hollows ([`HollowFinder::fill`]), keeping its buffers from one layer to the next:
