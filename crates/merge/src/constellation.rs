@@ -122,12 +122,10 @@ fn circle_through(outline: &[Point2], cell_m: f64) -> Option<Landmark> {
         return None;
     }
     let fit = CircleFit::of(outline)?;
-    let (mx, my) = (fit.mean.x_m, fit.mean.y_m);
-    let (cx, cy) = fit.centre_from_mean;
     let radius_m = fit.radius_m;
     let rms = fit.rms_off_m(outline);
     (radius_m <= CIRCLE_MAX_M / 2.0 && rms <= CIRCLE_RMS_CELLS * cell_m).then(|| Landmark {
-        c: Point2::new(mx + cx, my + cy),
+        c: fit.centre(),
         radius_m,
     })
 }

@@ -939,33 +939,28 @@ impl Mapping {
     /// implies marked if the rover infers them.
     fn hazard_states(&mut self) -> Grid<CellState> {
         let mut states = self.hazards.states(&self.mapper.submap_origins());
-        if let Some(hollows) = &mut self.hollows {
-            let view = self.mapper.live_map();
-            let g = view.geometry;
-            let open = |p: Point2| {
-                g.world_to_cell(p)
-                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Free)
-            };
-            hollows.fill(&mut states, open);
+        let discs = self.cfg.traversability.crater_discs;
+        if self.hollows.is_none() && discs.is_none() {
+            return states;
         }
-        if let Some(discs) = self.cfg.traversability.crater_discs {
+        let view = self.mapper.live_map();
+        let g = view.geometry;
+        let state_at = |p: Point2| g.world_to_cell(p).map(|c| view.states[g.index(c)]);
+        if let Some(hollows) = &mut self.hollows {
+            hollows.fill(&mut states, |p| state_at(p) == Some(CellState::Free));
+        }
+        if let Some(discs) = discs {
             // A hazard cell with what the lidar sees as an obstacle at its centre or one
             // hazard cell away (eight points round it) is a wall's or a rock's foot, not a
             // crater's wall.
             let reach_m = states.resolution_m();
-            let view = self.mapper.live_map();
-            let g = view.geometry;
-            let occupied = |p: Point2| {
-                g.world_to_cell(p)
-                    .is_some_and(|c| view.states[c.y * g.width + c.x] == CellState::Occupied)
-            };
             let wall = |p: Point2| {
                 (-1..=1).any(|dy| {
                     (-1..=1).any(|dx| {
-                        occupied(Point2::new(
+                        state_at(Point2::new(
                             p.x_m + dx as f64 * reach_m,
                             p.y_m + dy as f64 * reach_m,
-                        ))
+                        )) == Some(CellState::Occupied)
                     })
                 })
             };

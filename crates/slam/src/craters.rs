@@ -192,7 +192,7 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_layers::{layer, set};
+    use crate::test_layers::{layer, set, state_at};
 
     /// Marks hazard every cell whose centre `inside` holds.
     fn mark(g: &mut Grid<CellState>, inside: impl Fn(Point2) -> bool) {
@@ -215,7 +215,7 @@ mod tests {
         assert!(found.centre.distance_m(c) < 0.15, "{found:?}");
         assert!((found.radius_m - r).abs() < 0.15, "{found:?}");
         // The near wall behind the rim and the bowl are marked now; outside the rim is not.
-        let at = |x: f64, y: f64| *g.at_world(Point2::new(x, y)).expect("inside");
+        let at = |x: f64, y: f64| state_at(&g, x, y);
         assert_eq!(at(3.35, 5.05), CellState::Occupied);
         assert_eq!(at(5.05, 5.05), CellState::Occupied);
         assert_eq!(at(2.75, 5.05), CellState::Unknown);
@@ -266,7 +266,7 @@ mod tests {
         assert!(craters[0].centre.distance_m(c) < 0.2, "{craters:?}");
         // The disc reaches the farthest outline cell, at the rim on the west: the ring
         // short of the rim elsewhere and the bite are marked now, outside the rim is not.
-        let at = |x: f64, y: f64| *whole.at_world(Point2::new(x, y)).expect("inside");
+        let at = |x: f64, y: f64| state_at(&whole, x, y);
         assert_eq!(at(5.05, 6.85), CellState::Occupied);
         assert_eq!(at(6.75, 5.05), CellState::Occupied);
         assert_eq!(at(7.25, 5.05), CellState::Unknown);

@@ -185,13 +185,8 @@ impl HollowFinder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_layers::{layer, set};
+    use crate::test_layers::{layer, set, state_at};
     use realms_core::GridGeometry;
-
-    fn state_at(g: &Grid<CellState>, x_m: f64, y_m: f64) -> CellState {
-        *g.at_world(Point2::new(x_m, y_m))
-            .expect("a point on the layer")
-    }
 
     #[test]
     fn the_unjudged_middle_of_a_crater_ringed_by_hazard_is_marked_and_the_floor_round_it_is_not() {

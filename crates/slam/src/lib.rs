@@ -17,6 +17,7 @@
 //! - [`relief`]: the travel between two depth frames, from the relief of the ground they see.
 //! - [`slip`]: how far the wheels over-report, learnt on line from the scan matches.
 //! - [`craters`]: craters inferred from the hazard layer's crescents, their discs marked.
+//! - [`hollows`]: ground the lidar saw open and the camera never judged, walled in by hazard.
 //! - [`traversability`]: a hazard layer from depth-camera points (steps, slopes, drops).
 //! - [`walls`]: long straight walls along directions seen from the start, as a heading reference.
 //! - [`mapper`]: the full SLAM: submaps, keyframes, verified loop closures, the graph.

@@ -29,3 +29,9 @@ pub fn set(g: &mut Grid<CellState>, state: CellState, inside: impl Fn(Point2) ->
         }
     }
 }
+
+/// The state of the cell under (`x_m`, `y_m`), which must lie on the layer.
+pub fn state_at(g: &Grid<CellState>, x_m: f64, y_m: f64) -> CellState {
+    *g.at_world(Point2::new(x_m, y_m))
+        .expect("a point on the layer")
+}
