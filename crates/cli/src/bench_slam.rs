@@ -721,6 +721,19 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "no-slip-takeback",
+        what: "a slip burst reported leaves the pose where the wheels carried it, and the matcher's pull towards them as it is (the rovers' setup before the sixty-third session; the pose is taken back by what it ran beyond the slip check's matches, and the pull is a tenth while the wheels disagree)",
+        apply: |c| {
+            c.mapper.unreliable_rewind = false;
+            c.mapper.unreliable_pull_share = None;
+        },
+    },
+    Variant {
+        name: "slip-rewind-only",
+        what: "a slip burst reported: the pose taken back, the matcher's pull towards the wheels left as it is",
+        apply: |c| c.mapper.unreliable_pull_share = None,
+    },
+    Variant {
         name: "no-hollows",
         what: "patches the lidar saw open and the camera never judged, walled in by hazard, left unjudged (the rovers' setup before the sixty-second session; they are marked hazard)",
         apply: |c| c.traversability.hazard_hollows = None,

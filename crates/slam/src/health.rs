@@ -5,7 +5,9 @@
 //! - the wheel odometry disagrees with scan matching over the last couple of seconds (the
 //!   wheels slip or an encoder fails; optionally also over several, for a rover creeping
 //!   too slowly to slip far in two): SLAM says so and goes on matching its scans, still
-//!   predicted from the wheels, but no longer learns the wheels' slip from them;
+//!   predicted from the wheels, but no longer learns the wheels' slip from them; the
+//!   monitor also says how far the pose ran beyond the matches it heard
+//!   ([`HealthMonitor::overrun`]), which the mapper may take back;
 //! - scan matching itself stops fitting the map (too few points, a poor match score, or a
 //!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
 //!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.
@@ -75,6 +77,9 @@ pub struct TrackedScan {
     pub odom_delta: Pose2,
     /// Motion since the previous scan by scan matching.
     pub matched_delta: Pose2,
+    /// Motion since the previous scan of the pose tracking kept (which a pull towards the
+    /// wheels may have carried beyond the match).
+    pub tracked_delta: Pose2,
     /// The match score (mean occupancy at the endpoints), or `None` if the scan was not
     /// matched (too few points, or no map yet).
     pub score: Option<f64>,
@@ -99,6 +104,9 @@ struct MatchedStep {
     wheels_m: f64,
     /// How far the match fell short of it along the wheels' direction (capped), metres.
     shortfall_m: f64,
+    /// How far the tracked pose went beyond the match along the wheels' direction, as a
+    /// vector in the robot's frame, metres.
+    overrun: (f64, f64),
 }
 
 /// The monitor.
@@ -108,9 +116,10 @@ pub struct HealthMonitor {
     state: LocalisationState,
     /// The matched scans within the window.
     recent: std::collections::VecDeque<MatchedStep>,
-    /// Motion by odometry and as tracked since the last matched scan (scans the motion filter
-    /// skipped are not matched: they follow odometry, and the next match corrects them all).
-    unmatched: (Pose2, Pose2),
+    /// Motion by odometry, as matched and as tracked since the last matched scan (scans the
+    /// motion filter skipped are not matched: they follow odometry, and the next match
+    /// corrects them all).
+    unmatched: (Pose2, Pose2, Pose2),
     poor_in_a_row: usize,
     agreeing_since_s: Option<f64>,
     disagreeing_since_s: Option<f64>,
@@ -134,7 +143,7 @@ impl HealthMonitor {
             cfg,
             state: LocalisationState::Tracking,
             recent: std::collections::VecDeque::new(),
-            unmatched: (Pose2::IDENTITY, Pose2::IDENTITY),
+            unmatched: (Pose2::IDENTITY, Pose2::IDENTITY, Pose2::IDENTITY),
             poor_in_a_row: 0,
             wheels_silent_since_s: None,
             agreeing_since_s: None,
@@ -148,6 +157,25 @@ impl HealthMonitor {
     /// The current state.
     pub fn state(&self) -> LocalisationState {
         self.state
+    }
+
+    /// The wheels and the matches disagree over the last window (a disagreement not yet
+    /// confirmed, or one that raised the alarm and still lasts).
+    pub fn disagrees(&self) -> bool {
+        self.disagreeing_since_s.is_some()
+    }
+
+    /// How far the tracked pose went beyond the matches along the wheels' travel over the
+    /// last window, in the robot's frame (each step's share in its own frame; the frames
+    /// of a couple of seconds' travel differ by a few degrees at most), metres. What the
+    /// mapper takes back when the alarm is raised: the matches that raised it were pulled
+    /// along by the wheels first.
+    pub fn overrun(&self) -> (f64, f64) {
+        let from_s = self.last_time_s.unwrap_or(0.0) - self.cfg.window_s;
+        self.recent
+            .iter()
+            .filter(|m| m.time_s >= from_s)
+            .fold((0.0, 0.0), |(x, y), m| (x + m.overrun.0, y + m.overrun.1))
     }
 
     fn go(&mut self, state: LocalisationState, reason: String) -> Option<Transition> {
@@ -167,7 +195,7 @@ impl HealthMonitor {
     pub fn relocalised(&mut self, time_s: f64, reason: String) -> Option<Transition> {
         self.last_time_s = Some(time_s);
         self.recent.clear();
-        self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
+        self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY, Pose2::IDENTITY);
         self.poor_in_a_row = 0;
         self.agreeing_since_s = None;
         self.wheels_silent_since_s = None;
@@ -228,21 +256,34 @@ impl HealthMonitor {
         // after a long unmatched stretch), so no single match can make the window disagree.
         self.unmatched.0 = self.unmatched.0 * scan.odom_delta;
         self.unmatched.1 = self.unmatched.1 * scan.matched_delta;
+        self.unmatched.2 = self.unmatched.2 * scan.tracked_delta;
         if scan.score.is_some() {
-            let (wheels, matched) = (self.unmatched.0.position(), self.unmatched.1.position());
-            self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY);
+            let (wheels, matched, tracked) = (
+                self.unmatched.0.position(),
+                self.unmatched.1.position(),
+                self.unmatched.2.position(),
+            );
+            self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY, Pose2::IDENTITY);
             let step_m = wheels.x_m.hypot(wheels.y_m);
-            let shortfall_m = if step_m > MIN_STEP_M {
-                let along = (matched.x_m * wheels.x_m + matched.y_m * wheels.y_m) / step_m;
+            let (shortfall_m, overrun) = if step_m > MIN_STEP_M {
+                let (ux, uy) = (wheels.x_m / step_m, wheels.y_m / step_m);
+                let along = matched.x_m * ux + matched.y_m * uy;
                 let cap = step_m.min(self.cfg.slip_min_m / 2.0);
-                (step_m - along).clamp(-cap, cap)
+                let shortfall_m = (step_m - along).clamp(-cap, cap);
+                // Measured against the match as the check counts it, so one match's jump
+                // moves the pose back no further than it counts towards the alarm; a pose
+                // behind the match was not carried by the wheels.
+                let beyond_m =
+                    (tracked.x_m * ux + tracked.y_m * uy - (step_m - shortfall_m)).max(0.0);
+                (shortfall_m, (beyond_m * ux, beyond_m * uy))
             } else {
-                0.0
+                (0.0, (0.0, 0.0))
             };
             self.recent.push_back(MatchedStep {
                 time_s: scan.time_s,
                 wheels_m: step_m,
                 shortfall_m,
+                overrun,
             });
         }
         let kept_s = self
@@ -321,6 +362,7 @@ mod tests {
             time_s: t,
             odom_delta: Pose2::new(odom_m, 0.0, 0.0),
             matched_delta: Pose2::new(matched_m, 0.0, 0.0),
+            tracked_delta: Pose2::new(matched_m, 0.0, 0.0),
             score: Some(score),
             wheels_silent: false,
         }
@@ -396,6 +438,7 @@ mod tests {
                 time_s: t,
                 odom_delta: Pose2::new(0.005, 0.0, 0.0),
                 matched_delta: Pose2::new(matched, 0.0, 0.0),
+                tracked_delta: Pose2::new(matched, 0.0, 0.0),
                 score,
                 wheels_silent: false,
             })
@@ -520,12 +563,52 @@ mod tests {
                     time_s: t,
                     odom_delta: Pose2::new(0.03, 0.0, 0.0),
                     matched_delta: Pose2::new(matched, 0.0, 0.0),
+                    tracked_delta: Pose2::new(matched, 0.0, 0.0),
                     score,
                     wheels_silent: false,
                 }),
                 None,
                 "{t}"
             );
+        }
+    }
+
+    /// Drives at 0.3 m/s; from 5 s the matches see a tenth of the wheels' travel and the
+    /// tracked pose `tracked_m` a step. Returns when the alarm came, how many slipping
+    /// steps lie in the window then, and the overrun then.
+    fn overrun_at_the_alarm(tracked_m: f64) -> (f64, usize, (f64, f64)) {
+        let mut m = HealthMonitor::new(HealthConfig::default());
+        for k in 0..100 {
+            let t = k as f64 * 0.1;
+            let slipping = t >= 5.0 - 1e-9;
+            let matched = if slipping { 0.003 } else { 0.03 };
+            let observed = TrackedScan {
+                tracked_delta: Pose2::new(if slipping { tracked_m } else { 0.03 }, 0.0, 0.0),
+                ..scan(t, 0.03, matched, 0.8)
+            };
+            if let Some(tr) = m.observe(&observed) {
+                assert_eq!(tr.state, LocalisationState::OdometryUnreliable);
+                let in_window = (50..=k).filter(|j| *j as f64 * 0.1 >= t - 2.0).count();
+                return (t, in_window, m.overrun());
+            }
+        }
+        panic!("no alarm");
+    }
+
+    #[test]
+    fn the_overrun_is_what_the_pose_ran_beyond_the_matches_in_the_window() {
+        // Each slipping step the pose follows the wheels 0.027 m beyond the match.
+        let (t, steps, (x, y)) = overrun_at_the_alarm(0.03);
+        assert!((5.0..7.0).contains(&t), "alarm at {t}");
+        assert!(
+            (x - 0.027 * steps as f64).abs() < 1e-9,
+            "{x} over {steps} steps"
+        );
+        assert_eq!(y, 0.0);
+        // A pose that kept to the matches ran beyond nothing, nor does one that fell behind.
+        for tracked_m in [0.003, 0.0] {
+            let (x, y) = overrun_at_the_alarm(tracked_m).2;
+            assert!(x.abs() < 1e-9 && y == 0.0, "{tracked_m}: ({x}, {y})");
         }
     }
 
@@ -548,6 +631,7 @@ mod tests {
                 time_s: t,
                 odom_delta: Pose2::new(0.01, 0.0, 0.0),
                 matched_delta: Pose2::new(matched, 0.0, 0.0),
+                tracked_delta: Pose2::new(matched, 0.0, 0.0),
                 score,
                 wheels_silent: false,
             }) {

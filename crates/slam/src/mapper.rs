@@ -412,6 +412,13 @@ pub struct MapperConfig {
     /// ... but only where the match lies within this distance of the prediction along that
     /// direction, metres (`None`: at any distance).
     pub weak_direction_gate_m: Option<f64>,
+    /// When the odometry is reported unreliable, the pose is moved back by what the wheels
+    /// carried it beyond the slip check's matches over the check's window: the scans that
+    /// raised the alarm already followed the slipping wheels for a second or so.
+    pub unreliable_rewind: bool,
+    /// While the odometry is reported unreliable, the matcher pulls towards the wheels'
+    /// prediction with this share of its usual weight (`None`: the usual weight).
+    pub unreliable_pull_share: Option<f64>,
     /// The refinement on the hits moves the match only along directions the occupancy match
     /// pins at least this firmly (per point, per square metre, its prior left out; `None`:
     /// along any). Its cells of a few hits along a wall can lie across it and pull the
@@ -758,6 +765,8 @@ impl Default for MapperConfig {
             still_hold: None,
             weak_direction_floor: None,
             weak_direction_gate_m: None,
+            unreliable_rewind: false,
+            unreliable_pull_share: None,
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
             map_occupied_above: crate::assembly::OCCUPIED_ABOVE,
@@ -962,6 +971,9 @@ pub struct Mapper {
     /// The last match before any pull towards the prediction, relative to the pose tracking
     /// kept (see [`MapperConfig::slip_check_match_to_match`]).
     heard_from_pose: Option<Pose2>,
+    /// Poses moved back when the odometry was reported unreliable
+    /// ([`MapperConfig::unreliable_rewind`]).
+    pub rewinds: usize,
     /// Accepted loop closures.
     pub closures: usize,
     /// Every verified closure match, with what its search and refinement saw.
@@ -1026,6 +1038,7 @@ impl Mapper {
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             heard_from_pose: None,
+            rewinds: 0,
             closures: 0,
             closure_records: Vec::new(),
             heading_holds: 0,
@@ -1220,6 +1233,22 @@ impl Mapper {
                         },
                         None => self.cfg.frontend.matcher,
                     };
+                    // The slip check's own matches keep the usual pull: they decide when
+                    // the wheels agree again.
+                    let check_matcher = matcher;
+                    let matcher = match self.cfg.unreliable_pull_share {
+                        Some(share)
+                            if still.is_none()
+                                && self.health.state() == LocalisationState::OdometryUnreliable
+                                && self.health.disagrees() =>
+                        {
+                            MatcherConfig {
+                                prior_translation_weight: share * matcher.prior_translation_weight,
+                                ..matcher
+                            }
+                        }
+                        _ => matcher,
+                    };
                     let mut m = match_scan(map, &dense, prior, &matcher);
                     // The match's information sums over these points (floors are per point).
                     let matched_points = dense.len() as f64;
@@ -1375,13 +1404,13 @@ impl Mapper {
                         })
                         .map(|o| origin.inverse() * (before * o * (before.inverse() * predicted)));
                     if let Some(own_prior) = own {
-                        let own_match = match_scan(map, &dense, own_prior, &matcher);
+                        let own_match = match_scan(map, &dense, own_prior, &check_matcher);
                         let heard = if self.cfg.slip_check_without_prior {
                             without_prior_along_heading(
                                 own_match.pose,
                                 own_prior,
                                 &own_match.information,
-                                prior_pull,
+                                check_matcher.prior_translation_weight * matched_points,
                             )
                         } else {
                             own_match.pose
@@ -1439,6 +1468,7 @@ impl Mapper {
                 } else {
                     before.inverse() * matched_alone.unwrap_or(self.pose)
                 },
+                tracked_delta: before.inverse() * self.pose,
                 score,
                 wheels_silent: sample.wheels_silent,
             };
@@ -1447,7 +1477,18 @@ impl Mapper {
             {
                 self.heard_from_pose = Some(self.pose.inverse() * heard);
             }
-            if let Some(t) = self.health.observe(&observed) {
+            let was = self.health.state();
+            if let Some(mut t) = self.health.observe(&observed) {
+                if self.cfg.unreliable_rewind
+                    && was == LocalisationState::Tracking
+                    && t.state == LocalisationState::OdometryUnreliable
+                {
+                    let (x, y) = self.health.overrun();
+                    self.pose = self.pose * Pose2::new(-x, -y, 0.0);
+                    self.rewinds += 1;
+                    t.reason
+                        .push_str(&format!("; pose taken back {:.2} m", x.hypot(y)));
+                }
                 if t.state == LocalisationState::Lost {
                     self.heard_from_pose = None;
                     // The scan that tipped it is not trusted either.
@@ -3375,6 +3416,57 @@ mod tests {
             own_error_m < 0.7 * held_error_m,
             "{own_error_m} {held_error_m}"
         );
+    }
+
+    /// [`slip_burst_seen`] a metre and a half from a long wall with a few rocks about, the
+    /// mapper set up as on the rovers' slip check and hold along weak directions, and then
+    /// by `change`.
+    fn slip_among_rocks(change: impl FnOnce(&mut MapperConfig)) -> (Option<f64>, f64) {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.densify = Some(Densify {
+            max_gap_m: 0.3,
+            spacing_m: 0.05,
+        });
+        cfg.slip_check_without_prior = true;
+        cfg.weak_direction_floor = Some(100.0);
+        cfg.slip_check_match_to_match = true;
+        cfg.slip_check_own_match = true;
+        change(&mut cfg);
+        let wall = [(-20.0, 1.5, 40.0, 1.5)];
+        let rocks = [(3.0, -2.0, 0.25), (6.5, -3.5, 0.3), (9.0, -1.5, 0.2)];
+        slip_burst_seen(cfg, &wall, &rocks)
+    }
+
+    #[test]
+    fn a_slip_burst_reported_is_taken_back_and_its_wheels_pull_the_pose_no_further() {
+        let (reported, followed_m) = slip_among_rocks(|_| {});
+        let (reported_too, rewound_m) = slip_among_rocks(|cfg| {
+            cfg.unreliable_rewind = true;
+        });
+        let (_, let_go_m) = slip_among_rocks(|cfg| {
+            cfg.unreliable_pull_share = Some(0.1);
+        });
+        let (_, both_m) = slip_among_rocks(|cfg| {
+            cfg.unreliable_rewind = true;
+            cfg.unreliable_pull_share = Some(0.1);
+        });
+        // The rocks pin the travel, but the matches follow the wheels part of the way before
+        // the alarm (0.3 s after the wheels are 0.1 m ahead), and the map drawn meanwhile
+        // holds the pose there: 0.4 m ahead at the end.
+        let t = reported.expect("reported");
+        assert!((5.0..7.5).contains(&t), "reported at {t:.1} s");
+        assert!(followed_m > 0.3, "{followed_m:.3} m off");
+        // Taking back what the pose ran beyond the check's matches, or weakening the pull
+        // while the wheels disagree, or both, leaves it within a few centimetres.
+        assert_eq!(reported_too, reported);
+        for (what, error_m) in [
+            ("taken back", rewound_m),
+            ("let go", let_go_m),
+            ("both", both_m),
+        ] {
+            assert!(error_m < 0.06, "{what}: {error_m:.3} m off");
+        }
     }
 
     #[test]
