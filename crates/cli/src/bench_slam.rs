@@ -721,17 +721,17 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
-        name: "no-slip-takeback",
-        what: "a slip burst reported leaves the pose where the wheels carried it, and the matcher's pull towards them as it is (the rovers' setup before the sixty-third session; the pose is taken back by what it ran beyond the slip check's matches, and the pull is a tenth while the wheels disagree)",
+        name: "slip-takeback",
+        what: "a slip burst reported is taken back by what the pose ran beyond the slip check's matches over its window, and the matcher's pull towards the wheels is a tenth while they disagree",
         apply: |c| {
-            c.mapper.unreliable_rewind = false;
-            c.mapper.unreliable_pull_share = None;
+            c.mapper.unreliable_rewind = true;
+            c.mapper.unreliable_pull_share = Some(0.1);
         },
     },
     Variant {
         name: "slip-rewind-only",
-        what: "a slip burst reported: the pose taken back, the matcher's pull towards the wheels left as it is",
-        apply: |c| c.mapper.unreliable_pull_share = None,
+        what: "a slip burst reported is taken back; the matcher's pull towards the wheels left as it is",
+        apply: |c| c.mapper.unreliable_rewind = true,
     },
     Variant {
         name: "no-hollows",
