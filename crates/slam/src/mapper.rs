@@ -971,9 +971,6 @@ pub struct Mapper {
     /// The last match before any pull towards the prediction, relative to the pose tracking
     /// kept (see [`MapperConfig::slip_check_match_to_match`]).
     heard_from_pose: Option<Pose2>,
-    /// Poses moved back when the odometry was reported unreliable
-    /// ([`MapperConfig::unreliable_rewind`]).
-    pub rewinds: usize,
     /// Accepted loop closures.
     pub closures: usize,
     /// Every verified closure match, with what its search and refinement saw.
@@ -1038,7 +1035,6 @@ impl Mapper {
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
             heard_from_pose: None,
-            rewinds: 0,
             closures: 0,
             closure_records: Vec::new(),
             heading_holds: 0,
@@ -1485,7 +1481,6 @@ impl Mapper {
                 {
                     let (x, y) = self.health.overrun();
                     self.pose = self.pose * Pose2::new(-x, -y, 0.0);
-                    self.rewinds += 1;
                     t.reason
                         .push_str(&format!("; pose taken back {:.2} m", x.hypot(y)));
                 }
@@ -3329,9 +3324,12 @@ mod tests {
         slip_burst_seen(cfg, &[], &[(6.0, 2.5, 0.3)])
     }
 
-    /// [`slip_burst_seen`] a metre and a half from a long wall, with one small rock in view,
-    /// the mapper set up by `change`.
-    fn slip_beside_a_wall(change: impl FnOnce(&mut MapperConfig)) -> (Option<f64>, f64) {
+    /// [`slip_burst_seen`] a metre and a half from a long wall, with `rocks` in view, the
+    /// mapper set up by `change`.
+    fn slip_near_a_wall(
+        rocks: &[(f64, f64, f64)],
+        change: impl FnOnce(&mut MapperConfig),
+    ) -> (Option<f64>, f64) {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
         cfg.frontend.densify = Some(Densify {
@@ -3340,7 +3338,12 @@ mod tests {
         });
         change(&mut cfg);
         let wall = [(-20.0, 1.5, 40.0, 1.5)];
-        slip_burst_seen(cfg, &wall, &[(9.0, -6.0, 0.1)])
+        slip_burst_seen(cfg, &wall, rocks)
+    }
+
+    /// [`slip_near_a_wall`] with one small rock in view.
+    fn slip_beside_a_wall(change: impl FnOnce(&mut MapperConfig)) -> (Option<f64>, f64) {
+        slip_near_a_wall(&[(9.0, -6.0, 0.1)], change)
     }
 
     /// [`slip_beside_a_wall`], the slip check hearing the matches `without_prior` or not:
@@ -3418,24 +3421,17 @@ mod tests {
         );
     }
 
-    /// [`slip_burst_seen`] a metre and a half from a long wall with a few rocks about, the
-    /// mapper set up as on the rovers' slip check and hold along weak directions, and then
-    /// by `change`.
+    /// [`slip_near_a_wall`] with a few rocks about, the mapper set up as on the rovers'
+    /// slip check and hold along weak directions, and then by `change`.
     fn slip_among_rocks(change: impl FnOnce(&mut MapperConfig)) -> (Option<f64>, f64) {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.densify = Some(Densify {
-            max_gap_m: 0.3,
-            spacing_m: 0.05,
-        });
-        cfg.slip_check_without_prior = true;
-        cfg.weak_direction_floor = Some(100.0);
-        cfg.slip_check_match_to_match = true;
-        cfg.slip_check_own_match = true;
-        change(&mut cfg);
-        let wall = [(-20.0, 1.5, 40.0, 1.5)];
         let rocks = [(3.0, -2.0, 0.25), (6.5, -3.5, 0.3), (9.0, -1.5, 0.2)];
-        slip_burst_seen(cfg, &wall, &rocks)
+        slip_near_a_wall(&rocks, |cfg| {
+            cfg.slip_check_without_prior = true;
+            cfg.weak_direction_floor = Some(100.0);
+            cfg.slip_check_match_to_match = true;
+            cfg.slip_check_own_match = true;
+            change(cfg);
+        })
     }
 
     #[test]
