@@ -729,6 +729,11 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "faces-from-behind",
+        what: "far corrections whose hits reach the submap's walls from behind are not refused (the rovers' setup before the sixty-fourth session)",
+        apply: |c| c.mapper.faces_seen_from = None,
+    },
+    Variant {
         name: "slip-rewind-only",
         what: "a slip burst reported is taken back; the matcher's pull towards the wheels left as it is",
         apply: |c| c.mapper.unreliable_rewind = true,

@@ -14,7 +14,7 @@ pub const WRONG_CLOSURE_M: f64 = 0.1;
 pub const WRONG_CLOSURE_DEG: f64 = 1.0;
 
 /// The columns of a `--trajectories` closures file.
-const CSV_HEADER: &str = "from_t_s,to_t_s,error_m,error_deg,along_weakest_m,search_score,rival_score,score,weakest_information,strongest_information,heading_information,within_drift,accepted";
+const CSV_HEADER: &str = "from_t_s,to_t_s,error_m,error_deg,along_weakest_m,search_score,rival_score,score,weakest_information,strongest_information,heading_information,within_drift,accepted,on_walls,from_behind";
 
 /// One verified closure against the truth.
 #[derive(Clone, Copy, Debug)]
@@ -92,7 +92,7 @@ pub fn csv(graded: &[GradedClosure]) -> String {
     for g in graded {
         let r = &g.record;
         text += &format!(
-            "{:.3},{:.3},{:.4},{:.3},{:.4},{:.3},{:.3},{:.3},{:.1},{:.1},{:.1},{},{}\n",
+            "{:.3},{:.3},{:.4},{:.3},{:.4},{:.3},{:.3},{:.3},{:.1},{:.1},{:.1},{},{},{},{}\n",
             g.from_t_s,
             g.to_t_s,
             g.error_m,
@@ -105,7 +105,9 @@ pub fn csv(graded: &[GradedClosure]) -> String {
             g.strongest_information,
             r.information[2][2],
             r.within_drift,
-            r.accepted
+            r.accepted,
+            r.on_walls,
+            r.from_behind
         );
     }
     text
@@ -135,6 +137,8 @@ mod tests {
             score: 0.75,
             information: [[5000.0, 0.0, 0.0], [0.0, 300.0, 0.0], [0.0, 0.0, 1e5]],
             within_drift: true,
+            on_walls: 0,
+            from_behind: 0,
             accepted: true,
         };
         let g = grade(&record, (10.0, from), (20.0, to));

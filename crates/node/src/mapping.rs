@@ -184,6 +184,9 @@ pub fn rover_mapper_config() -> MapperConfig {
     // the same paths (seeds 9-16) only seed 14's rover1 (0.57 -> 0.07 m) and seed 16's
     // rover3 changed (BENCHMARKS.md, "A far correction confirmed from another submap").
     cfg.distinct_confirmation_beyond_m = Some(0.5);
+    // A far correction whose hits reach the submap's walls from behind is refused: the
+    // lander's west face laid on its east face (BENCHMARKS.md, "Faces reached from behind").
+    cfg.faces_seen_from = Some(realms_slam::mapper::FacesSeenFrom::default());
     // The slip check hears each match without the matcher's pull towards the wheels: where
     // the map pins the travel a few times as firmly as that pull, a burst's matches followed
     // the wheels far enough to stay under the alarm. `realms bench slip` (seeds 1-16): 94 ->

@@ -237,6 +237,37 @@ impl OccupancyGrid {
         }
     }
 
+    /// Of the beams from `sensor` that end on a cell this grid holds as occupied, how many
+    /// (second) and how many of those reach it through ground the grid never saw open
+    /// (first): the cell `back_m` before the end along the beam is not free. A surface seen
+    /// from the side it was drawn from is reached over open ground; one reached from behind
+    /// (a face laid on the opposite face of a block) is not.
+    pub fn hits_from_behind(
+        &self,
+        sensor: Point2,
+        endpoints: &[Point2],
+        back_m: f64,
+    ) -> (usize, usize) {
+        let (mut behind, mut on) = (0, 0);
+        for e in endpoints {
+            if CellState::from_log_odds(self.log_odds_at(*e)) != CellState::Occupied {
+                continue;
+            }
+            let (dx, dy) = (e.x_m - sensor.x_m, e.y_m - sensor.y_m);
+            let d = dx.hypot(dy);
+            if d <= back_m {
+                continue;
+            }
+            on += 1;
+            let f = 1.0 - back_m / d;
+            let before = Point2::new(sensor.x_m + f * dx, sensor.y_m + f * dy);
+            if CellState::from_log_odds(self.log_odds_at(before)) != CellState::Free {
+                behind += 1;
+            }
+        }
+        (behind, on)
+    }
+
     /// Adds `evidence(p)` (log-odds) to every cell in the world box `[min, max]`, at the
     /// cell's centre `p`; grows the grid to hold the box.
     pub fn accumulate(&mut self, min: Point2, max: Point2, evidence: impl Fn(Point2) -> f32) {
@@ -685,6 +716,43 @@ mod tests {
         assert_eq!(at(5.05, 5.05), CellState::Unknown);
         let (p, _) = g.probability_and_gradient(Point2::new(30.05, 0.05));
         assert!(p > 0.9, "{p}");
+    }
+
+    #[test]
+    fn a_face_reached_from_behind_is_told_from_one_reached_over_the_open_ground_it_was_seen_across()
+    {
+        // A block's east face at x = 1.25 m, seen from the east only, as a submap begun
+        // beside a lander sees it; the block's inside and its west face are never seen.
+        let mut g = OccupancyGrid::new(0.05);
+        let face: Vec<Point2> = (0..50)
+            .map(|k| Point2::new(1.25 + 0.025, -1.225 + 0.05 * k as f64))
+            .collect();
+        for sensor in [Point2::new(4.0, -0.5), Point2::new(4.0, 0.5)] {
+            let beams: Vec<(Point2, bool)> = face.iter().map(|p| (*p, true)).collect();
+            for _ in 0..3 {
+                g.insert(sensor, &beams);
+            }
+        }
+        let on_face: Vec<Point2> = face[10..40].to_vec();
+        // From the east, over the open ground: every hit is on the face, none from behind.
+        assert_eq!(
+            g.hits_from_behind(Point2::new(3.0, 0.0), &on_face, 0.15),
+            (0, 30)
+        );
+        // From the west, through the block (the west face laid on the east one): all of them.
+        assert_eq!(
+            g.hits_from_behind(Point2::new(-1.0, 0.0), &on_face, 0.15),
+            (30, 30)
+        );
+        // Points off the face are not counted either way.
+        let off: Vec<Point2> = on_face
+            .iter()
+            .map(|p| Point2::new(p.x_m + 1.0, p.y_m))
+            .collect();
+        assert_eq!(
+            g.hits_from_behind(Point2::new(3.0, 0.0), &off, 0.15),
+            (0, 0)
+        );
     }
 
     #[test]
