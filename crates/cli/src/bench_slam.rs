@@ -734,6 +734,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.faces_seen_from = None,
     },
     Variant {
+        name: "closure-min-15",
+        what: "keyframes of fewer than 15 hits search for no closure",
+        apply: |c| c.mapper.closure_min_points = Some(15),
+    },
+    Variant {
+        name: "closure-min-20",
+        what: "keyframes of fewer than 20 hits search for no closure",
+        apply: |c| c.mapper.closure_min_points = Some(20),
+    },
+    Variant {
         name: "slip-rewind-only",
         what: "a slip burst reported is taken back; the matcher's pull towards the wheels left as it is",
         apply: |c| c.mapper.unreliable_rewind = true,

@@ -547,6 +547,10 @@ pub struct MapperConfig {
     /// A far correction whose hits reach the submap's walls from behind is refused
     /// ([`FacesSeenFrom`]; `None`: no such test).
     pub faces_seen_from: Option<FacesSeenFrom>,
+    /// A keyframe of fewer hits than this searches for no closure (`None`: the search's own
+    /// least, ten). On open floor a scan holds a few rocks, and its closures slide along
+    /// whatever they leave loose.
+    pub closure_min_points: Option<usize>,
 }
 
 /// A closure that lays one face of a block on the opposite face (the lander's west face on
@@ -842,6 +846,7 @@ impl Default for MapperConfig {
             drop_closures_beyond: None,
             distinct_confirmation_beyond_m: None,
             faces_seen_from: None,
+            closure_min_points: None,
             closure_weighting: None,
             closure_min_information: None,
             closure_ridges: None,
@@ -1856,7 +1861,11 @@ impl Mapper {
 
     /// Searches finished submaps near `node` for a closure; returns whether one was added.
     fn close_loops(&mut self, node: usize) -> bool {
-        if self.keyframe_points[node].len() < SEARCH_MIN_POINTS {
+        let min_points = self
+            .cfg
+            .closure_min_points
+            .map_or(SEARCH_MIN_POINTS, |n| n.max(SEARCH_MIN_POINTS));
+        if self.keyframe_points[node].len() < min_points {
             return false;
         }
         let pose = self.graph.nodes[node];
