@@ -1926,13 +1926,12 @@ impl Mapper {
                     .closure_min_information
                     .is_none_or(|f| weakest >= f);
                 let within_drift = self.within_drift(&closure);
-                let ends: Vec<Point2> = self.keyframe_points[node]
+                let ends = self.keyframe_points[node]
                     .iter()
-                    .map(|p| m.pose.transform_point(*p))
-                    .collect();
+                    .map(|p| m.pose.transform_point(*p));
                 let (from_behind, on_walls) = self.submaps[s].map.finest().hits_from_behind(
                     m.pose.position(),
-                    &ends,
+                    ends,
                     FROM_BEHIND_BACK_M,
                 );
                 let walls_from_front =

@@ -245,12 +245,12 @@ impl OccupancyGrid {
     pub fn hits_from_behind(
         &self,
         sensor: Point2,
-        endpoints: &[Point2],
+        endpoints: impl IntoIterator<Item = Point2>,
         back_m: f64,
     ) -> (usize, usize) {
         let (mut behind, mut on) = (0, 0);
         for e in endpoints {
-            if CellState::from_log_odds(self.log_odds_at(*e)) != CellState::Occupied {
+            if CellState::from_log_odds(self.log_odds_at(e)) != CellState::Occupied {
                 continue;
             }
             let (dx, dy) = (e.x_m - sensor.x_m, e.y_m - sensor.y_m);
@@ -736,12 +736,12 @@ mod tests {
         let on_face: Vec<Point2> = face[10..40].to_vec();
         // From the east, over the open ground: every hit is on the face, none from behind.
         assert_eq!(
-            g.hits_from_behind(Point2::new(3.0, 0.0), &on_face, 0.15),
+            g.hits_from_behind(Point2::new(3.0, 0.0), on_face.iter().copied(), 0.15),
             (0, 30)
         );
         // From the west, through the block (the west face laid on the east one): all of them.
         assert_eq!(
-            g.hits_from_behind(Point2::new(-1.0, 0.0), &on_face, 0.15),
+            g.hits_from_behind(Point2::new(-1.0, 0.0), on_face.iter().copied(), 0.15),
             (30, 30)
         );
         // Points off the face are not counted either way.
@@ -750,7 +750,7 @@ mod tests {
             .map(|p| Point2::new(p.x_m + 1.0, p.y_m))
             .collect();
         assert_eq!(
-            g.hits_from_behind(Point2::new(3.0, 0.0), &off, 0.15),
+            g.hits_from_behind(Point2::new(3.0, 0.0), off.iter().copied(), 0.15),
             (0, 0)
         );
     }
