@@ -593,6 +593,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.min_scan_points = 4,
     },
     Variant {
+        name: "slip-fraction-40",
+        what: "odometry unreliable once scan matching falls short of the wheels by 40 % of their travel over the window, not 50 %",
+        apply: |c| c.mapper.health.slip_fraction = 0.4,
+    },
+    Variant {
+        name: "slip-confirm-0.2s",
+        what: "a disagreement between the wheels and scan matching confirmed after 0.2 s, not 0.3 s",
+        apply: |c| c.mapper.health.confirm_s = 0.2,
+    },
+    Variant {
         name: "slow-window-6s",
         what: "odometry checked against scan matching over the last 6 s as well as the last 2 s (a rover creeping through a burst)",
         apply: |c| c.mapper.health.slow_window_s = Some(6.0),

@@ -12,6 +12,10 @@
 //! to report is counted from that moment (the 1 Hz checks interpolated). A false alarm is an
 //! odometry-unreliable report that starts outside every burst (from its start to [`LATE_S`]
 //! after its end).
+//!
+//! Each burst is also placed against what the lidar could see where it began (walls, rocks
+//! taller than the lidar's plane, the lander, from the truth), so the bursts no check on
+//! the scans could hear are told apart from those the check missed.
 
 use crate::bench::{in_parallel, median};
 use crate::cli::BenchSlipArgs;
@@ -48,6 +52,59 @@ struct Burst {
     /// (the first check after the all-clear or, without one, [`LATE_S`] after its end).
     error_before_m: f64,
     error_after_m: f64,
+    /// What the lidar could see where the burst began (filled in once graded).
+    scene: Option<Scene>,
+}
+
+/// What stands within the lidar's range of a true position: the walls whose face is within
+/// range, and the things tall enough to cut the lidar's plane (boulders above its mount
+/// height, the lander). Beside one bare wall, or in the open hall, scan matching cannot see
+/// travel along the wall, and a burst there is beyond any check on the scans.
+#[derive(Clone, Copy, Debug)]
+struct Scene {
+    nearest_wall_m: f64,
+    walls_in_range: usize,
+    /// Walls in range that face the rover's heading (within 60 degrees of head-on), which
+    /// pin its travel along that heading.
+    facing_walls_in_range: usize,
+    tall_things_in_range: usize,
+}
+
+fn scene_at(
+    terrain: &realms_sim::terrain::Terrain,
+    scenario: &realms_sim::scenario::Scenario,
+    pose: realms_core::Pose2,
+) -> Scene {
+    let at = pose.position();
+    // The walls at x = 0 and x = width face along x, the others along y.
+    let (along_x, along_y) = (
+        pose.yaw_rad.cos().abs() > 0.5,
+        pose.yaw_rad.sin().abs() > 0.5,
+    );
+    let (a, lidar) = (&scenario.arena, &scenario.rovers.lidar);
+    let range_m = lidar.range_max_m;
+    let walls = [at.x_m, a.width_m - at.x_m, at.y_m, a.length_m - at.y_m];
+    let tall_rocks = terrain
+        .boulders
+        .iter()
+        .filter(|b| b.height_m > lidar.mount_height_m)
+        .filter(|b| b.center.distance_m(at) - b.radius_m <= range_m)
+        .count();
+    let l = &terrain.lander;
+    let (dx, dy) = (
+        (l.min.x_m - at.x_m).max(at.x_m - l.max.x_m).max(0.0),
+        (l.min.y_m - at.y_m).max(at.y_m - l.max.y_m).max(0.0),
+    );
+    Scene {
+        nearest_wall_m: walls.iter().copied().fold(f64::INFINITY, f64::min),
+        walls_in_range: walls.iter().filter(|d| **d <= range_m).count(),
+        facing_walls_in_range: walls
+            .iter()
+            .zip([along_x, along_x, along_y, along_y])
+            .filter(|(d, facing)| **d <= range_m && *facing)
+            .count(),
+        tall_things_in_range: tall_rocks + usize::from(dx.hypot(dy) <= range_m),
+    }
 }
 
 impl Burst {
@@ -254,6 +311,7 @@ fn grade(record: &RoverSlamRecord, faults: &[&Fault], end_s: f64) -> (Vec<Burst>
                 latency_s,
                 error_before_m: error_at(record, f.at_s - 1.0)?,
                 error_after_m: error_at(record, settled)?,
+                scene: None,
             })
         })
         .collect();
@@ -317,7 +375,14 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         for (r, record) in mission.slam_records().iter().enumerate() {
             let name = RoverId(r as u8 + 1).to_string();
             let mine: Vec<&Fault> = s.faults.iter().filter(|f| f.rover == name).collect();
-            let (bursts, false_alarms) = grade(record, &mine, end_s);
+            let (mut bursts, false_alarms) = grade(record, &mine, end_s);
+            for b in &mut bursts {
+                b.scene = record
+                    .checks
+                    .iter()
+                    .find(|c| c.t.as_secs_f64() >= b.start_s)
+                    .map(|c| scene_at(mission.world().terrain(), &s, c.truth));
+            }
             run.bursts.extend(bursts);
             run.false_alarms
                 .extend(false_alarms.into_iter().map(|f| (name.clone(), f)));
@@ -448,5 +513,42 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         println!();
         println!("Missed: {}.", missed.join("; "));
     }
+    print_scenes(&all);
     Ok(())
+}
+
+/// Which bursts a row of the scenes' table takes.
+type BurstTest = fn(&Burst) -> bool;
+
+/// Where the bursts came, by what became of them: what the lidar could see there.
+fn print_scenes(all: &[&Burst]) {
+    let groups: [(&str, BurstTest); 3] = [
+        ("reported within the deadline", Burst::caught),
+        ("reported late", |b| b.latency_s.is_some() && !b.caught()),
+        ("never reported", |b| b.latency_s.is_none()),
+    ];
+    println!();
+    println!(
+        "| bursts | count | nearest wall, median | one wall or none in range | no rock above the lidar's plane nor the lander in range | both | nothing in range facing the heading |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    for (name, keep) in groups {
+        let scenes: Vec<Scene> = all
+            .iter()
+            .filter(|b| keep(b))
+            .filter_map(|b| b.scene)
+            .collect();
+        let n = scenes.len().max(1) as f64;
+        let share =
+            |f: &dyn Fn(&Scene) -> bool| 100.0 * scenes.iter().filter(|s| f(s)).count() as f64 / n;
+        println!(
+            "| {name} | {} | {:.1} m | {:.0} % | {:.0} % | {:.0} % | {:.0} % |",
+            scenes.len(),
+            median(scenes.iter().map(|s| s.nearest_wall_m).collect()),
+            share(&|s| s.walls_in_range <= 1),
+            share(&|s| s.tall_things_in_range == 0),
+            share(&|s| s.walls_in_range <= 1 && s.tall_things_in_range == 0),
+            share(&|s| s.facing_walls_in_range == 0 && s.tall_things_in_range == 0),
+        );
+    }
 }
