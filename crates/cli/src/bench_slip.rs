@@ -52,8 +52,8 @@ struct Burst {
     /// (the first check after the all-clear or, without one, [`LATE_S`] after its end).
     error_before_m: f64,
     error_after_m: f64,
-    /// What the lidar could see where the burst began (filled in once graded).
-    scene: Option<Scene>,
+    /// What the lidar could see where the burst began.
+    scene: Scene,
 }
 
 /// What stands within the lidar's range of a true position: the walls whose face is within
@@ -156,13 +156,14 @@ fn schedule(seed: u64, rovers: u8, limit_s: f64, period_s: f64) -> Vec<Fault> {
     faults
 }
 
+/// The first check at or after `t_s`.
+fn check_at(record: &RoverSlamRecord, t_s: f64) -> Option<&PoseCheck> {
+    record.checks.iter().find(|c| c.t.as_secs_f64() >= t_s)
+}
+
 /// The published pose's position error at the first check at or after `t_s`.
 fn error_at(record: &RoverSlamRecord, t_s: f64) -> Option<f64> {
-    record
-        .checks
-        .iter()
-        .find(|c| c.t.as_secs_f64() >= t_s)
-        .map(|c| c.estimate.position().distance_m(c.truth.position()))
+    check_at(record, t_s).map(|c| c.estimate.position().distance_m(c.truth.position()))
 }
 
 /// The 1 Hz checks spanning `from_s` to `to_s`: from the last at or before the one to the
@@ -251,7 +252,13 @@ fn false_alarm(record: &RoverSlamRecord, t_s: f64) -> FalseAlarm {
 }
 
 /// Grades one rover's reports against its bursts; returns the bursts and the false alarms.
-fn grade(record: &RoverSlamRecord, faults: &[&Fault], end_s: f64) -> (Vec<Burst>, Vec<FalseAlarm>) {
+/// `scene_at` says what the lidar could see from a true pose.
+fn grade(
+    record: &RoverSlamRecord,
+    faults: &[&Fault],
+    end_s: f64,
+    scene_at: impl Fn(realms_core::Pose2) -> Scene,
+) -> (Vec<Burst>, Vec<FalseAlarm>) {
     let entered = |state: LocalisationState| -> Vec<f64> {
         record
             .changes
@@ -311,7 +318,7 @@ fn grade(record: &RoverSlamRecord, faults: &[&Fault], end_s: f64) -> (Vec<Burst>
                 latency_s,
                 error_before_m: error_at(record, f.at_s - 1.0)?,
                 error_after_m: error_at(record, settled)?,
-                scene: None,
+                scene: scene_at(check_at(record, f.at_s)?.truth),
             })
         })
         .collect();
@@ -375,14 +382,9 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         for (r, record) in mission.slam_records().iter().enumerate() {
             let name = RoverId(r as u8 + 1).to_string();
             let mine: Vec<&Fault> = s.faults.iter().filter(|f| f.rover == name).collect();
-            let (mut bursts, false_alarms) = grade(record, &mine, end_s);
-            for b in &mut bursts {
-                b.scene = record
-                    .checks
-                    .iter()
-                    .find(|c| c.t.as_secs_f64() >= b.start_s)
-                    .map(|c| scene_at(mission.world().terrain(), &s, c.truth));
-            }
+            let (bursts, false_alarms) = grade(record, &mine, end_s, |pose| {
+                scene_at(mission.world().terrain(), &s, pose)
+            });
             run.bursts.extend(bursts);
             run.false_alarms
                 .extend(false_alarms.into_iter().map(|f| (name.clone(), f)));
@@ -533,12 +535,12 @@ fn print_scenes(all: &[&Burst]) {
     );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     for (name, keep) in groups {
-        let scenes: Vec<Scene> = all
-            .iter()
-            .filter(|b| keep(b))
-            .filter_map(|b| b.scene)
-            .collect();
-        let n = scenes.len().max(1) as f64;
+        let scenes: Vec<Scene> = all.iter().filter(|b| keep(b)).map(|b| b.scene).collect();
+        if scenes.is_empty() {
+            println!("| {name} | 0 | - | - | - | - | - |");
+            continue;
+        }
+        let n = scenes.len() as f64;
         let share =
             |f: &dyn Fn(&Scene) -> bool| 100.0 * scenes.iter().filter(|s| f(s)).count() as f64 / n;
         println!(
