@@ -732,11 +732,8 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "slip-takeback",
-        what: "a slip burst reported is taken back by what the pose ran beyond the slip check's matches over its window, and the matcher's pull towards the wheels is a tenth while they disagree",
-        apply: |c| {
-            c.mapper.unreliable_rewind = true;
-            c.mapper.unreliable_pull_share = Some(0.1);
-        },
+        what: "the matcher's pull towards the wheels is a tenth while they and the slip check's matches disagree (a burst reported is taken back, as for the rovers)",
+        apply: |c| c.mapper.unreliable_pull_share = Some(0.1),
     },
     Variant {
         name: "faces-from-behind",
@@ -754,9 +751,31 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.closure_min_points = Some(20),
     },
     Variant {
-        name: "slip-rewind-only",
-        what: "a slip burst reported is taken back; the matcher's pull towards the wheels left as it is",
-        apply: |c| c.mapper.unreliable_rewind = true,
+        name: "no-turn-check",
+        what: "the slip check does not compare the wheels' turns with the gyro's, nor is the wheels' travel scaled by the gyro's share of their turns",
+        apply: |c| {
+            c.mapper.health.turn_check = None;
+            c.mapper.turn_scaled_travel = false;
+        },
+    },
+    Variant {
+        name: "no-turn-scaled-travel",
+        what: "the wheels' travel is not scaled by the gyro's share of their turns while the two disagree",
+        apply: |c| c.mapper.turn_scaled_travel = false,
+    },
+    Variant {
+        name: "no-slip-rewind",
+        what: "a slip burst reported is not taken back",
+        apply: |c| c.mapper.unreliable_rewind = false,
+    },
+    Variant {
+        name: "before-turn-check",
+        what: "the rovers' setup before the sixty-seventh session: no turn check, no scaled travel, no take-back",
+        apply: |c| {
+            c.mapper.health.turn_check = None;
+            c.mapper.turn_scaled_travel = false;
+            c.mapper.unreliable_rewind = false;
+        },
     },
     Variant {
         name: "no-hollows",

@@ -54,6 +54,10 @@ struct Burst {
     error_after_m: f64,
     /// What the lidar could see where the burst began.
     scene: Scene,
+    /// How far the wheels and the truth turned between the burst's start and its deadline
+    /// (the 1 Hz checks' steps, each counted whole), degrees: wheels that turn while the
+    /// body does not are a slip the gyro sees, whatever the lidar sees.
+    turns_deg: (f64, f64),
 }
 
 /// What stands within the lidar's range of a true position: the walls whose face is within
@@ -219,6 +223,24 @@ fn odometry_travel(record: &RoverSlamRecord, from_s: f64, to_s: f64) -> f64 {
         .sum()
 }
 
+/// How far wheel odometry and the truth turned over the checks spanning `from_s` to `to_s`
+/// (each step's turn counted whole, whichever way), degrees.
+fn turns(record: &RoverSlamRecord, from_s: f64, to_s: f64) -> (f64, f64) {
+    let turn = |a: realms_core::Pose2, b: realms_core::Pose2| {
+        realms_core::geometry::normalize_angle_rad(b.yaw_rad - a.yaw_rad)
+            .abs()
+            .to_degrees()
+    };
+    checks_spanning(record, from_s, to_s)
+        .windows(2)
+        .fold((0.0, 0.0), |(w, t), c| {
+            (
+                w + turn(c[0].odometry, c[1].odometry),
+                t + turn(c[0].truth, c[1].truth),
+            )
+        })
+}
+
 /// An odometry-unreliable report outside every burst, and what was wrong then: over the two
 /// seconds before it (whole 1 Hz checks), how far wheel odometry and the published pose each
 /// moved off the true motion.
@@ -319,6 +341,7 @@ fn grade(
                 error_before_m: error_at(record, f.at_s - 1.0)?,
                 error_after_m: error_at(record, settled)?,
                 scene: scene_at(check_at(record, f.at_s)?.truth),
+                turns_deg: turns(record, f.at_s, (visible_s + DEADLINE_S).min(end)),
             })
         })
         .collect();
@@ -461,11 +484,13 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         .flat_map(|r| {
             r.bursts.iter().filter(|b| !b.caught()).map(move |b| {
                 format!(
-                    "seed {} {} at {:.0} s ({:.2} m of wheel travel, {})",
+                    "seed {} {} at {:.0} s ({:.2} m of wheel travel, turning {:.0} deg by the wheels and {:.0} deg in truth by the deadline, {})",
                     r.seed,
                     b.rover,
                     b.start_s,
                     b.odometry_travel_m,
+                    b.turns_deg.0,
+                    b.turns_deg.1,
                     b.latency_s.map_or("never reported".into(), |l| format!(
                         "reported after {l:.1} s"
                     ))
@@ -524,6 +549,8 @@ type BurstTest = fn(&Burst) -> bool;
 
 /// Where the bursts came, by what became of them: what the lidar could see there.
 fn print_scenes(all: &[&Burst]) {
+    // Wheels that turned at least this far by the deadline, the body less than half as far.
+    const TURN_DEG: f64 = 5.0;
     let groups: [(&str, BurstTest); 3] = [
         ("reported within the deadline", Burst::caught),
         ("reported late", |b| b.latency_s.is_some() && !b.caught()),
@@ -531,26 +558,32 @@ fn print_scenes(all: &[&Burst]) {
     ];
     println!();
     println!(
-        "| bursts | count | nearest wall, median | one wall or none in range | no rock above the lidar's plane nor the lander in range | both | nothing in range facing the heading |"
+        "| bursts | count | nearest wall, median | one wall or none in range | no rock above the lidar's plane nor the lander in range | both | nothing in range facing the heading | wheels turned {TURN_DEG:.0} deg or more by the deadline, the body under half that |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for (name, keep) in groups {
         let scenes: Vec<Scene> = all.iter().filter(|b| keep(b)).map(|b| b.scene).collect();
         if scenes.is_empty() {
-            println!("| {name} | 0 | - | - | - | - | - |");
+            println!("| {name} | 0 | - | - | - | - | - | - |");
             continue;
         }
+        let turned = all
+            .iter()
+            .filter(|b| keep(b))
+            .filter(|b| b.turns_deg.0 >= TURN_DEG && b.turns_deg.1 < 0.5 * b.turns_deg.0)
+            .count();
         let n = scenes.len() as f64;
         let share =
             |f: &dyn Fn(&Scene) -> bool| 100.0 * scenes.iter().filter(|s| f(s)).count() as f64 / n;
         println!(
-            "| {name} | {} | {:.1} m | {:.0} % | {:.0} % | {:.0} % | {:.0} % |",
+            "| {name} | {} | {:.1} m | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {:.0} % |",
             scenes.len(),
             median(scenes.iter().map(|s| s.nearest_wall_m).collect()),
             share(&|s| s.walls_in_range <= 1),
             share(&|s| s.tall_things_in_range == 0),
             share(&|s| s.walls_in_range <= 1 && s.tall_things_in_range == 0),
             share(&|s| s.facing_walls_in_range == 0 && s.tall_things_in_range == 0),
+            100.0 * turned as f64 / n,
         );
     }
 }

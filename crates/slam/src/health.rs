@@ -8,6 +8,12 @@
 //!   predicted from the wheels, but no longer learns the wheels' slip from them; the
 //!   monitor also says how far the pose ran beyond the matches it heard
 //!   ([`HealthMonitor::overrun`]), which the mapper may take back;
+//! - the wheels turn while the gyro says the body barely does (optional, where the odometry
+//!   says what the wheels' own heading did): skid-steer wheels that spin without grip turn
+//!   the odometry's heading as freely as its position, but not the body's, and the gyro is
+//!   blind to neither the lidar's bare walls nor an open hall. This is Borenstein and Feng's
+//!   gyrodometry (ICRA 1996): where the wheels' and the gyro's rates part, the wheels are
+//!   not to be trusted;
 //! - scan matching itself stops fitting the map (too few points, a poor match score, or a
 //!   gap in the scans long enough that odometry alone cannot bridge it): the rover is lost,
 //!   the map is frozen so nothing wrong is written into it, and the mapper relocalises.
@@ -46,6 +52,30 @@ pub struct HealthConfig {
     pub poor_matches_to_lose: usize,
     /// Lost when the scans stop for longer than this, seconds.
     pub max_scan_gap_s: f64,
+    /// The wheels' turn against the gyro's over the same window (`None`: not compared).
+    pub turn_check: Option<TurnCheck>,
+}
+
+/// When the wheels' turn and the gyro's disagree: over the window, the wheels turned at
+/// least `min_wheels_rad` (each scan's turn counted whichever way) and the gyro turned the
+/// same way by less than `max_gyro_share` of that. Skid steering loses some of every turn to
+/// the ground (the rovers' wheels over-report a turn by up to a third on slopes and loose
+/// ground); wheels with no grip lose nearly all of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TurnCheck {
+    /// Radians.
+    pub min_wheels_rad: f64,
+    /// Of the wheels' turn.
+    pub max_gyro_share: f64,
+}
+
+impl Default for TurnCheck {
+    fn default() -> Self {
+        TurnCheck {
+            min_wheels_rad: 5f64.to_radians(),
+            max_gyro_share: 0.5,
+        }
+    }
 }
 
 impl Default for HealthConfig {
@@ -64,6 +94,7 @@ impl Default for HealthConfig {
             poor_score: 0.35,
             poor_matches_to_lose: 5,
             max_scan_gap_s: 10.0,
+            turn_check: None,
         }
     }
 }
@@ -85,6 +116,10 @@ pub struct TrackedScan {
     pub score: Option<f64>,
     /// The wheels have stopped reporting (a dropout): `odom_delta` is the gyro's turn alone.
     pub wheels_silent: bool,
+    /// The turn since the previous scan by the wheels' own heading and by the gyro's,
+    /// radians, where the odometry says both (`None`: the odometry's heading is the wheels'
+    /// alone, or the wheels are silent).
+    pub turns_rad: Option<(f64, f64)>,
 }
 
 /// A change of state, with the reason in words (for the operator).
@@ -109,6 +144,21 @@ struct MatchedStep {
     overrun: (f64, f64),
 }
 
+/// How the wheels and the other sensors part, over a window.
+#[derive(Clone, Copy, Debug)]
+enum Disagreement {
+    /// Scan matching saw `matched_m` of the wheels' `wheels_m` over `window_s`, the slow
+    /// window's or the short one's.
+    Travel {
+        window_s: f64,
+        is_slow: bool,
+        wheels_m: f64,
+        matched_m: f64,
+    },
+    /// The gyro turned `gyro_rad` the wheels' way while they turned `wheels_rad`.
+    Turn { wheels_rad: f64, gyro_rad: f64 },
+}
+
 /// The monitor.
 #[derive(Clone, Debug)]
 pub struct HealthMonitor {
@@ -116,6 +166,9 @@ pub struct HealthMonitor {
     state: LocalisationState,
     /// The matched scans within the window.
     recent: std::collections::VecDeque<MatchedStep>,
+    /// Each scan's turn within the window: (when, the wheels' turn whichever way, the gyro's
+    /// turn the same way as the wheels'), seconds and radians.
+    turns: std::collections::VecDeque<(f64, f64, f64)>,
     /// Motion by odometry, as matched and as tracked since the last matched scan (scans the
     /// motion filter skipped are not matched: they follow odometry, and the next match
     /// corrects them all).
@@ -143,6 +196,7 @@ impl HealthMonitor {
             cfg,
             state: LocalisationState::Tracking,
             recent: std::collections::VecDeque::new(),
+            turns: std::collections::VecDeque::new(),
             unmatched: (Pose2::IDENTITY, Pose2::IDENTITY, Pose2::IDENTITY),
             poor_in_a_row: 0,
             wheels_silent_since_s: None,
@@ -195,11 +249,39 @@ impl HealthMonitor {
     pub fn relocalised(&mut self, time_s: f64, reason: String) -> Option<Transition> {
         self.last_time_s = Some(time_s);
         self.recent.clear();
+        self.turns.clear();
         self.unmatched = (Pose2::IDENTITY, Pose2::IDENTITY, Pose2::IDENTITY);
         self.poor_in_a_row = 0;
         self.agreeing_since_s = None;
         self.wheels_silent_since_s = None;
         self.go(LocalisationState::Tracking, reason)
+    }
+
+    /// While the wheels' turns and the gyro's disagree over the window, the share of the
+    /// wheels' turn the gyro saw (0 to 1): how much of their travel the wheels still carry,
+    /// if they lose as much of it as of their turn.
+    pub fn turn_share(&self) -> Option<f64> {
+        match self.turn_disagreement()? {
+            Disagreement::Turn {
+                wheels_rad,
+                gyro_rad,
+            } => Some((gyro_rad / wheels_rad).clamp(0.0, 1.0)),
+            Disagreement::Travel { .. } => None,
+        }
+    }
+
+    /// The wheels' turn over the window against the gyro's, if they disagree.
+    fn turn_disagreement(&self) -> Option<Disagreement> {
+        let check = self.cfg.turn_check?;
+        let (wheels_rad, gyro_rad) = self
+            .turns
+            .iter()
+            .fold((0.0, 0.0), |(w, g), (_, dw, dg)| (w + dw, g + dg));
+        (wheels_rad >= check.min_wheels_rad && gyro_rad < check.max_gyro_share * wheels_rad)
+            .then_some(Disagreement::Turn {
+                wheels_rad,
+                gyro_rad,
+            })
     }
 
     /// Takes one scan; returns the change of state it causes, if any.
@@ -249,6 +331,17 @@ impl HealthMonitor {
             return None;
         }
         self.wheels_silent_since_s = None;
+        if let Some((wheels, gyro)) = scan.turns_rad {
+            self.turns
+                .push_back((scan.time_s, wheels.abs(), gyro * wheels.signum()));
+        }
+        while self
+            .turns
+            .front()
+            .is_some_and(|(t, _, _)| *t < scan.time_s - self.cfg.window_s)
+        {
+            self.turns.pop_front();
+        }
         // Slipping wheels report travel the scans do not see, on every match while it lasts;
         // a match that jumps (onto a new submap, or onto one a loop closure has moved) does
         // so once. Each match's shortfall along the wheels' direction is therefore capped at
@@ -305,7 +398,9 @@ impl HealthMonitor {
             .slow_window_s
             .filter(|_| slow_counts)
             .map(|w| (w, (scan.time_s - w).max(self.slow_from_s), true));
-        let disagreement =
+        // The gyro first: it is heard apart from the scans, whose matches may have started
+        // from a prediction the gyro's share of the turns already scaled.
+        let disagreement = self.turn_disagreement().or_else(|| {
             std::iter::once(short)
                 .chain(slow)
                 .find_map(|(window_s, from_s, is_slow)| {
@@ -315,26 +410,50 @@ impl HealthMonitor {
                         .filter(|m| m.time_s >= from_s)
                         .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
                     (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
-                        .then_some((window_s, is_slow, odom_m, odom_m - short_m))
-                });
+                        .then_some(Disagreement::Travel {
+                            window_s,
+                            is_slow,
+                            wheels_m: odom_m,
+                            matched_m: odom_m - short_m,
+                        })
+                })
+        });
         if disagreement.is_none() {
             self.disagreeing_since_s = None;
         }
         // A disagreement must last a moment: single bumps and skids in turns are not slip.
-        if let Some((window_s, is_slow, odom_m, matched_m)) = disagreement
+        if let Some(disagreement) = disagreement
             && scan.time_s - *self.disagreeing_since_s.get_or_insert(scan.time_s)
                 >= self.cfg.confirm_s
         {
             self.agreeing_since_s = None;
             if self.state == LocalisationState::Tracking {
-                self.slow_alarm = is_slow;
+                self.slow_alarm =
+                    matches!(disagreement, Disagreement::Travel { is_slow: true, .. });
             }
+            let window_s = self.cfg.window_s;
             return self.go(
                 LocalisationState::OdometryUnreliable,
-                format!(
-                    "over the last {window_s:.0} s the wheels drove {odom_m:.2} m but scan \
-                     matching saw {matched_m:.2} m"
-                ),
+                match disagreement {
+                    Disagreement::Travel {
+                        window_s,
+                        wheels_m,
+                        matched_m,
+                        ..
+                    } => format!(
+                        "over the last {window_s:.0} s the wheels drove {wheels_m:.2} m but scan \
+                         matching saw {matched_m:.2} m"
+                    ),
+                    Disagreement::Turn {
+                        wheels_rad,
+                        gyro_rad,
+                    } => format!(
+                        "over the last {window_s:.0} s the wheels turned {:.0} deg but the gyro \
+                         {:.0} deg",
+                        wheels_rad.to_degrees(),
+                        gyro_rad.to_degrees()
+                    ),
+                },
             );
         }
         if self.state == LocalisationState::OdometryUnreliable {
@@ -343,7 +462,12 @@ impl HealthMonitor {
                 return self.go(
                     LocalisationState::Tracking,
                     format!(
-                        "wheel odometry agrees with scan matching again for {:.0} s",
+                        "wheel odometry agrees with scan matching{} again for {:.0} s",
+                        if self.cfg.turn_check.is_some() {
+                            " and the gyro"
+                        } else {
+                            ""
+                        },
                         self.cfg.recover_after_s
                     ),
                 );
@@ -365,6 +489,7 @@ mod tests {
             tracked_delta: Pose2::new(matched_m, 0.0, 0.0),
             score: Some(score),
             wheels_silent: false,
+            turns_rad: None,
         }
     }
 
@@ -392,6 +517,52 @@ mod tests {
         let (t_ok, s, _) = &states[1];
         assert_eq!(*s, LocalisationState::Tracking);
         assert!((16.0..20.0).contains(t_ok), "all clear at {t_ok}");
+    }
+
+    /// Drives at 0.3 m/s, the wheels turning 0.03 rad a scan one way for 2 s and then the
+    /// other, the matches following them; from 10 s the gyro turns `gyro_share` of the
+    /// wheels' turn. When the monitor checking turns by `check` first reports, why, and the
+    /// share of the turn it reckons the wheels kept then.
+    fn turn_slip_reported(
+        gyro_share: f64,
+        check: Option<TurnCheck>,
+    ) -> Option<(f64, String, Option<f64>)> {
+        let mut m = HealthMonitor::new(HealthConfig {
+            turn_check: check,
+            ..HealthConfig::default()
+        });
+        (0..200).find_map(|k| {
+            let t = k as f64 * 0.1;
+            let wheels = if (k / 20) % 2 == 0 { 0.03 } else { -0.03 };
+            let gyro = if t >= 10.0 {
+                gyro_share * wheels
+            } else {
+                wheels
+            };
+            let observed = TrackedScan {
+                turns_rad: Some((wheels, gyro)),
+                ..scan(t, 0.03, 0.03, 0.8)
+            };
+            m.observe(&observed)
+                .map(|tr| (t, tr.reason, m.turn_share()))
+        })
+    }
+
+    #[test]
+    fn wheels_that_turn_where_the_gyro_does_not_are_reported() {
+        let (t, why, share) =
+            turn_slip_reported(0.1, Some(TurnCheck::default())).expect("reported");
+        // Once over half the window's turns are the slipping ones (1.2 s), and the
+        // disagreement has lasted its moment (0.3 s).
+        assert!((10.0..12.0).contains(&t), "noticed at {t}");
+        assert!(why.contains("turned"), "{why}");
+        // Part of the window still holds the turns from before the slip.
+        let share = share.expect("a share");
+        assert!((0.1..0.5).contains(&share), "{share}");
+        // Skid steering that loses a quarter of each turn is not slip.
+        assert_eq!(turn_slip_reported(0.75, Some(TurnCheck::default())), None);
+        // And without the check, matches that follow the wheels say nothing.
+        assert_eq!(turn_slip_reported(0.1, None), None);
     }
 
     #[test]
@@ -441,6 +612,7 @@ mod tests {
                 tracked_delta: Pose2::new(matched, 0.0, 0.0),
                 score,
                 wheels_silent: false,
+                turns_rad: None,
             })
             .filter(|tr| tr.state == LocalisationState::OdometryUnreliable)
             .map(|_| t)
@@ -566,6 +738,7 @@ mod tests {
                     tracked_delta: Pose2::new(matched, 0.0, 0.0),
                     score,
                     wheels_silent: false,
+                    turns_rad: None,
                 }),
                 None,
                 "{t}"
@@ -634,6 +807,7 @@ mod tests {
                 tracked_delta: Pose2::new(matched, 0.0, 0.0),
                 score,
                 wheels_silent: false,
+                turns_rad: None,
             }) {
                 noticed.get_or_insert((t, tr.state));
             }

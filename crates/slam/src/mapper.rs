@@ -419,6 +419,11 @@ pub struct MapperConfig {
     /// While the odometry is reported unreliable, the matcher pulls towards the wheels'
     /// prediction with this share of its usual weight (`None`: the usual weight).
     pub unreliable_pull_share: Option<f64>,
+    /// While the wheels' turns and the gyro's disagree ([`HealthConfig::turn_check`]), the
+    /// wheels' travel is scaled by the share of their turn the gyro saw before it predicts
+    /// the next match: wheels that spin without grip lose as much of their travel as of
+    /// their turn, and the gyro measures the turn's loss whatever the lidar sees.
+    pub turn_scaled_travel: bool,
     /// The refinement on the hits moves the match only along directions the occupancy match
     /// pins at least this firmly (per point, per square metre, its prior left out; `None`:
     /// along any). Its cells of a few hits along a wall can lie across it and pull the
@@ -804,6 +809,7 @@ impl Default for MapperConfig {
             weak_direction_gate_m: None,
             unreliable_rewind: false,
             unreliable_pull_share: None,
+            turn_scaled_travel: false,
             refine_only_where_pinned: None,
             push_ahead_where_weak: None,
             map_occupied_above: crate::assembly::OCCUPIED_ABOVE,
@@ -1007,6 +1013,11 @@ pub struct Mapper {
     features: Vec<Point2>,
     /// The next scan's points' heights (see [`Mapper::set_point_heights`]).
     point_heights: Vec<f64>,
+    /// The wheels' own heading at the next scan (see [`Mapper::set_wheel_heading`]).
+    wheel_heading: Option<f64>,
+    /// The wheels' own heading and the odometry's at the last scan, for the slip check's
+    /// turns.
+    last_headings: Option<(f64, f64)>,
     /// The tracked heading less the odometry's when the pose was last set, and when.
     heading_anchor: Option<HeadingAnchor>,
     /// The odometry's heading at the last scan, while not lost: where a new anchor starts
@@ -1078,6 +1089,8 @@ impl Mapper {
             last_relocalise_odom: None,
             features: Vec::new(),
             point_heights: Vec::new(),
+            wheel_heading: None,
+            last_headings: None,
             heading_anchor: None,
             last_odom_yaw: None,
             searches_since_lost: 0,
@@ -1175,6 +1188,14 @@ impl Mapper {
         self.point_heights = heights;
     }
 
+    /// The wheels' own heading at the next scan, radians, where the odometry given to
+    /// [`add_points_with`](Self::add_points_with) takes its heading from a gyro: the slip
+    /// check then compares the two turns ([`HealthConfig::turn_check`]). For the next scan
+    /// only.
+    pub fn set_wheel_heading(&mut self, yaw_rad: f64) {
+        self.wheel_heading = Some(yaw_rad);
+    }
+
     /// Adds a scan from a CARMEN log.
     pub fn add_scan(&mut self, scan: &LaserReading) -> Tracked {
         let points = self.points(scan);
@@ -1195,8 +1216,28 @@ impl Mapper {
         points: Vec<Point2>,
     ) -> Tracked {
         let odom = sample.pose;
+        let headings = self
+            .wheel_heading
+            .take()
+            .filter(|_| !sample.wheels_silent)
+            .map(|wheels| (wheels, odom.yaw_rad));
+        let turns_rad = match (self.last_headings, headings) {
+            (Some((w0, g0)), Some((w1, g1))) => {
+                Some((normalize_angle_rad(w1 - w0), normalize_angle_rad(g1 - g0)))
+            }
+            _ => None,
+        };
+        self.last_headings = headings;
+        let turn_share = self
+            .health
+            .turn_share()
+            .filter(|_| self.cfg.turn_scaled_travel);
         let prediction = self.odometry.predict(sample, self.pose, |d| {
-            self.wheel_scale.as_ref().map_or(d, |w| w.apply(d))
+            let d = self.wheel_scale.as_ref().map_or(d, |w| w.apply(d));
+            match turn_share {
+                Some(share) => Pose2::new(share * d.x_m, share * d.y_m, d.yaw_rad),
+                None => d,
+            }
         });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
@@ -1515,6 +1556,7 @@ impl Mapper {
                 tracked_delta: before.inverse() * self.pose,
                 score,
                 wheels_silent: sample.wheels_silent,
+                turns_rad,
             };
             if let Some(heard) = match_before_pull
                 && self.cfg.slip_check_match_to_match
@@ -2439,6 +2481,7 @@ fn move_as_block(nodes: &mut [Pose2], drawn: &[Pose2]) {
 mod tests {
     use super::*;
     use crate::frontend::Densify;
+    use crate::health::TurnCheck;
 
     #[test]
     fn a_closure_on_a_ridge_is_held_along_it_as_the_score_falls() {
@@ -3414,6 +3457,69 @@ mod tests {
             }
         }
         (reported, (mapper.pose.x_m - truth_x).abs())
+    }
+
+    /// A rover weaves along a bare wall 1.5 m to its left for 15 s (0.3 m/s, turning at up
+    /// to 0.25 rad/s one way and the other); from 5 to 10 s its wheels slip 90 %, of their
+    /// turns as of their travel. The odometry is the wheels' travel along a perfect gyro's
+    /// heading, as a rover's is; the wheels' own heading is given beside it. Returns when
+    /// `cfg`'s mapper first reported the odometry unreliable, and its position error at the
+    /// end, metres.
+    fn slip_while_weaving(cfg: MapperConfig) -> (Option<f64>, f64) {
+        let mut mapper = Mapper::new(cfg);
+        let wall = [(-20.0, 1.5, 40.0, 1.5)];
+        let (mut truth, mut odom, mut wheel_yaw) = (Pose2::IDENTITY, Pose2::IDENTITY, 0.0);
+        let mut reported = None;
+        for k in 0..150 {
+            let t = 0.1 * k as f64;
+            if k > 0 {
+                let (v, w) = (0.3, 0.25 * (std::f64::consts::TAU * t / 4.0).sin());
+                let grip = if (5.0..10.0).contains(&t) { 0.1 } else { 1.0 };
+                truth = truth * Pose2::new(grip * v * 0.1, 0.0, grip * w * 0.1);
+                let (s, c) = truth.yaw_rad.sin_cos();
+                odom = Pose2::new(
+                    odom.x_m + c * v * 0.1,
+                    odom.y_m + s * v * 0.1,
+                    truth.yaw_rad,
+                );
+                wheel_yaw += w * 0.1;
+            }
+            mapper.set_wheel_heading(wheel_yaw);
+            let points = ray_cast_scan(truth, &wall, &[]);
+            let tracked = mapper.add_points(t, odom, points);
+            if tracked.state == LocalisationState::OdometryUnreliable {
+                reported.get_or_insert(t);
+            }
+        }
+        (
+            reported,
+            mapper.pose.position().distance_m(truth.position()),
+        )
+    }
+
+    #[test]
+    fn wheels_slipping_as_they_turn_are_told_by_the_gyro_where_the_lidar_cannot_tell() {
+        let cfg = |turn_check: bool, turn_scaled_travel: bool| {
+            let mut cfg = MapperConfig::default();
+            cfg.frontend.max_range_m = 12.0;
+            cfg.health.turn_check = turn_check.then(TurnCheck::default);
+            cfg.turn_scaled_travel = turn_scaled_travel;
+            cfg
+        };
+        // The wall says nothing of the travel along it: the pose follows the wheels, 1.35 m
+        // ahead at the end, and the scans never disagree with them.
+        let (reported, error_m) = slip_while_weaving(cfg(false, false));
+        assert_eq!(reported, None);
+        assert!(error_m > 1.0, "{error_m:.2} m off");
+        // The gyro sees a tenth of the wheels' turns.
+        let (reported, error_m) = slip_while_weaving(cfg(true, false));
+        let t = reported.expect("reported");
+        assert!((5.0..7.0).contains(&t), "reported at {t:.1} s");
+        assert!(error_m > 1.0, "{error_m:.2} m off");
+        // And the travel scaled as the turns are keeps the pose with the truth.
+        let (reported_too, error_m) = slip_while_weaving(cfg(true, true));
+        assert_eq!(reported_too, reported);
+        assert!(error_m < 0.2, "{error_m:.2} m off");
     }
 
     /// [`slip_burst_seen`] on open ground where the lidar sees one rock and nothing else
