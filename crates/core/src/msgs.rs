@@ -211,7 +211,8 @@ pub enum LocalisationState {
     /// Scan matching and odometry agree.
     #[default]
     Tracking,
-    /// Scan matching tracks, but wheel odometry disagrees with it (slip, a failed encoder).
+    /// Scan matching tracks, but wheel odometry disagrees with it, or the wheels' turns with the
+    /// gyro's (slip, a failed encoder).
     OdometryUnreliable,
     /// The scans no longer fit the map: the pose is unknown and the map is frozen until the
     /// rover relocalises.
