@@ -286,10 +286,10 @@ pub fn rover_mapper_config() -> MapperConfig {
     // disagree, the wheels' travel is scaled by the share of their turn the gyro saw; and a
     // reported burst is taken back by what the pose ran beyond the check's matches (the
     // matcher's pull left as it is: weakened as well, it cost the whole missions' maps).
-    // `realms bench slip` (seeds 1-8): reported within 2 s 94 -> 99.7 % of bursts, false
-    // alarms 1 -> 1 in 13 rover-hours, the pose within 0.2 m of the truth after recovery
-    // 69 -> 89 %; whole missions (seeds 1-16) maps 94.9 -> 95.6 %, final RMS 0.083 -> 0.078
-    // m per rover, worst 0.26 -> 0.14 m (BENCHMARKS.md, "Slipping wheels told by the gyro").
+    // `realms bench slip` (seeds 1-16): reported within 2 s 94 -> 99 % of bursts, 4 false
+    // alarms in 26 rover-hours, the pose within 0.2 m of the truth after recovery 69 -> 87 %;
+    // over 32 whole missions the maps 93.85 -> 94.2 % and the final RMS 0.084 -> 0.079 m
+    // per rover on average (BENCHMARKS.md, "Slipping wheels told by the gyro").
     cfg.health.turn_check = Some(realms_slam::health::TurnCheck::default());
     cfg.turn_scaled_travel = true;
     cfg.unreliable_rewind = true;

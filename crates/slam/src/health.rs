@@ -239,6 +239,10 @@ impl HealthMonitor {
                 self.slow_alarm = false;
                 self.slow_from_s = self.last_time_s.unwrap_or(f64::NEG_INFINITY);
             }
+            if state == LocalisationState::Lost {
+                // No scan is observed while lost: turns from before would linger.
+                self.turns.clear();
+            }
             Transition { state, reason }
         })
     }
@@ -257,11 +261,16 @@ impl HealthMonitor {
         self.go(LocalisationState::Tracking, reason)
     }
 
-    /// While the wheels' turns and the gyro's disagree over the window, the share of the
-    /// wheels' turn the gyro saw (0 to 1): how much of their travel the wheels still carry,
-    /// if they lose as much of it as of their turn.
-    pub fn turn_share(&self) -> Option<f64> {
-        match self.turn_disagreement()? {
+    /// While the wheels' turns and the gyro's disagree over the window ending at `time_s`
+    /// (a scan's time, not yet observed), the share of the wheels' turn the gyro saw (0 to
+    /// 1): how much of their travel the wheels still carry, if they lose as much of it as
+    /// of their turn. `None` while lost, and where the window holds no turns (after a gap
+    /// or a dropout, the turns before it are out of the window).
+    pub fn turn_share(&self, time_s: f64) -> Option<f64> {
+        if self.state == LocalisationState::Lost {
+            return None;
+        }
+        match self.turn_disagreement(time_s - self.cfg.window_s)? {
             Disagreement::Turn {
                 wheels_rad,
                 gyro_rad,
@@ -270,14 +279,18 @@ impl HealthMonitor {
         }
     }
 
-    /// The wheels' turn over the window against the gyro's, if they disagree.
-    fn turn_disagreement(&self) -> Option<Disagreement> {
+    /// The wheels' turn against the gyro's over the scans from `from_s` on, if they
+    /// disagree.
+    fn turn_disagreement(&self, from_s: f64) -> Option<Disagreement> {
         let check = self.cfg.turn_check?;
         let (wheels_rad, gyro_rad) = self
             .turns
             .iter()
+            .filter(|(t, _, _)| *t >= from_s)
             .fold((0.0, 0.0), |(w, g), (_, dw, dg)| (w + dw, g + dg));
-        (wheels_rad >= check.min_wheels_rad && gyro_rad < check.max_gyro_share * wheels_rad)
+        (wheels_rad > 0.0
+            && wheels_rad >= check.min_wheels_rad
+            && gyro_rad < check.max_gyro_share * wheels_rad)
             .then_some(Disagreement::Turn {
                 wheels_rad,
                 gyro_rad,
@@ -318,6 +331,7 @@ impl HealthMonitor {
             // Wheels that report nothing are lost odometry too: said once it has lasted a
             // moment, and never all clear while it lasts.
             self.agreeing_since_s = None;
+            self.turns.clear();
             let since = *self.wheels_silent_since_s.get_or_insert(scan.time_s);
             if scan.time_s - since >= self.cfg.confirm_s {
                 return self.go(
@@ -332,8 +346,15 @@ impl HealthMonitor {
         }
         self.wheels_silent_since_s = None;
         if let Some((wheels, gyro)) = scan.turns_rad {
+            // Wheels that did not turn say nothing of which way the gyro should have (and
+            // `signum` would call it a left turn).
+            let gyro_their_way = if wheels == 0.0 {
+                0.0
+            } else {
+                gyro * wheels.signum()
+            };
             self.turns
-                .push_back((scan.time_s, wheels.abs(), gyro * wheels.signum()));
+                .push_back((scan.time_s, wheels.abs(), gyro_their_way));
         }
         while self
             .turns
@@ -400,7 +421,7 @@ impl HealthMonitor {
             .map(|w| (w, (scan.time_s - w).max(self.slow_from_s), true));
         // The gyro first: it is heard apart from the scans, whose matches may have started
         // from a prediction the gyro's share of the turns already scaled.
-        let disagreement = self.turn_disagreement().or_else(|| {
+        let disagreement = self.turn_disagreement(short.1).or_else(|| {
             std::iter::once(short)
                 .chain(slow)
                 .find_map(|(window_s, from_s, is_slow)| {
@@ -544,7 +565,7 @@ mod tests {
                 ..scan(t, 0.03, 0.03, 0.8)
             };
             m.observe(&observed)
-                .map(|tr| (t, tr.reason, m.turn_share()))
+                .map(|tr| (t, tr.reason, m.turn_share(t)))
         })
     }
 
@@ -563,6 +584,40 @@ mod tests {
         assert_eq!(turn_slip_reported(0.75, Some(TurnCheck::default())), None);
         // And without the check, matches that follow the wheels say nothing.
         assert_eq!(turn_slip_reported(0.1, None), None);
+    }
+
+    #[test]
+    fn a_turn_share_is_not_carried_past_a_gap_nor_into_a_loss() {
+        // Wheels turning 0.03 rad a scan, the gyro a tenth of it, for 1.5 s; then the scans
+        // fit the map poorly until the rover is lost.
+        let mut m = HealthMonitor::new(HealthConfig {
+            turn_check: Some(TurnCheck::default()),
+            ..HealthConfig::default()
+        });
+        let mut t = 0.0;
+        for k in 0..15 {
+            t = k as f64 * 0.1;
+            m.observe(&TrackedScan {
+                turns_rad: Some((0.03, 0.003)),
+                ..scan(t, 0.03, 0.03, 0.8)
+            });
+        }
+        let share = m.turn_share(t + 0.1).expect("disagreeing");
+        assert!((share - 0.1).abs() < 1e-9, "{share}");
+        // A scan 2.5 s later finds no turns in its window.
+        assert_eq!(m.turn_share(t + 2.5), None);
+        let mut state = m.state();
+        while state != LocalisationState::Lost {
+            t += 0.1;
+            if let Some(tr) = m.observe(&TrackedScan {
+                turns_rad: Some((0.03, 0.003)),
+                ..scan(t, 0.03, 0.03, 0.1)
+            }) {
+                state = tr.state;
+            }
+            assert!(t < 5.0, "never lost");
+        }
+        assert_eq!(m.turn_share(t + 0.1), None);
     }
 
     #[test]

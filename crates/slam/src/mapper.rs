@@ -1230,7 +1230,7 @@ impl Mapper {
         self.last_headings = headings;
         let turn_share = self
             .health
-            .turn_share()
+            .turn_share(time_s)
             .filter(|_| self.cfg.turn_scaled_travel);
         let prediction = self.odometry.predict(sample, self.pose, |d| {
             let d = self.wheel_scale.as_ref().map_or(d, |w| w.apply(d));
