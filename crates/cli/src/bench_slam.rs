@@ -765,17 +765,8 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "no-slip-rewind",
-        what: "a slip burst reported is not taken back",
+        what: "a slip burst reported is not taken back (with no-turn-check, `no-turn-check+no-slip-rewind`: the rovers' setup before the sixty-seventh session)",
         apply: |c| c.mapper.unreliable_rewind = false,
-    },
-    Variant {
-        name: "before-turn-check",
-        what: "the rovers' setup before the sixty-seventh session: no turn check, no scaled travel, no take-back",
-        apply: |c| {
-            c.mapper.health.turn_check = None;
-            c.mapper.turn_scaled_travel = false;
-            c.mapper.unreliable_rewind = false;
-        },
     },
     Variant {
         name: "no-hollows",

@@ -570,14 +570,14 @@ fn print_scenes(all: &[&Burst]) {
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for (name, keep) in groups {
-        let scenes: Vec<Scene> = all.iter().filter(|b| keep(b)).map(|b| b.scene).collect();
-        if scenes.is_empty() {
+        let group: Vec<&Burst> = all.iter().copied().filter(|b| keep(b)).collect();
+        if group.is_empty() {
             println!("| {name} | 0 | - | - | - | - | - | - |");
             continue;
         }
-        let turned = all
+        let scenes: Vec<Scene> = group.iter().map(|b| b.scene).collect();
+        let turned = group
             .iter()
-            .filter(|b| keep(b))
             .filter(|b| b.turns_deg.0 >= TURN_DEG && b.turns_deg.1 < 0.5 * b.turns_deg.0)
             .count();
         let n = scenes.len() as f64;

@@ -155,8 +155,39 @@ enum Disagreement {
         wheels_m: f64,
         matched_m: f64,
     },
-    /// The gyro turned `gyro_rad` the wheels' way while they turned `wheels_rad`.
-    Turn { wheels_rad: f64, gyro_rad: f64 },
+    /// The gyro turned `gyro_rad` the wheels' way while they turned `wheels_rad`, over
+    /// `window_s`.
+    Turn {
+        window_s: f64,
+        wheels_rad: f64,
+        gyro_rad: f64,
+    },
+}
+
+impl Disagreement {
+    /// What the operator is told.
+    fn reason(&self) -> String {
+        match *self {
+            Disagreement::Travel {
+                window_s,
+                wheels_m,
+                matched_m,
+                ..
+            } => format!(
+                "over the last {window_s:.0} s the wheels drove {wheels_m:.2} m but scan \
+                 matching saw {matched_m:.2} m"
+            ),
+            Disagreement::Turn {
+                window_s,
+                wheels_rad,
+                gyro_rad,
+            } => format!(
+                "over the last {window_s:.0} s the wheels turned {:.0} deg but the gyro {:.0} deg",
+                wheels_rad.to_degrees(),
+                gyro_rad.to_degrees()
+            ),
+        }
+    }
 }
 
 /// The monitor.
@@ -270,18 +301,13 @@ impl HealthMonitor {
         if self.state == LocalisationState::Lost {
             return None;
         }
-        match self.turn_disagreement(time_s - self.cfg.window_s)? {
-            Disagreement::Turn {
-                wheels_rad,
-                gyro_rad,
-            } => Some((gyro_rad / wheels_rad).clamp(0.0, 1.0)),
-            Disagreement::Travel { .. } => None,
-        }
+        let (wheels_rad, gyro_rad) = self.disagreeing_turns(time_s - self.cfg.window_s)?;
+        Some((gyro_rad / wheels_rad).clamp(0.0, 1.0))
     }
 
-    /// The wheels' turn against the gyro's over the scans from `from_s` on, if they
-    /// disagree.
-    fn turn_disagreement(&self, from_s: f64) -> Option<Disagreement> {
+    /// The wheels' turn and the gyro's (the wheels' way) over the scans from `from_s` on,
+    /// radians, if they disagree.
+    fn disagreeing_turns(&self, from_s: f64) -> Option<(f64, f64)> {
         let check = self.cfg.turn_check?;
         let (wheels_rad, gyro_rad) = self
             .turns
@@ -291,10 +317,7 @@ impl HealthMonitor {
         (wheels_rad > 0.0
             && wheels_rad >= check.min_wheels_rad
             && gyro_rad < check.max_gyro_share * wheels_rad)
-            .then_some(Disagreement::Turn {
-                wheels_rad,
-                gyro_rad,
-            })
+            .then_some((wheels_rad, gyro_rad))
     }
 
     /// Takes one scan; returns the change of state it causes, if any.
@@ -421,24 +444,31 @@ impl HealthMonitor {
             .map(|w| (w, (scan.time_s - w).max(self.slow_from_s), true));
         // The gyro first: it is heard apart from the scans, whose matches may have started
         // from a prediction the gyro's share of the turns already scaled.
-        let disagreement = self.turn_disagreement(short.1).or_else(|| {
-            std::iter::once(short)
-                .chain(slow)
-                .find_map(|(window_s, from_s, is_slow)| {
-                    let (odom_m, short_m) = self
-                        .recent
-                        .iter()
-                        .filter(|m| m.time_s >= from_s)
-                        .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
-                    (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
-                        .then_some(Disagreement::Travel {
-                            window_s,
-                            is_slow,
-                            wheels_m: odom_m,
-                            matched_m: odom_m - short_m,
-                        })
-                })
-        });
+        let disagreement = self
+            .disagreeing_turns(short.1)
+            .map(|(wheels_rad, gyro_rad)| Disagreement::Turn {
+                window_s: self.cfg.window_s,
+                wheels_rad,
+                gyro_rad,
+            })
+            .or_else(|| {
+                std::iter::once(short)
+                    .chain(slow)
+                    .find_map(|(window_s, from_s, is_slow)| {
+                        let (odom_m, short_m) = self
+                            .recent
+                            .iter()
+                            .filter(|m| m.time_s >= from_s)
+                            .fold((0.0, 0.0), |(a, b), m| (a + m.wheels_m, b + m.shortfall_m));
+                        (short_m > self.cfg.slip_min_m && short_m > self.cfg.slip_fraction * odom_m)
+                            .then_some(Disagreement::Travel {
+                                window_s,
+                                is_slow,
+                                wheels_m: odom_m,
+                                matched_m: odom_m - short_m,
+                            })
+                    })
+            });
         if disagreement.is_none() {
             self.disagreeing_since_s = None;
         }
@@ -452,30 +482,7 @@ impl HealthMonitor {
                 self.slow_alarm =
                     matches!(disagreement, Disagreement::Travel { is_slow: true, .. });
             }
-            let window_s = self.cfg.window_s;
-            return self.go(
-                LocalisationState::OdometryUnreliable,
-                match disagreement {
-                    Disagreement::Travel {
-                        window_s,
-                        wheels_m,
-                        matched_m,
-                        ..
-                    } => format!(
-                        "over the last {window_s:.0} s the wheels drove {wheels_m:.2} m but scan \
-                         matching saw {matched_m:.2} m"
-                    ),
-                    Disagreement::Turn {
-                        wheels_rad,
-                        gyro_rad,
-                    } => format!(
-                        "over the last {window_s:.0} s the wheels turned {:.0} deg but the gyro \
-                         {:.0} deg",
-                        wheels_rad.to_degrees(),
-                        gyro_rad.to_degrees()
-                    ),
-                },
-            );
+            return self.go(LocalisationState::OdometryUnreliable, disagreement.reason());
         }
         if self.state == LocalisationState::OdometryUnreliable {
             let since = *self.agreeing_since_s.get_or_insert(scan.time_s);

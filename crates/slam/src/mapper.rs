@@ -1228,10 +1228,11 @@ impl Mapper {
             _ => None,
         };
         self.last_headings = headings;
-        let turn_share = self
-            .health
-            .turn_share(time_s)
-            .filter(|_| self.cfg.turn_scaled_travel);
+        let turn_share = if self.cfg.turn_scaled_travel {
+            self.health.turn_share(time_s)
+        } else {
+            None
+        };
         let prediction = self.odometry.predict(sample, self.pose, |d| {
             let d = self.wheel_scale.as_ref().map_or(d, |w| w.apply(d));
             match turn_share {
