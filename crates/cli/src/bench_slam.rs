@@ -17,7 +17,10 @@ use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LaserScan, LocalisationState, Message};
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
-use realms_mission::slam_record::{MapGrade, PoseErrors, aligned_rmse, grade_map, pose_errors};
+use realms_mission::slam_record::{
+    CRATER_BANDS, CraterCells, MapGrade, PoseErrors, aligned_rmse, crater_cells, grade_map,
+    map_grid, pose_errors,
+};
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
 use realms_sim::{GroundTruth, World};
@@ -705,6 +708,33 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "crest-marks",
+        what: "the crest a stretch of hidden ground drops behind (the last ground seen before it) marked hazard too",
+        apply: |c| c.traversability.gap_marks_crest = true,
+    },
+    Variant {
+        name: "hazards-drawn-fine",
+        what: "the submaps' hazard layers drawn together on the map's own cells (5 cm), not on the layers' 10 cm",
+        apply: |c| c.traversability.assembled_resolution_m = Some(c.mapper.frontend.resolution_m),
+    },
+    Variant {
+        name: "crater-outlines-checked",
+        what: "crater-outlines, a disc refused when the layer judged more than 30 % of its cells safe",
+        apply: |c| {
+            c.traversability.crater_discs = Some(realms_slam::craters::CraterDiscs {
+                fit_outline: true,
+                max_spread: 0.15,
+                max_safe_share: 0.3,
+                ..Default::default()
+            })
+        },
+    },
+    Variant {
+        name: "depth-at-own-stamp",
+        what: "a depth frame's verdicts placed at the pose of the frame's own stamp (the latest scan's moved on by the odometry since), not at the latest scan's",
+        apply: |c| c.depth_at_own_stamp = true,
+    },
+    Variant {
         name: "crater-discs",
         what: "craters inferred from the hazard layer's crescents (a circle fitted to each), their whole discs marked hazard",
         apply: |c| c.traversability.crater_discs = Some(Default::default()),
@@ -833,6 +863,8 @@ struct Replay {
     relief: Vec<(ReliefHop, Pose2)>,
     /// The final map graded against the truth, as the mission's report grades it.
     map: MapGrade,
+    /// ... and what it says of the crater cells near the path, by where in their craters.
+    crater_cells: CraterCells,
     /// The pose as tracked: its drift by distance to the arena's edge.
     drift: [Band; 3],
 }
@@ -865,6 +897,13 @@ fn with_twins(input: &[CapturedInput], twins: &[LaserScan]) -> Vec<CapturedInput
         .collect()
 }
 
+/// What a mission's maps are graded against: the truth, and the craters' centres and rim
+/// radii (metres).
+struct GradedArena {
+    truth: GroundTruth,
+    craters: Vec<(Point2, f64)>,
+}
+
 /// Runs SLAM for one rover over its captured input.
 fn replay(
     seed: u64,
@@ -872,9 +911,10 @@ fn replay(
     variant: &str,
     cfg: &MappingConfig,
     input: &[CapturedInput],
-    truth: &GroundTruth,
+    graded: &GradedArena,
     with_csv: bool,
 ) -> Replay {
+    let truth = &graded.truth;
     let mut mapping = Mapping::new(rover, cfg.clone());
     // Each scan's time, true pose and pose as tracked.
     let mut scans: Vec<(f64, Pose2, Pose2)> = Vec::new();
@@ -940,7 +980,11 @@ fn replay(
     let end = input.last().map_or(Time::ZERO, |c| c.t);
     // As the rover does before its last map.
     mapping.finish_map();
-    let map = grade_map(&mapping.map(end), truth, &path);
+    let published = mapping.map(end);
+    let map = grade_map(&published, truth, &path);
+    let crater_cells = map_grid(&published)
+        .map(|grid| crater_cells(&grid, truth, &graded.craters, &path))
+        .unwrap_or_default();
     // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
         let k = scans.partition_point(|s| s.0 < t);
@@ -1009,6 +1053,7 @@ fn replay(
         csv,
         relief,
         map,
+        crater_cells,
         drift,
     }
 }
@@ -1217,7 +1262,12 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             ..MissionOptions::default()
         };
         let world = World::new(&s);
-        let truth = world.truth().clone();
+        let arena = GradedArena {
+            truth: world.truth().clone(),
+            craters: (world.terrain().craters.iter())
+                .map(|c| (c.center, c.radius_m))
+                .collect(),
+        };
         let cfg = rover_mapping_config(&world, &options);
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let biases: Vec<f64> = world.rovers().map(|b| b.gyro_bias_rad_s).collect();
@@ -1243,7 +1293,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
         }
         let mut replays = Vec::new();
         for (k, (id, input)) in ids.iter().zip(&capture).enumerate() {
-            replays.push(replay(seed, *id, "baseline", &cfg, input, &truth, with_csv));
+            replays.push(replay(seed, *id, "baseline", &cfg, input, &arena, with_csv));
             if args.lidar_twins {
                 let twinned = with_twins(input, &twins[k]);
                 replays.push(replay(
@@ -1252,7 +1302,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                     AT_ONCE_TWIN,
                     &cfg,
                     &twinned,
-                    &truth,
+                    &arena,
                     with_csv,
                 ));
             }
@@ -1260,7 +1310,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                 let mut changed = cfg.clone();
                 v.apply(&mut changed);
                 replays.push(replay(
-                    seed, *id, &v.name, &changed, input, &truth, with_csv,
+                    seed, *id, &v.name, &changed, input, &arena, with_csv,
                 ));
             }
         }
@@ -1357,6 +1407,34 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             share(|m| (m.path_hazards_flagged, m.path_hazards)),
             share(|m| (m.hazard_correct, m.hazard_cells)),
         );
+    }
+    println!();
+    println!(
+        "Crater cells within 1.5 m of the paths, all rovers, by where in their crater (distance from the centre as a share of the rim's radius): marked / free with a mark within 0.1 m / free / unknown"
+    );
+    println!();
+    let bands: Vec<String> = (0..CRATER_BANDS.len())
+        .map(|b| {
+            let from = if b == 0 { 0.0 } else { CRATER_BANDS[b - 1] };
+            format!("{from:.2}-{:.2}", CRATER_BANDS[b])
+        })
+        .collect();
+    println!("| variant | {} |", bands.join(" | "));
+    println!("| --- |{}", " --- |".repeat(bands.len()));
+    for &name in &names {
+        let mut pooled = CraterCells::default();
+        for r in all.iter().filter(|r| r.variant == name) {
+            pooled.add(&r.crater_cells);
+        }
+        let cells: Vec<String> = (0..CRATER_BANDS.len())
+            .map(|b| {
+                format!(
+                    "{} / {} / {} / {}",
+                    pooled.marked[b], pooled.free_mark_near[b], pooled.free[b], pooled.unknown[b]
+                )
+            })
+            .collect();
+        println!("| {name} | {} |", cells.join(" | "));
     }
     println!();
     println!(

@@ -102,6 +102,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // the maps over sixteen missions came out 95.5 % right instead of 93.7 % (BENCHMARKS.md,
         // "Floor hits of a tilt the levelling has not caught up with").
         tilt_gate: true,
+        depth_at_own_stamp: false,
         mapper: rover_mapper_config(),
         map_period: MAP_PERIOD,
         delta_period: MAP_DELTA_PERIOD,

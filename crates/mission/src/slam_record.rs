@@ -397,6 +397,81 @@ fn obstacle_faces(grid: &Grid<i8>, truth: &GroundTruth) -> (usize, usize) {
     (seen, marked)
 }
 
+/// Where in their craters the true crater cells near a path lie, as a share of the radius
+/// from the centre (the bands' upper edges), and what a map says of them: what
+/// [`MapGrade::path_hazards_flagged`] counts, split so a miss can be told a crest a cell off
+/// from a bowl never judged.
+pub const CRATER_BANDS: [f64; 5] = [0.5, 0.8, 0.9, 0.95, 1.0];
+
+/// What a map says of the true crater cells near a path, by [`CRATER_BANDS`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CraterCells {
+    /// Marked hazard or occupied.
+    pub marked: [usize; 5],
+    /// Free, with a mark within [`CREST_SLACK_M`] (per axis).
+    pub free_mark_near: [usize; 5],
+    /// Free, no mark that near.
+    pub free: [usize; 5],
+    /// Unknown.
+    pub unknown: [usize; 5],
+}
+
+/// How near a mark must lie for [`CraterCells::free_mark_near`], metres: a hazard cell of
+/// 10 cm drawn a cell off.
+pub const CREST_SLACK_M: f64 = 0.1;
+
+impl CraterCells {
+    /// Adds another map's counts.
+    pub fn add(&mut self, o: &CraterCells) {
+        for b in 0..CRATER_BANDS.len() {
+            self.marked[b] += o.marked[b];
+            self.free_mark_near[b] += o.free_mark_near[b];
+            self.free[b] += o.free[b];
+            self.unknown[b] += o.unknown[b];
+        }
+    }
+}
+
+/// Sorts the true crater cells within [`PATH_REACH_M`] of `path` by where in their crater
+/// they lie (`craters`: centre and rim radius, metres) and what `grid` says of them. Cells of
+/// steep floor outside every crater are left out.
+pub fn crater_cells(
+    grid: &Grid<i8>,
+    truth: &GroundTruth,
+    craters: &[(Point2, f64)],
+    path: &[Point2],
+) -> CraterCells {
+    let geo = truth.traversability.geometry();
+    let near = near_path(geo, path, PATH_REACH_M);
+    let is_mark = |v: &i8| *v == OccupancyGrid::HAZARD || *v == OccupancyGrid::OCCUPIED;
+    let mut out = CraterCells::default();
+    for ((c, t), near) in truth.traversability.iter().zip(&near) {
+        if *t != TruthCell::Hazard || !*near {
+            continue;
+        }
+        let p = geo.cell_center(c);
+        let share = craters
+            .iter()
+            .map(|(centre, r)| p.distance_m(*centre) / r)
+            .fold(f64::INFINITY, f64::min);
+        let Some(band) = CRATER_BANDS.iter().position(|edge| share < *edge) else {
+            continue;
+        };
+        let v = grid.at_world(p).copied().unwrap_or(OccupancyGrid::UNKNOWN);
+        let count = if is_mark(&v) {
+            &mut out.marked
+        } else if v == OccupancyGrid::UNKNOWN {
+            &mut out.unknown
+        } else if any_within(grid, p, CREST_SLACK_M, is_mark) {
+            &mut out.free_mark_near
+        } else {
+            &mut out.free
+        };
+        count[band] += 1;
+    }
+    out
+}
+
 /// Per cell of `geo`, whether it lies within `reach_m` of a point of `path`. Points closer
 /// than a cell to the last one stamped add nothing and are skipped.
 fn near_path(geo: &GridGeometry, path: &[Point2], reach_m: f64) -> Vec<bool> {

@@ -72,6 +72,12 @@ pub struct MappingConfig {
     /// floor metres ahead, and the smoothed levelling would keep those hits as an arc of
     /// obstacles across open ground (`false`: the clearance alone).
     pub tilt_gate: bool,
+    /// A depth frame's verdicts are placed at the rover's pose at the frame's own stamp:
+    /// the pose of the latest scan moved on by the odometry since (wheels' travel, gyro's
+    /// heading). Frames come some 50 ms after the scans; placed at the scan's pose they
+    /// land behind the rover's travel and turned back by its turn (`false`: at the
+    /// latest scan's pose).
+    pub depth_at_own_stamp: bool,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -340,6 +346,9 @@ pub struct Mapping {
     /// The two latest odometry poses (wheel translation, gyro heading), oldest first, to
     /// interpolate at a scan's stamp.
     odometry: Vec<(Time, Pose2)>,
+    /// The odometry (gyro heading) the latest scan was tracked with, for a depth frame's
+    /// pose at its own stamp.
+    scan_odometry: Option<Pose2>,
     /// The same readings as the wheels alone gave them (their own heading), for the slip
     /// check's comparison of the wheels' turns with the gyro's.
     wheel_readings: Vec<(Time, Pose2)>,
@@ -391,7 +400,11 @@ impl Mapping {
         Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
-            hazards: SubmapHazards::new(cfg.traversability.resolution_m),
+            hazards: SubmapHazards::new(
+                cfg.traversability.resolution_m,
+                (cfg.traversability.assembled_resolution_m)
+                    .unwrap_or(cfg.traversability.resolution_m),
+            ),
             tracked_once: false,
             hollows: cfg
                 .traversability
@@ -399,6 +412,7 @@ impl Mapping {
                 .map(realms_slam::hollows::HollowFinder::new),
             cfg,
             odometry: Vec::new(),
+            scan_odometry: None,
             wheel_readings: Vec::new(),
             last_wheel: None,
             wheel_period_s: None,
@@ -672,7 +686,7 @@ impl Mapping {
             ));
         }
         if let Some((submap, origin)) = self.mapper.newest_submap() {
-            let rover = origin.inverse() * self.mapper.pose();
+            let rover = origin.inverse() * self.pose_at(cloud.header.stamp);
             self.hazards.insert(submap, rover, &verdicts);
         }
         if self.cfg.depth_features {
@@ -738,6 +752,24 @@ impl Mapping {
                 (t - *t1).as_secs_f64() > WHEELS_SILENT_READINGS * period
             }
             _ => false,
+        }
+    }
+
+    /// The rover's pose at `t` (not before the latest scan): the latest scan's pose moved
+    /// on by the odometry since, if so configured ([`MappingConfig::depth_at_own_stamp`]).
+    fn pose_at(&self, t: Time) -> Pose2 {
+        let pose = self.mapper.pose();
+        if !self.cfg.depth_at_own_stamp {
+            return pose;
+        }
+        match (self.scan_odometry, self.odometry_at(t)) {
+            (Some(at_scan), Some(mut now)) => {
+                if self.gyro_heard {
+                    now.yaw_rad = self.gyro_yaw_at(t);
+                }
+                pose * (at_scan.inverse() * now)
+            }
+            _ => pose,
         }
     }
 
@@ -859,6 +891,7 @@ impl Mapping {
         let tracked = self
             .mapper
             .add_points_with(stamp.as_secs_f64(), sample, points);
+        self.scan_odometry = Some(odom);
         self.tracked_once = true;
         for (_, change) in self.mapper.take_transitions() {
             out.push(Outgoing {
@@ -982,7 +1015,7 @@ impl Mapping {
             // A hazard cell with what the lidar sees as an obstacle at its centre or one
             // hazard cell away (eight points round it) is a wall's or a rock's foot, not a
             // crater's wall.
-            let reach_m = states.resolution_m();
+            let reach_m = self.cfg.traversability.resolution_m;
             let wall = |p: Point2| {
                 (-1..=1).any(|dy| {
                     (-1..=1).any(|dx| {
@@ -1062,6 +1095,7 @@ mod tests {
                 ground_clearance_m: 0.12,
                 tilt_smoothing: 0.2,
                 tilt_gate: false,
+                depth_at_own_stamp: false,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),
@@ -1141,6 +1175,38 @@ mod tests {
             0
         );
         assert_eq!(floor_hits_after_a_tilt(gated(), 0.0, 8.0), 0);
+    }
+
+    #[test]
+    fn a_depth_frame_is_placed_at_its_own_stamp_by_the_odometry_since_the_scan() {
+        // Odometry along x, a scan at 0.40 s, then the wheels 2 cm on and turned 0.05 rad
+        // at 0.45 s, when a depth frame is stamped.
+        let at = |t: f64, x: f64, yaw: f64| {
+            let mut o = odom(Time::from_secs_f64(t));
+            o.pose.pose.position.x = x;
+            o.pose.pose.orientation = Quaternion::from_roll_pitch_yaw(0.0, 0.0, yaw);
+            o
+        };
+        for own_stamp in [false, true] {
+            let mut m = mapping();
+            m.cfg.depth_at_own_stamp = own_stamp;
+            m.on_odometry(&at(0.35, 0.14, 0.0));
+            m.on_odometry(&at(0.40, 0.16, 0.0));
+            m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.0), &mut Vec::new());
+            m.on_odometry(&at(0.45, 0.18, 0.05));
+            let scan_pose = m.mapper.pose();
+            let expected = if own_stamp {
+                scan_pose * Pose2::new(0.02, 0.0, 0.05)
+            } else {
+                scan_pose
+            };
+            let got = m.pose_at(Time::from_secs_f64(0.45));
+            let off = got.relative_to(&expected);
+            assert!(
+                off.x_m.hypot(off.y_m) < 1e-9 && off.yaw_rad.abs() < 1e-9,
+                "{own_stamp}: {got:?} against {expected:?}"
+            );
+        }
     }
 
     #[test]

@@ -363,6 +363,7 @@ mod tests {
                     ground_clearance_m: 0.12,
                     tilt_smoothing: 0.2,
                     tilt_gate: false,
+                    depth_at_own_stamp: false,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),

@@ -25,6 +25,13 @@ use realms_core::{Grid, Point2, Pose2};
 pub struct TraversabilityConfig {
     /// Elevation cell edge, metres.
     pub resolution_m: f64,
+    /// Cell edge the submaps' layers are drawn together at, metres (`None`: `resolution_m`).
+    /// Each drawing takes every cell from the layer cell its centre falls in, and so moves
+    /// an edge by up to half a cell of the layer it is drawn on; drawn straight onto the
+    /// map's finer cells, a crater's edge moves less. Not the rovers' default: four times
+    /// the cells cost a fifth of the fleet's SLAM speed for little (BENCHMARKS.md, "Where
+    /// the crater cells near the paths are missed").
+    pub assembled_resolution_m: Option<f64>,
     /// Tallest step the rover drives over, metres.
     pub max_step_m: f64,
     /// Steepest slope it drives on, radians.
@@ -47,6 +54,12 @@ pub struct TraversabilityConfig {
     /// Hidden ground is a hazard in [`shadow_gaps`] when the ground beyond it resumes this
     /// much lower than the ground before it (the rovers take their step limit), metres.
     pub gap_drop_m: f64,
+    /// The cell of the last ground seen before such a hidden stretch is a hazard too: it is
+    /// the crest the ground drops away behind, and the camera, seeing only its near side,
+    /// judges it safe. The truth holds a crater's whole disc out to the crest hazard. Not
+    /// the rovers' default: on fixed paths it marked few more of the crater cells near them
+    /// (BENCHMARKS.md, "Where the crater cells near the paths are missed").
+    pub gap_marks_crest: bool,
     /// Craters inferred from the layer's crescents of hazard, their whole discs marked
     /// ([`crate::craters`]); `None` marks only what the camera judged.
     pub crater_discs: Option<crate::craters::CraterDiscs>,
@@ -59,6 +72,7 @@ impl Default for TraversabilityConfig {
     fn default() -> Self {
         TraversabilityConfig {
             resolution_m: 0.1,
+            assembled_resolution_m: None,
             max_step_m: 0.08,
             max_slope_rad: 20f64.to_radians(),
             max_drop_m: 0.15,
@@ -66,6 +80,7 @@ impl Default for TraversabilityConfig {
             min_points: 1,
             gap_reach_m: 4.0,
             gap_drop_m: 0.08,
+            gap_marks_crest: false,
             crater_discs: None,
             hazard_hollows: None,
         }
@@ -236,8 +251,9 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
 /// ground points are walked outwards; where they stop and resume more than `min_gap_m`
 /// farther out *and lower than the ground before the gap* (the lowest point within
 /// [`GROUND_BEFORE_GAP_M`] of its near end), the ground in between dropped out of sight, and
-/// every cell of the gap within `cfg.max_range_m` is judged hazardous; the gap may end at a
-/// point as far as `cfg.gap_reach_m`. A rock hides the ground behind it too, but
+/// every cell of the gap within `cfg.max_range_m` is judged hazardous (with the crest it
+/// starts at, if `cfg.gap_marks_crest`); the gap may end at a point as far as
+/// `cfg.gap_reach_m`. A rock hides the ground behind it too, but
 /// there the ground resumes at the height of the ground in front of it, only lower than the
 /// rock's top: that shadow is left to [`judge_frame`].
 ///
@@ -293,6 +309,9 @@ pub fn shadow_gaps(
                 .fold(near[2], |low, (_, _, p, _)| low.min(p[2]));
             if far[2] > ground_before - cfg.gap_drop_m {
                 continue;
+            }
+            if cfg.gap_marks_crest {
+                out.push((Point2::new(near[0], near[1]), true));
             }
             // Cells along the hidden stretch, at the resolution of the layer.
             let steps = ((d1 - d0) / cfg.resolution_m).ceil() as usize;
@@ -440,16 +459,19 @@ impl HazardMap {
 pub struct SubmapHazards {
     layers: Vec<Option<HazardMap>>,
     current: Option<usize>,
+    /// The layers' cell edge, metres.
+    resolution_m: f64,
     assembly: Assembly,
 }
 
 impl SubmapHazards {
-    /// No layers yet, `resolution_m` cells.
-    pub fn new(resolution_m: f64) -> Self {
+    /// No layers yet, `resolution_m` cells, drawn together on cells of `assembled_m`.
+    pub fn new(resolution_m: f64, assembled_m: f64) -> Self {
         SubmapHazards {
             layers: Vec::new(),
             current: None,
-            assembly: Assembly::hazard_votes(resolution_m),
+            resolution_m,
+            assembly: Assembly::hazard_votes(assembled_m),
         }
     }
 
@@ -459,7 +481,7 @@ impl SubmapHazards {
         if self.layers.len() <= submap {
             self.layers.resize(submap + 1, None);
         }
-        let resolution = self.assembly.resolution_m();
+        let resolution = self.resolution_m;
         self.layers[submap]
             .get_or_insert_with(|| HazardMap::new(resolution))
             .insert(rover_in_submap, verdicts);
@@ -537,7 +559,7 @@ mod tests {
 
     #[test]
     fn a_hazard_seen_once_close_by_outvotes_many_distant_safe_looks() {
-        let mut layers = SubmapHazards::new(0.1);
+        let mut layers = SubmapHazards::new(0.1, 0.1);
         let rock = Point2::new(1.05, 0.05);
         // Three submaps, their origins 1 m apart along x; the first two saw the cell safe
         // over and over, the newest saw it hazardous once.
@@ -556,7 +578,7 @@ mod tests {
         let states = layers.states(&origins);
         assert_eq!(states.at_world(rock), Some(&CellState::Occupied));
         // Where only safe looks were taken (two: one alone is undecided), the cell is safe.
-        let mut safe = SubmapHazards::new(0.1);
+        let mut safe = SubmapHazards::new(0.1, 0.1);
         safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
         safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
         let states = safe.states(&origins[..1]);
@@ -638,6 +660,33 @@ mod tests {
             p[2] = -0.12;
         }
         assert!(shadow_gaps(&[col], &[], &cfg, 0.5).iter().any(|(_, h)| *h));
+    }
+
+    #[test]
+    fn the_crest_a_hidden_stretch_drops_behind_is_marked_only_if_asked() {
+        // Floor to 2.0 m (its last point at 2.02 m), hidden ground, then ground 12 cm lower.
+        let col = floor_then_ground_beyond(3.6, -0.12);
+        let crest = |cfg: &TraversabilityConfig| {
+            shadow_gaps(std::slice::from_ref(&col), &[], cfg, 0.5)
+                .iter()
+                .any(|(p, h)| *h && (p.x_m - 2.02).abs() < 1e-9)
+        };
+        let cfg = TraversabilityConfig::default();
+        assert!(!crest(&cfg));
+        assert!(crest(&TraversabilityConfig {
+            gap_marks_crest: true,
+            ..cfg
+        }));
+        // A rock's shadow starts no hazard, and so marks no crest.
+        let mut flat = col.clone();
+        for p in flat.iter_mut().skip(20) {
+            p[2] = 0.0;
+        }
+        let marking = TraversabilityConfig {
+            gap_marks_crest: true,
+            ..cfg
+        };
+        assert!(shadow_gaps(&[flat], &[], &marking, 0.5).is_empty());
     }
 
     #[test]
