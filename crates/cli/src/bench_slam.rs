@@ -18,8 +18,8 @@ use anyhow::{Context, Result, bail};
 use realms_core::msgs::{LaserScan, LocalisationState, Message};
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_mission::slam_record::{
-    CRATER_BANDS, CraterCells, MapGrade, PoseErrors, aligned_rmse, crater_cells, grade_map,
-    map_grid, pose_errors,
+    CRATER_BANDS, CREST_SLACK_M, CraterCells, MapGrade, PATH_REACH_M, PoseErrors, aligned_rmse,
+    crater_cells, grade_grid, map_grid, pose_errors,
 };
 use realms_mission::{CapturedInput, Mission, MissionOptions, replay_slam, rover_mapping_config};
 use realms_node::mapping::{Mapping, MappingConfig, RELIEF_REFERENCE_TRAVEL_M, ReliefHop};
@@ -980,11 +980,14 @@ fn replay(
     let end = input.last().map_or(Time::ZERO, |c| c.t);
     // As the rover does before its last map.
     mapping.finish_map();
-    let published = mapping.map(end);
-    let map = grade_map(&published, truth, &path);
-    let crater_cells = map_grid(&published)
-        .map(|grid| crater_cells(&grid, truth, &graded.craters, &path))
-        .unwrap_or_default();
+    let (map, crater_cells) = match map_grid(&mapping.map(end)) {
+        Some(grid) => (
+            grade_grid(&grid, truth, &path),
+            crater_cells(&grid, truth, &graded.craters, &path),
+        ),
+        // A map whose size does not match its data grades as empty.
+        None => Default::default(),
+    };
     // The final trajectory's poses are stamped with their scans' times.
     let truth_at = |t: f64| {
         let k = scans.partition_point(|s| s.0 < t);
@@ -1410,7 +1413,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
     }
     println!();
     println!(
-        "Crater cells within 1.5 m of the paths, all rovers, by where in their crater (distance from the centre as a share of the rim's radius): marked / free with a mark within 0.1 m / free / unknown"
+        "Crater cells within {PATH_REACH_M} m of the paths, all rovers, by where in their crater (distance from the centre as a share of the rim's radius): marked / free with a mark within {CREST_SLACK_M} m (per axis) / free / unknown"
     );
     println!();
     let bands: Vec<String> = (0..CRATER_BANDS.len())

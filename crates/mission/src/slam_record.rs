@@ -397,23 +397,27 @@ fn obstacle_faces(grid: &Grid<i8>, truth: &GroundTruth) -> (usize, usize) {
     (seen, marked)
 }
 
-/// Where in their craters the true crater cells near a path lie, as a share of the radius
-/// from the centre (the bands' upper edges), and what a map says of them: what
-/// [`MapGrade::path_hazards_flagged`] counts, split so a miss can be told a crest a cell off
-/// from a bowl never judged.
+/// The bands of [`CraterCells`]: their upper edges, as a share of a crater's radius from its
+/// centre.
 pub const CRATER_BANDS: [f64; 5] = [0.5, 0.8, 0.9, 0.95, 1.0];
 
-/// What a map says of the true crater cells near a path, by [`CRATER_BANDS`].
+/// Cells of each band of [`CRATER_BANDS`].
+pub type BandCounts = [usize; CRATER_BANDS.len()];
+
+/// The crater part of [`MapGrade::path_hazards_flagged`] (true hazard cells inside a
+/// crater's rim, not steep floor outside one), sorted by where in their crater the cells
+/// lie and what a map says of them, so a miss at the crest a cell off can be told from a
+/// bowl never judged.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CraterCells {
     /// Marked hazard or occupied.
-    pub marked: [usize; 5],
+    pub marked: BandCounts,
     /// Free, with a mark within [`CREST_SLACK_M`] (per axis).
-    pub free_mark_near: [usize; 5],
+    pub free_mark_near: BandCounts,
     /// Free, no mark that near.
-    pub free: [usize; 5],
+    pub free: BandCounts,
     /// Unknown.
-    pub unknown: [usize; 5],
+    pub unknown: BandCounts,
 }
 
 /// How near a mark must lie for [`CraterCells::free_mark_near`], metres: a hazard cell of
@@ -625,6 +629,73 @@ mod tests {
             (g.path_hazards_flagged_nearby - 16.0 / 32.0).abs() < 1e-12,
             "{g:?}"
         );
+    }
+
+    #[test]
+    fn crater_cells_are_sorted_by_where_in_their_crater_and_what_the_map_says() {
+        use realms_core::Cell;
+        let geo = GridGeometry {
+            width: 40,
+            height: 40,
+            resolution_m: 0.05,
+            origin: Point2::new(0.0, 0.0),
+        };
+        // A crater of 0.5 m radius centred on the corner of cells (19, 19) and (20, 20).
+        let (centre, radius) = (Point2::new(1.0, 1.0), 0.5);
+        let cells_of = || (0..40).flat_map(|y| (0..40).map(move |x| Cell { x, y }));
+        let mut traversability = Grid::new(geo, TruthCell::Free);
+        for c in cells_of() {
+            if geo.cell_center(c).distance_m(centre) < radius {
+                *traversability.get_mut(c.x, c.y).expect("inside") = TruthCell::Hazard;
+            }
+        }
+        // Steep floor outside the crater is not counted.
+        *traversability.get_mut(0, 0).expect("inside") = TruthCell::Hazard;
+        let truth = GroundTruth {
+            traversability,
+            lidar_obstacles: Grid::new(geo, false),
+            explorable: Grid::new(geo, true),
+            explorable_area_m2: 4.0,
+        };
+        // The map marks the crater out to 0.45 m of its centre, calls the rest free but for
+        // the cells west of x = 0.6 m, which it never saw.
+        let mut map = Grid::new(geo, OccupancyGrid::FREE);
+        for c in cells_of() {
+            let p = geo.cell_center(c);
+            let v = map.get_mut(c.x, c.y).expect("inside");
+            if p.distance_m(centre) < 0.45 {
+                *v = OccupancyGrid::HAZARD;
+            } else if p.x_m < 0.6 {
+                *v = OccupancyGrid::UNKNOWN;
+            }
+        }
+        let cells = crater_cells(&map, &truth, &[(centre, radius)], &[centre]);
+        let share = |c: Cell| geo.cell_center(c).distance_m(centre) / radius;
+        let (mut marked, mut near, mut unknown) = ([0; 5], [0; 5], [0; 5]);
+        for (c, t) in truth.traversability.iter() {
+            if *t != TruthCell::Hazard || c == (Cell { x: 0, y: 0 }) {
+                continue;
+            }
+            let s = share(c);
+            let band = CRATER_BANDS.iter().position(|e| s < *e).expect("inside");
+            let p = geo.cell_center(c);
+            if p.distance_m(centre) < 0.45 {
+                marked[band] += 1;
+            } else if p.x_m < 0.6 {
+                unknown[band] += 1;
+            } else {
+                // The ring from 0.45 to 0.5 m is one cell wide: a mark is always beside it.
+                near[band] += 1;
+            }
+        }
+        assert_eq!(cells.marked, marked);
+        assert_eq!(cells.free_mark_near, near);
+        assert_eq!(cells.free, [0; 5]);
+        assert_eq!(cells.unknown, unknown);
+        // Within 0.45 m is within 0.9 of the radius; the outer bands hold the free ring.
+        assert_eq!(cells.marked[3..], [0, 0]);
+        assert!(cells.free_mark_near[3] > 0 && cells.free_mark_near[4] > 0);
+        assert!(cells.unknown.iter().sum::<usize>() > 0);
     }
 
     #[test]

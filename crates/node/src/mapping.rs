@@ -891,7 +891,9 @@ impl Mapping {
         let tracked = self
             .mapper
             .add_points_with(stamp.as_secs_f64(), sample, points);
-        self.scan_odometry = Some(odom);
+        // A scan taken while the wheels are silent holds their last reading, and the first
+        // reading back carries the whole dropout's travel: no frame is moved on by that.
+        self.scan_odometry = (!sample.wheels_silent).then_some(odom);
         self.tracked_once = true;
         for (_, change) in self.mapper.take_transitions() {
             out.push(Outgoing {
@@ -1013,8 +1015,9 @@ impl Mapping {
         }
         if let Some(discs) = discs {
             // A hazard cell with what the lidar sees as an obstacle at its centre or one
-            // hazard cell away (eight points round it) is a wall's or a rock's foot, not a
-            // crater's wall.
+            // judged cell away (eight points round it) is a wall's or a rock's foot, not a
+            // crater's wall. (The discs' own counts, such as their fewest cells, are of the
+            // cells the layers are drawn on.)
             let reach_m = self.cfg.traversability.resolution_m;
             let wall = |p: Point2| {
                 (-1..=1).any(|dy| {
@@ -1179,21 +1182,22 @@ mod tests {
 
     #[test]
     fn a_depth_frame_is_placed_at_its_own_stamp_by_the_odometry_since_the_scan() {
-        // Odometry along x, a scan at 0.40 s, then the wheels 2 cm on and turned 0.05 rad
-        // at 0.45 s, when a depth frame is stamped.
-        let at = |t: f64, x: f64, yaw: f64| {
+        // Odometry heading 0.5 rad, a scan at 0.40 s, then the wheels 2 cm on along their
+        // heading and turned 0.05 rad at 0.45 s, when a depth frame is stamped.
+        let at = |t: f64, along: f64, yaw: f64| {
             let mut o = odom(Time::from_secs_f64(t));
-            o.pose.pose.position.x = x;
+            o.pose.pose.position.x = along * 0.5f64.cos();
+            o.pose.pose.position.y = along * 0.5f64.sin();
             o.pose.pose.orientation = Quaternion::from_roll_pitch_yaw(0.0, 0.0, yaw);
             o
         };
         for own_stamp in [false, true] {
             let mut m = mapping();
             m.cfg.depth_at_own_stamp = own_stamp;
-            m.on_odometry(&at(0.35, 0.14, 0.0));
-            m.on_odometry(&at(0.40, 0.16, 0.0));
+            m.on_odometry(&at(0.35, 0.14, 0.5));
+            m.on_odometry(&at(0.40, 0.16, 0.5));
             m.on_scan(&scan_ahead(Time::from_secs_f64(0.4), 3.0), &mut Vec::new());
-            m.on_odometry(&at(0.45, 0.18, 0.05));
+            m.on_odometry(&at(0.45, 0.18, 0.55));
             let scan_pose = m.mapper.pose();
             let expected = if own_stamp {
                 scan_pose * Pose2::new(0.02, 0.0, 0.05)

@@ -677,7 +677,8 @@ mod tests {
             gap_marks_crest: true,
             ..cfg
         }));
-        // A rock's shadow starts no hazard, and so marks no crest.
+        // Ground that resumes as high as before the hidden stretch (a rock's shadow) starts
+        // no hazard, and so marks no crest.
         let mut flat = col.clone();
         for p in flat.iter_mut().skip(20) {
             p[2] = 0.0;
