@@ -557,8 +557,10 @@ type BurstTest = fn(&Burst) -> bool;
 
 /// Where the bursts came, by what became of them: what the lidar could see there.
 fn print_scenes(all: &[&Burst]) {
-    // Wheels that turned at least this far by the deadline, the body less than half as far.
-    const TURN_DEG: f64 = 5.0;
+    // Wheels that turned as far as the rovers' turn check asks by the deadline, the body
+    // less than the share of it the check allows.
+    let check = realms_slam::health::TurnCheck::default();
+    let (turn_deg, body_share) = (check.min_wheels_rad.to_degrees(), check.max_gyro_share);
     let groups: [(&str, BurstTest); 3] = [
         ("reported within the deadline", Burst::caught),
         ("reported late", |b| b.latency_s.is_some() && !b.caught()),
@@ -566,7 +568,7 @@ fn print_scenes(all: &[&Burst]) {
     ];
     println!();
     println!(
-        "| bursts | count | nearest wall, median | one wall or none in range | no rock above the lidar's plane nor the lander in range | both | nothing in range facing the heading | wheels turned {TURN_DEG:.0} deg or more by the deadline, the body under half that |"
+        "| bursts | count | nearest wall, median | one wall or none in range | no rock above the lidar's plane nor the lander in range | both | nothing in range facing the heading | wheels turned {turn_deg:.0} deg or more by the deadline, the body under {body_share} of that |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for (name, keep) in groups {
@@ -578,7 +580,7 @@ fn print_scenes(all: &[&Burst]) {
         let scenes: Vec<Scene> = group.iter().map(|b| b.scene).collect();
         let turned = group
             .iter()
-            .filter(|b| b.turns_deg.0 >= TURN_DEG && b.turns_deg.1 < 0.5 * b.turns_deg.0)
+            .filter(|b| b.turns_deg.0 >= turn_deg && b.turns_deg.1 < body_share * b.turns_deg.0)
             .count();
         let n = scenes.len() as f64;
         let share =

@@ -705,24 +705,18 @@ impl Mapping {
                 .collect();
             let stride = on_hazards.len().div_ceil(DEPTH_FEATURES_MAX).max(1);
             let kept = on_hazards.into_iter().step_by(stride).collect();
-            self.depth_features = self.odometry_at(stamp).map(|mut odom| {
-                if self.gyro_heard {
-                    odom.yaw_rad = self.gyro_yaw_at(stamp);
-                }
-                (stamp, odom, kept)
-            });
+            self.depth_features = self
+                .headed_odometry_at(stamp)
+                .map(|odom| (stamp, odom, kept));
         }
     }
 
     /// Fits a depth frame's `points` (levelled rover frame) onto the reference frame's relief,
     /// and makes it the next reference once the rover has moved on far enough.
     fn fit_relief(&mut self, stamp: Time, points: &[[f64; 3]], cfg: &ReliefConfig) {
-        let Some(mut odom) = self.odometry_at(stamp) else {
+        let Some(odom) = self.headed_odometry_at(stamp) else {
             return;
         };
-        if self.gyro_heard {
-            odom.yaw_rad = self.gyro_yaw_at(stamp);
-        }
         let mut refresh = true;
         if let Some((from, patch, at)) = &self.relief_reference {
             let wheels = at.inverse() * odom;
@@ -762,15 +756,20 @@ impl Mapping {
         if !self.cfg.depth_at_own_stamp {
             return pose;
         }
-        match (self.scan_odometry, self.odometry_at(t)) {
-            (Some(at_scan), Some(mut now)) => {
-                if self.gyro_heard {
-                    now.yaw_rad = self.gyro_yaw_at(t);
-                }
-                pose * (at_scan.inverse() * now)
-            }
+        match (self.scan_odometry, self.headed_odometry_at(t)) {
+            (Some(at_scan), Some(now)) => pose * (at_scan.inverse() * now),
             _ => pose,
         }
+    }
+
+    /// Odometry at `t` with the gyro's heading at `t` once the gyro is heard: it samples
+    /// five times as often as the wheels report.
+    fn headed_odometry_at(&self, t: Time) -> Option<Pose2> {
+        let mut odom = self.odometry_at(t)?;
+        if self.gyro_heard {
+            odom.yaw_rad = self.gyro_yaw_at(t);
+        }
+        Some(odom)
     }
 
     /// Odometry at `t`, interpolated (or extrapolated a little) from the latest two readings.
@@ -812,16 +811,14 @@ impl Mapping {
         // one at its stamp.
         let stamp = scan.last_beam_time();
         let deskewing = self.cfg.deskew && scan.sweep() > Duration::ZERO;
-        let Some(mut odom) = self.odometry_at(stamp) else {
+        let Some(odom) = self.headed_odometry_at(stamp) else {
             // No odometry yet: nothing to anchor the map frame to.
             return;
         };
-        if self.gyro_heard {
-            // The gyro samples five times as often as the wheels report.
-            odom.yaw_rad = self.gyro_yaw_at(stamp);
-            if let Some(wheels) = self.reading_at(&self.wheel_readings, stamp) {
-                self.mapper.set_wheel_heading(wheels.yaw_rad);
-            }
+        if self.gyro_heard
+            && let Some(wheels) = self.reading_at(&self.wheel_readings, stamp)
+        {
+            self.mapper.set_wheel_heading(wheels.yaw_rad);
         }
         let max = (self.cfg.mapper.frontend.max_range_m as f32).min(scan.range_max_m);
         let min = (self.cfg.mapper.frontend.min_range_m as f32).max(scan.range_min_m);

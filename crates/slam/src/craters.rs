@@ -193,12 +193,12 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
     if reach > cfg.max_radius_m {
         return None;
     }
-    let disc: Vec<Cell> = g.cells_within(centre, reach).collect();
-    let safe = disc
-        .iter()
-        .filter(|c| cells[g.index(**c)] == CellState::Free)
-        .count();
-    (safe as f64 <= cfg.max_safe_share * disc.len() as f64).then_some(Crater {
+    let (safe, all) = g
+        .cells_within(centre, reach)
+        .fold((0usize, 0usize), |(s, n), c| {
+            (s + usize::from(cells[g.index(c)] == CellState::Free), n + 1)
+        });
+    (safe as f64 <= cfg.max_safe_share * all as f64).then_some(Crater {
         centre,
         radius_m: reach,
     })
