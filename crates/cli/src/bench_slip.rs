@@ -52,6 +52,12 @@ struct Burst {
     /// (the first check after the all-clear or, without one, [`LATE_S`] after its end).
     error_before_m: f64,
     error_after_m: f64,
+    /// How far the published pose's motion from before the burst to after it (the two
+    /// checks above) is off the true motion, metres: what the burst left behind, whatever
+    /// the error was before.
+    residual_m: f64,
+    /// Seconds between those two checks.
+    span_s: f64,
     /// What the lidar could see where the burst began.
     scene: Scene,
     /// How far the wheels and the truth turned between the burst's start and its deadline
@@ -137,6 +143,74 @@ struct Run {
     false_alarms: Vec<(String, FalseAlarm)>,
     rover_hours: f64,
     wall_s: f64,
+    calm: Calm,
+}
+
+/// The published pose away from every burst: how often it is within 0.2 m of the truth when
+/// nothing has just slipped, which the figure after recovery cannot be expected to beat.
+#[derive(Clone, Debug, Default)]
+struct Calm {
+    checks: usize,
+    /// The pose published then within 0.2 m of the truth ...
+    live_within: usize,
+    /// ... and the final trajectory's pose of the same instant.
+    optimised_within: usize,
+    /// The published pose's motion over [`CALM_WINDOW_S`] from each check, off the true
+    /// motion (see [`motion_error_m`]), where no burst touches the window.
+    drift_m: Vec<f64>,
+}
+
+/// The span of the windows of [`Calm::drift_m`], seconds: about a burst's, from a second
+/// before it to its recovery.
+const CALM_WINDOW_S: f64 = 12.0;
+
+impl Calm {
+    /// The checks of `record` outside every one of `faults`, from a second before it to
+    /// [`SETTLE_WITHIN_S`] after its end.
+    fn of(record: &RoverSlamRecord, faults: &[&Fault]) -> Calm {
+        let near_burst = |t: f64| {
+            faults
+                .iter()
+                .any(|f| t >= f.at_s - 1.0 && t <= f.at_s + f.duration_s + SETTLE_WITHIN_S)
+        };
+        let within = |p: realms_core::Pose2, truth: realms_core::Pose2| {
+            p.position().distance_m(truth.position()) <= 0.2
+        };
+        let mut calm = Calm::default();
+        for c in record
+            .checks
+            .iter()
+            .filter(|c| !near_burst(c.t.as_secs_f64()))
+        {
+            calm.checks += 1;
+            calm.live_within += usize::from(within(c.estimate, c.truth));
+            calm.optimised_within += usize::from(c.optimised.is_some_and(|o| within(o, c.truth)));
+            let t = c.t.as_secs_f64();
+            if let Some(end) = check_at(record, t + CALM_WINDOW_S)
+                && (end.t.as_secs_f64() - t) < CALM_WINDOW_S + 1.5
+                && !near_burst(end.t.as_secs_f64())
+                && !faults
+                    .iter()
+                    .any(|f| f.at_s <= end.t.as_secs_f64() && f.at_s + f.duration_s >= t)
+            {
+                calm.drift_m.push(motion_error_m(c, end));
+            }
+        }
+        calm
+    }
+
+    /// `n` of the checks, in per cent.
+    fn share(&self, n: usize) -> f64 {
+        100.0 * n as f64 / self.checks.max(1) as f64
+    }
+
+    fn add(mut self, other: &Calm) -> Calm {
+        self.checks += other.checks;
+        self.live_within += other.live_within;
+        self.optimised_within += other.optimised_within;
+        self.drift_m.extend_from_slice(&other.drift_m);
+        self
+    }
 }
 
 /// Bursts for every rover of a mission: the first after the gyro calibration, then one every
@@ -168,6 +242,14 @@ fn check_at(record: &RoverSlamRecord, t_s: f64) -> Option<&PoseCheck> {
 /// The published pose's position error at the first check at or after `t_s`.
 fn error_at(record: &RoverSlamRecord, t_s: f64) -> Option<f64> {
     check_at(record, t_s).map(|c| c.estimate.position().distance_m(c.truth.position()))
+}
+
+/// How far the published pose's motion from check `a` to check `b` is off the true motion
+/// (in `a`'s frame), metres.
+fn motion_error_m(a: &PoseCheck, b: &PoseCheck) -> f64 {
+    let estimated = b.estimate.relative_to(&a.estimate).position();
+    let truth = b.truth.relative_to(&a.truth).position();
+    estimated.distance_m(truth)
 }
 
 /// The 1 Hz checks spanning `from_s` to `to_s`: from the last at or before the one to the
@@ -333,7 +415,10 @@ fn grade(
                 .copied()
                 .find(|t| *t >= end && *t <= (end + SETTLE_WITHIN_S).min(next_burst))
                 .unwrap_or(end + LATE_S);
+            let (before, after) = (check_at(record, f.at_s - 1.0)?, check_at(record, settled)?);
             Some(Burst {
+                residual_m: motion_error_m(before, after),
+                span_s: (after.t - before.t).as_secs_f64(),
                 rover: f.rover.clone(),
                 start_s: f.at_s,
                 odometry_travel_m: travel,
@@ -401,6 +486,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             false_alarms: Vec::new(),
             rover_hours: 0.0,
             wall_s: 0.0,
+            calm: Calm::default(),
         };
         for (r, record) in mission.slam_records().iter().enumerate() {
             let name = RoverId(r as u8 + 1).to_string();
@@ -412,6 +498,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             run.false_alarms
                 .extend(false_alarms.into_iter().map(|f| (name.clone(), f)));
             run.rover_hours += end_s / 3600.0;
+            run.calm = run.calm.add(&Calm::of(record, &mine));
         }
         run.wall_s = t0.elapsed().as_secs_f64();
         let caught = run.bursts.iter().filter(|b| b.caught()).count();
@@ -427,13 +514,13 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
     runs.sort_by_key(|r| r.seed);
 
     println!(
-        "| seed | bursts seen by the wheels | reported within {DEADLINE_S} s | latency, median | false alarms | per rover-hour | error after recovery, median (growth) | wall |"
+        "| seed | bursts seen by the wheels | reported within {DEADLINE_S} s | latency, median | false alarms | per rover-hour | error after recovery, median (growth) | away from bursts, within 0.2 m: published / final | wall |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for r in &runs {
         let caught = r.bursts.iter().filter(|b| b.caught()).count();
         println!(
-            "| {} | {} | {} | {:.1} s | {} | {:.1} | {:.2} m ({:+.2} m) | {:.0} s |",
+            "| {} | {} | {} | {:.1} s | {} | {:.1} | {:.2} m ({:+.2} m) | {:.1} / {:.1} % | {:.0} s |",
             r.seed,
             r.bursts.len(),
             caught,
@@ -442,6 +529,8 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
             r.false_alarms.len() as f64 / r.rover_hours,
             median(r.bursts.iter().map(|b| b.error_after_m).collect()),
             median(r.bursts.iter().map(Burst::growth_m).collect()),
+            r.calm.share(r.calm.live_within),
+            r.calm.share(r.calm.optimised_within),
             r.wall_s
         );
     }
@@ -486,6 +575,24 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
     println!(
         "Of the {} bursts after which the pose was more than 0.2 m off, it was that far off before {off_before} of them (a second before the burst began).",
         all.len() - within(0.2)
+    );
+    let calm = runs.iter().fold(Calm::default(), |a, r| a.add(&r.calm));
+    println!(
+        "Away from the bursts (from a second before each to {SETTLE_WITHIN_S:.0} s after it ends), the published pose is within 0.2 m of the truth at {:.1} % of the {} checks (1 Hz), the final trajectory at {:.1} %.",
+        calm.share(calm.live_within),
+        calm.checks,
+        calm.share(calm.optimised_within)
+    );
+    let residuals: Vec<f64> = all.iter().map(|b| b.residual_m).collect();
+    println!(
+        "What a burst leaves: from a second before it to its recovery (median {:.0} s), the published pose's motion is off the true motion by {:.3} m (median; 90th percentile {:.3} m, mean {:.3} m); over {CALM_WINDOW_S:.0} s away from the bursts, by {:.3} m (90th percentile {:.3} m, mean {:.3} m).",
+        median(all.iter().map(|b| b.span_s).collect()),
+        median(residuals.clone()),
+        percentile(&residuals, 0.9),
+        mean(&residuals),
+        median(calm.drift_m.clone()),
+        percentile(&calm.drift_m, 0.9),
+        mean(&calm.drift_m),
     );
     let missed: Vec<String> = runs
         .iter()
@@ -550,6 +657,18 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
     }
     print_scenes(&all);
     Ok(())
+}
+
+/// The value below which a share `q` of `v` lies (nearest rank); NaN for none.
+fn percentile(v: &[f64], q: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let k = ((v.len() as f64 * q).ceil() as usize).clamp(1, v.len().max(1)) - 1;
+    v.get(k).copied().unwrap_or(f64::NAN)
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
 }
 
 /// Which bursts a row of the scenes' table takes.

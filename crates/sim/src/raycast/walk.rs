@@ -25,6 +25,10 @@ pub(super) struct ClearWalk {
     t_per_drop_m: f64,
     inv_res: f64,
     inv_dz: f64,
+    /// Layers below the ray's height the step reads: one for a falling ray (so it may drop
+    /// a layer's spacing before the step must end), none for one that never falls (it stays
+    /// above the layer at its own height: fewer cells reach it, so the steps are longer).
+    layers_below: f64,
     t: f64,
     t_max: f64,
 }
@@ -118,6 +122,7 @@ impl HeightPyramid {
             },
             inv_res: 1.0 / self.geometry.resolution_m,
             inv_dz: 1.0 / c.dz_m,
+            layers_below: if dir[2] < 0.0 { 1.0 } else { 0.0 },
             t: t_min,
             t_max,
         })
@@ -137,11 +142,11 @@ impl HeightPyramid {
             return ClearStep::Exact(t);
         }
         let z = w.origin[2] + w.dir[2] * t;
-        let layer = (z - c.z0_m) * w.inv_dz;
-        if layer < 1.0 {
+        let layer = (z - c.z0_m) * w.inv_dz - w.layers_below;
+        if layer < 0.0 {
             return ClearStep::Exact(t);
         }
-        let k = (layer as usize - 1).min(c.count - 1);
+        let k = (layer as usize).min(c.count - 1);
         let z_k = c.z0_m + k as f64 * c.dz_m;
         // d is the least distance of the point's block, so no more than the point's own cell's:
         // no cell reaching z_k lies within d - 1 king moves of it, and a point moved by at
