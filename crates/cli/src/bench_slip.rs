@@ -25,7 +25,7 @@ use rand::{Rng, SeedableRng};
 use realms_core::RoverId;
 use realms_core::msgs::LocalisationState;
 use realms_mission::MissionOptions;
-use realms_mission::slam_record::{PoseCheck, RoverSlamRecord};
+use realms_mission::slam_record::{POSE_BOUND_M, PoseCheck, RoverSlamRecord};
 use realms_sim::scenario::{Fault, FaultKind};
 use std::time::Instant;
 
@@ -174,7 +174,7 @@ impl Calm {
                 .any(|f| t >= f.at_s - 1.0 && t <= f.at_s + f.duration_s + SETTLE_WITHIN_S)
         };
         let within = |p: realms_core::Pose2, truth: realms_core::Pose2| {
-            p.position().distance_m(truth.position()) <= 0.2
+            p.position().distance_m(truth.position()) <= POSE_BOUND_M
         };
         let mut calm = Calm::default();
         for c in record
@@ -583,17 +583,24 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         calm.checks,
         calm.share(calm.optimised_within)
     );
-    let residuals: Vec<f64> = all.iter().map(|b| b.residual_m).collect();
-    println!(
-        "What a burst leaves: from a second before it to its recovery (median {:.0} s), the published pose's motion is off the true motion by {:.3} m (median; 90th percentile {:.3} m, mean {:.3} m); over {CALM_WINDOW_S:.0} s away from the bursts, by {:.3} m (90th percentile {:.3} m, mean {:.3} m).",
-        median(all.iter().map(|b| b.span_s).collect()),
-        median(residuals.clone()),
-        percentile(&residuals, 0.9),
-        mean(&residuals),
+    let calm_drift = format!(
+        "over {CALM_WINDOW_S:.0} s away from the bursts, the published pose's motion is off the true motion by {:.3} m (median; 90th percentile {:.3} m, mean {:.3} m)",
         median(calm.drift_m.clone()),
         percentile(&calm.drift_m, 0.9),
         mean(&calm.drift_m),
     );
+    if all.is_empty() {
+        println!("No bursts; {calm_drift}.");
+    } else {
+        let residuals: Vec<f64> = all.iter().map(|b| b.residual_m).collect();
+        println!(
+            "What a burst leaves: from a second before it to its recovery (median {:.0} s), the published pose's motion is off the true motion by {:.3} m (median; 90th percentile {:.3} m, mean {:.3} m); {calm_drift}.",
+            median(all.iter().map(|b| b.span_s).collect()),
+            median(residuals.clone()),
+            percentile(&residuals, 0.9),
+            mean(&residuals),
+        );
+    }
     let missed: Vec<String> = runs
         .iter()
         .flat_map(|r| {

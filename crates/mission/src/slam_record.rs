@@ -122,17 +122,26 @@ pub struct PoseErrors {
     pub final_m: f64,
     /// Root mean square heading error, degrees.
     pub heading_rmse_deg: f64,
+    /// Share of the instants at most [`POSE_BOUND_M`] off (0 without instants): how often
+    /// the pose could be trusted to that bound, the figure issue 3 sets the pose after a slip
+    /// burst's recovery against.
+    pub share_within_0_2_m: f64,
 }
+
+/// The position error the pose after a slip burst's recovery must stay within (issue 3).
+pub const POSE_BOUND_M: f64 = 0.2;
 
 /// The errors of `(estimate, truth)` pairs in time order.
 pub fn pose_errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
     let (mut sq, mut max, mut sq_yaw, mut n) = (0.0, 0.0f64, 0.0, 0usize);
+    let mut within = 0usize;
     let mut last = 0.0;
     for (estimate, truth) in pairs {
         let d = estimate.relative_to(&truth);
         let e = estimate.position().distance_m(truth.position());
         sq += e * e;
         max = max.max(e);
+        within += usize::from(e <= POSE_BOUND_M);
         sq_yaw += d.yaw_rad.to_degrees().powi(2);
         n += 1;
         last = e;
@@ -146,6 +155,7 @@ pub fn pose_errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
         max_m: max,
         final_m: last,
         heading_rmse_deg: (sq_yaw / n).sqrt(),
+        share_within_0_2_m: within as f64 / n,
     }
 }
 
@@ -774,6 +784,18 @@ mod tests {
         // a marked cell within one cell.
         assert_eq!(g.obstacle_faces_seen, 5);
         assert!((g.obstacle_faces_marked - 3.0 / 5.0).abs() < 1e-12, "{g:?}");
+    }
+
+    #[test]
+    fn pose_errors_count_the_instants_within_the_bound() {
+        let truth = Pose2::new(1.0, 2.0, 0.5);
+        // Off by 0.1, 0.2 (on the bound), 0.3 and 0.0 m: three of four within.
+        let pairs = [0.1, 0.2, 0.3, 0.0].map(|dx| (Pose2::new(1.0 + dx, 2.0, 0.5), truth));
+        let e = pose_errors(pairs.into_iter());
+        assert!((e.share_within_0_2_m - 0.75).abs() < 1e-12, "{e:?}");
+        assert!((e.max_m - 0.3).abs() < 1e-12 && e.final_m == 0.0);
+        assert!((e.rmse_m - (0.14f64 / 4.0).sqrt()).abs() < 1e-12);
+        assert_eq!(pose_errors(std::iter::empty()).share_within_0_2_m, 0.0);
     }
 
     #[test]
