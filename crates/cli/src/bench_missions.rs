@@ -25,6 +25,8 @@ struct RoverGrades {
     occupied_correct: Option<f64>,
     /// RMS of the final trajectory against the truth, metres.
     trajectory_rmse_m: Option<f64>,
+    /// Share of the 1 Hz checks with the pose as published then within 0.2 m of the truth.
+    pose_within_0_2_m: f64,
     /// Crater cells within reach of the rover's path ...
     path_hazards: usize,
     /// ... and the share of them its map marks.
@@ -59,6 +61,7 @@ impl MissionGrades {
                         powered: r.powered,
                         occupied_correct: map.map(|m| m.occupied_correct),
                         trajectory_rmse_m: r.slam.trajectory_error.as_ref().map(|e| e.rmse_m),
+                        pose_within_0_2_m: r.slam.pose_error.share_within_0_2_m,
                         path_hazards: map.map_or(0, |m| m.path_hazards),
                         path_hazards_flagged: map.map_or(0.0, |m| m.path_hazards_flagged),
                     }
@@ -82,6 +85,9 @@ struct Summary {
     trajectory_rmse_median_m: f64,
     trajectory_rmse_worst_m: f64,
     rovers_under_10cm: usize,
+    /// The published pose within 0.2 m of the truth, mean over the rovers of their share of
+    /// checks.
+    pose_within_0_2_m_mean: f64,
     /// Crater cells near the paths marked, pooled over every rover.
     path_hazards_flagged: f64,
     /// Absent when no mission merged a map (a lone rover).
@@ -121,6 +127,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         trajectory_rmse_median_m: median(errors.clone()),
         trajectory_rmse_worst_m: errors.iter().copied().fold(f64::NAN, f64::max),
         rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
+        pose_within_0_2_m_mean: mean(&rovers().map(|r| r.pose_within_0_2_m).collect::<Vec<_>>()),
         path_hazards_flagged: flagged / near.max(1) as f64,
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),
@@ -209,18 +216,19 @@ fn print_tables(
     );
     println!();
     println!(
-        "| seed | rover | occupied cells right | final trajectory RMS | crater cells near the path marked (cells) | powered at the end |"
+        "| seed | rover | occupied cells right | final trajectory RMS | published pose within 0.2 m | crater cells near the path marked (cells) | powered at the end |"
     );
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
     for m in missions {
         for r in &m.rovers {
             println!(
-                "| {} | {} | {} | {} | {:.1} % ({}) | {} |",
+                "| {} | {} | {} | {} | {:.1} % | {:.1} % ({}) | {} |",
                 m.seed,
                 r.name,
                 pct(r.occupied_correct),
                 r.trajectory_rmse_m
                     .map_or("-".to_string(), |e| format!("{e:.3} m")),
+                100.0 * r.pose_within_0_2_m,
                 100.0 * r.path_hazards_flagged,
                 r.path_hazards,
                 if r.powered { "yes" } else { "no" }
@@ -243,11 +251,11 @@ fn print_tables(
     }
     println!();
     println!(
-        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | crater cells near the paths marked | lander's merged map, mean | mission length, mean | fleet SLAM speed, median |"
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | fleet SLAM speed, median |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {} | {:.0} s | {:.0}x |",
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -259,6 +267,7 @@ fn print_tables(
         s.trajectory_rmse_median_m,
         s.trajectory_rmse_worst_m,
         s.rovers_under_10cm,
+        100.0 * s.pose_within_0_2_m_mean,
         100.0 * s.path_hazards_flagged,
         pct(s.merged_occupied_correct_mean),
         s.sim_duration_mean_s,
