@@ -158,6 +158,11 @@ pub struct MissionArgs {
     /// Keep running to the full duration even after exploration is complete.
     #[arg(long)]
     pub full_duration: bool,
+    /// Run the rovers with this SLAM variant of `realms bench slam` instead of the setup as
+    /// it is (the report names it); join several with `+`. For looking into what a variant
+    /// changes in a whole mission, with all its files.
+    #[arg(long)]
+    pub variant: Option<String>,
 }
 
 /// `realms scenario`.

@@ -50,6 +50,15 @@ pub fn run(args: MissionArgs) -> Result<()> {
         scenario.faults.clear();
     }
     scenario.validate(&source)?;
+    let variant = args
+        .variant
+        .as_deref()
+        .map(crate::bench_slam::variant)
+        .transpose()?;
+    let source = match &variant {
+        Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
+        None => source,
+    };
     let out = args
         .out
         .clone()
@@ -72,6 +81,9 @@ pub fn run(args: MissionArgs) -> Result<()> {
     let options = MissionOptions {
         ideal_comms: args.ideal_comms,
         cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
+        mapping_changes: variant
+            .as_ref()
+            .map_or_else(Vec::new, |v| v.changes.clone()),
         ..MissionOptions::default()
     };
     let mut mission = Mission::with_options(World::new(&scenario), options);
