@@ -39,6 +39,10 @@ struct MissionGrades {
     seed: u64,
     sim_duration_s: f64,
     slam_speedup: f64,
+    /// Share of the explorable area some rover's map knows at the end ...
+    coverage: f64,
+    /// ... and when it first reached 95 %, seconds (absent if it never did).
+    time_to_95_s: Option<f64>,
     /// The lander's merged map: share of its occupied cells right (absent without a merge).
     merged_occupied_correct: Option<f64>,
     rovers: Vec<RoverGrades>,
@@ -50,6 +54,8 @@ impl MissionGrades {
             seed: report.seed,
             sim_duration_s: report.sim_duration_s,
             slam_speedup: report.slam_speedup,
+            coverage: report.coverage,
+            time_to_95_s: report.time_to_95_s,
             merged_occupied_correct: report.merge.as_ref().map(|m| m.occupied_correct),
             rovers: report
                 .rovers
@@ -93,6 +99,10 @@ struct Summary {
     /// Absent when no mission merged a map (a lone rover).
     merged_occupied_correct_mean: Option<f64>,
     sim_duration_mean_s: f64,
+    /// Coverage at the end, mean over the missions.
+    coverage_mean: f64,
+    /// Time to 95 % coverage, mean over the missions that reached it, seconds.
+    time_to_95_mean_s: f64,
     slam_speedup_median: f64,
 }
 
@@ -131,6 +141,13 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         path_hazards_flagged: flagged / near.max(1) as f64,
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),
+        coverage_mean: mean(&missions.iter().map(|m| m.coverage).collect::<Vec<_>>()),
+        time_to_95_mean_s: mean(
+            &missions
+                .iter()
+                .filter_map(|m| m.time_to_95_s)
+                .collect::<Vec<_>>(),
+        ),
         slam_speedup_median: median(missions.iter().map(|m| m.slam_speedup).collect()),
     }
 }
@@ -237,25 +254,28 @@ fn print_tables(
     }
     println!();
     println!(
-        "| seed | mission length | lander's merged map, occupied cells right | fleet SLAM speed |"
+        "| seed | mission length | coverage at the end | 95 % covered at | lander's merged map, occupied cells right | fleet SLAM speed |"
     );
-    println!("| --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- |");
     for m in missions {
         println!(
-            "| {} | {:.0} s | {} | {:.0}x |",
+            "| {} | {:.0} s | {:.1} % | {} | {} | {:.0}x |",
             m.seed,
             m.sim_duration_s,
+            100.0 * m.coverage,
+            m.time_to_95_s
+                .map_or("-".to_string(), |t| format!("{t:.0} s")),
             pct(m.merged_occupied_correct),
             m.slam_speedup
         );
     }
     println!();
     println!(
-        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | fleet SLAM speed, median |"
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean | fleet SLAM speed, median |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.0}x |",
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {:.0} s | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -271,6 +291,8 @@ fn print_tables(
         100.0 * s.path_hazards_flagged,
         pct(s.merged_occupied_correct_mean),
         s.sim_duration_mean_s,
+        100.0 * s.coverage_mean,
+        s.time_to_95_mean_s,
         s.slam_speedup_median
     );
 }
