@@ -80,6 +80,20 @@ pub(crate) fn explore_to_end(
     mission
 }
 
+/// The arithmetic mean; NaN for none.
+pub(crate) fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// The least value at or below which at least a share `q` of `v` lies (nearest rank); NaN
+/// for none.
+pub(crate) fn percentile(v: &[f64], q: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let k = ((v.len() as f64 * q).ceil() as usize).clamp(1, v.len().max(1)) - 1;
+    v.get(k).copied().unwrap_or(f64::NAN)
+}
+
 pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     if v.is_empty() {

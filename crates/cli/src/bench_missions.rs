@@ -6,7 +6,7 @@
 //! mission says little of a change: these figures are read over many seeds (BENCHMARKS.md
 //! compares builds on sixteen). For SLAM alone on fixed paths, see `realms bench slam`.
 
-use crate::bench::{in_parallel, machine, median, workers};
+use crate::bench::{in_parallel, machine, mean, median, workers};
 use crate::cli::BenchMissionsArgs;
 use crate::mission::{load_scenario, parse_duration_s, run_to_end};
 use anyhow::{Result, bail};
@@ -101,13 +101,12 @@ struct Summary {
     sim_duration_mean_s: f64,
     /// Coverage at the end, mean over the missions.
     coverage_mean: f64,
-    /// Time to 95 % coverage, mean over the missions that reached it, seconds.
-    time_to_95_mean_s: f64,
+    /// Time to 95 % coverage, mean over the missions that reached it, seconds (absent when
+    /// none did) ...
+    time_to_95_mean_s: Option<f64>,
+    /// ... and how many did.
+    reached_95: usize,
     slam_speedup_median: f64,
-}
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len() as f64
 }
 
 fn summarise(missions: &[MissionGrades]) -> Summary {
@@ -125,6 +124,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         .filter_map(|m| m.merged_occupied_correct)
         .collect();
     let lengths: Vec<f64> = missions.iter().map(|m| m.sim_duration_s).collect();
+    let reached: Vec<f64> = missions.iter().filter_map(|m| m.time_to_95_s).collect();
     Summary {
         missions: missions.len(),
         rovers_graded: maps.len(),
@@ -142,13 +142,17 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),
         coverage_mean: mean(&missions.iter().map(|m| m.coverage).collect::<Vec<_>>()),
-        time_to_95_mean_s: mean(
-            &missions
-                .iter()
-                .filter_map(|m| m.time_to_95_s)
-                .collect::<Vec<_>>(),
-        ),
+        time_to_95_mean_s: (!reached.is_empty()).then(|| mean(&reached)),
+        reached_95: reached.len(),
         slam_speedup_median: median(missions.iter().map(|m| m.slam_speedup).collect()),
+    }
+}
+
+/// A change to the rovers' navigation by name (`--nav-variant`).
+fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::NavigationConfig)> {
+    match name {
+        "unjudged-must-pay" => Ok(|n| n.explore.unjudged_must_pay = true),
+        _ => bail!("unknown navigation variant `{name}`; known: unjudged-must-pay"),
     }
 }
 
@@ -181,6 +185,14 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
         None => source,
     };
+    let navigation_changes = match args.nav_variant.as_deref() {
+        None => Vec::new(),
+        Some(name) => vec![nav_variant(name)?],
+    };
+    let source = match &args.nav_variant {
+        Some(name) => format!("{source}, navigation variant {name}"),
+        None => source,
+    };
     let jobs = workers(args.jobs);
     let mut missions = in_parallel(&scenarios, jobs, |scenario| {
         let wall = std::time::Instant::now();
@@ -189,6 +201,7 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
             mapping_changes: variant
                 .as_ref()
                 .map_or_else(Vec::new, |v| v.changes.clone()),
+            navigation_changes: navigation_changes.clone(),
             ..MissionOptions::default()
         };
         let mut mission = Mission::with_options(World::new(scenario), options);
@@ -271,11 +284,11 @@ fn print_tables(
     }
     println!();
     println!(
-        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean | fleet SLAM speed, median |"
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean (missions that got there) | fleet SLAM speed, median |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {:.0} s | {:.0}x |",
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {} | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -292,7 +305,10 @@ fn print_tables(
         pct(s.merged_occupied_correct_mean),
         s.sim_duration_mean_s,
         100.0 * s.coverage_mean,
-        s.time_to_95_mean_s,
+        s.time_to_95_mean_s.map_or("-".to_string(), |t| format!(
+            "{t:.0} s ({} of {})",
+            s.reached_95, s.missions
+        )),
         s.slam_speedup_median
     );
 }

@@ -228,6 +228,10 @@ pub struct BenchMissionsArgs {
     /// `weak-floor-100-own+gaps-to-6m`.
     #[arg(long)]
     pub variant: Option<String>,
+    /// Run the rovers with this change to their navigation: `unjudged-must-pay` (a frontier
+    /// beside ground only the lidar saw is driven to only where it is worth the drive).
+    #[arg(long)]
+    pub nav_variant: Option<String>,
 }
 
 /// `realms bench logs`.

@@ -71,6 +71,8 @@ pub struct MissionOptions {
     /// Changes to every rover's SLAM setup, applied in turn, for benches that compare setups
     /// over whole missions (none: the setup as it is).
     pub mapping_changes: Vec<fn(&mut MappingConfig)>,
+    /// Changes to every rover's navigation, likewise (none: as it is).
+    pub navigation_changes: Vec<fn(&mut NavigationConfig)>,
 }
 
 impl Default for MissionOptions {
@@ -81,6 +83,7 @@ impl Default for MissionOptions {
             gyro_calibration: GYRO_CALIBRATION,
             cost_clock: CostClock::default(),
             mapping_changes: Vec::new(),
+            navigation_changes: Vec::new(),
         }
     }
 }
@@ -274,6 +277,9 @@ impl Mission {
                 let mut navigation = NavigationConfig::new(body.pose.position());
                 navigation.follower.max_speed_m_s = 0.3_f64.min(spec.max_speed_m_s);
                 navigation.follower.max_yaw_rate_rad_s = 0.8_f64.min(spec.max_yaw_rate_rad_s);
+                for change in &options.navigation_changes {
+                    change(&mut navigation);
+                }
                 let cfg = RoverConfig {
                     mapping,
                     navigation,

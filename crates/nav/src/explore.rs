@@ -33,8 +33,8 @@ pub struct ExploreConfig {
     /// whole crosses and recrosses the hall for the last scraps of unjudged ground (the
     /// foot of a wall, behind a rock), a few square metres a visit. Not the rovers' default:
     /// over sixteen missions it cut them by a quarter with the same coverage, but the
-    /// crater cells near the paths came out 3 points less marked (BENCHMARKS.md, "The
-    /// missions' last quarter").
+    /// crater cells near the paths came out 4 points less marked (BENCHMARKS.md, "The
+    /// missions' last quarter"; `realms bench missions --nav-variant unjudged-must-pay`).
     pub unjudged_must_pay: bool,
     /// A peer's target discounts frontiers within this distance, metres (about what the
     /// peer will map on arrival).
@@ -168,8 +168,9 @@ fn score(
         .sum::<f64>()
         .min(gain);
     let travel = travel[geo.index(cell)] as f64;
-    let utility = gain - discount - travel;
-    if cfg.unjudged_must_pay && f.beside_unknown == 0 && utility <= 0.0 {
+    // Worth against the drive alone: a peer heading there lowers the utility, but the rover
+    // still waits on such a frontier in case the peer fails (see `Candidate::taken_by_peer`).
+    if cfg.unjudged_must_pay && f.beside_unknown == 0 && gain <= travel {
         return None;
     }
     Some(Candidate {
@@ -178,7 +179,7 @@ fn score(
         gain,
         discount,
         travel,
-        utility,
+        utility: gain - discount - travel,
     })
 }
 

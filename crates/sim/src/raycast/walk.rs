@@ -154,6 +154,9 @@ impl HeightPyramid {
         let (bx, by) = (x as usize / CLEAR_BLOCK, y as usize / CLEAR_BLOCK);
         let d = c.layers[k * c.layer_len + Level::tiled(c.tiles_w, bx, by)] as f64 - 1.5;
         let mut step = d * w.t_per_cell;
+        // A ray that never falls has no drop limit (infinite t_per_drop_m; at z == z_k the
+        // product is NaN, which the comparison leaves aside). Should rounding put z_k a hair
+        // above z, the limit is -inf and the exact walk takes over.
         let drop_limit = (z - z_k) * w.t_per_drop_m;
         if drop_limit < step {
             step = drop_limit;
