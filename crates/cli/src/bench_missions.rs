@@ -181,10 +181,7 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         s.validate(&source)?;
         scenarios.push(s);
     }
-    let source = match &variant {
-        Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
-        None => source,
-    };
+    let source = crate::bench_slam::with_setup(source, variant.as_ref());
     let navigation_changes = match args.nav_variant.as_deref() {
         None => Vec::new(),
         Some(name) => vec![nav_variant(name)?],
@@ -198,9 +195,7 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         let wall = std::time::Instant::now();
         let options = MissionOptions {
             cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
-            mapping_changes: variant
-                .as_ref()
-                .map_or_else(Vec::new, |v| v.changes.clone()),
+            mapping_changes: crate::bench_slam::mapping_changes(variant.as_ref()),
             navigation_changes: navigation_changes.clone(),
             ..MissionOptions::default()
         };

@@ -53,6 +53,21 @@ impl Setup {
     }
 }
 
+/// The changes a mission's rovers run with for an optional setup (`--variant`): none
+/// without one.
+pub(crate) fn mapping_changes(setup: Option<&Setup>) -> Vec<fn(&mut MappingConfig)> {
+    setup.map_or_else(Vec::new, |v| v.changes.clone())
+}
+
+/// A mission's scenario `source` as its report names it, with the setup its rovers ran,
+/// if any.
+pub(crate) fn with_setup(source: String, setup: Option<&Setup>) -> String {
+    match setup {
+        Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
+        None => source,
+    }
+}
+
 /// The setup called `name`: a variant's name, or several joined by `+` (applied in that
 /// order, so a later one wins where two set the same field); an error names any unknown one
 /// and lists the known ones.

@@ -242,14 +242,15 @@ fn schedule(seed: u64, rovers: u8, limit_s: f64, period_s: f64) -> Vec<Fault> {
     faults
 }
 
-/// The first check at or after `t_s`.
+/// The first check at or after `t_s` (the checks are in time order).
 fn check_at(record: &RoverSlamRecord, t_s: f64) -> Option<&PoseCheck> {
-    record.checks.iter().find(|c| c.t.as_secs_f64() >= t_s)
+    let k = record.checks.partition_point(|c| c.t.as_secs_f64() < t_s);
+    record.checks.get(k)
 }
 
-/// The published pose's position error at the first check at or after `t_s`.
-fn error_at(record: &RoverSlamRecord, t_s: f64) -> Option<f64> {
-    check_at(record, t_s).map(|c| c.estimate.position().distance_m(c.truth.position()))
+/// The published pose's position error at check `c`.
+fn error_m(c: &PoseCheck) -> f64 {
+    c.estimate.position().distance_m(c.truth.position())
 }
 
 /// How far the published pose's motion from check `a` to check `b` is off the true motion
@@ -431,8 +432,8 @@ fn grade(
                 start_s: f.at_s,
                 odometry_travel_m: travel,
                 latency_s,
-                error_before_m: error_at(record, f.at_s - 1.0)?,
-                error_after_m: error_at(record, settled)?,
+                error_before_m: error_m(before),
+                error_after_m: error_m(after),
                 scene: scene_at(check_at(record, f.at_s)?.truth),
                 turns_deg: turns(record, f.at_s, (visible_s + DEADLINE_S).min(end)),
             })
@@ -481,9 +482,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         let t0 = Instant::now();
         let options = MissionOptions {
             ideal_comms: true,
-            mapping_changes: variant
-                .as_ref()
-                .map_or_else(Vec::new, |v| v.changes.clone()),
+            mapping_changes: crate::bench_slam::mapping_changes(variant.as_ref()),
             ..MissionOptions::default()
         };
         let mission = crate::bench::explore_to_end(&s, options, limit_s);

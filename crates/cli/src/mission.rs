@@ -55,10 +55,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
         .as_deref()
         .map(crate::bench_slam::variant)
         .transpose()?;
-    let source = match &variant {
-        Some(v) => format!("{source}, SLAM variant {} ({})", v.name, v.what),
-        None => source,
-    };
+    let source = crate::bench_slam::with_setup(source, variant.as_ref());
     let out = args
         .out
         .clone()
@@ -81,9 +78,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
     let options = MissionOptions {
         ideal_comms: args.ideal_comms,
         cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
-        mapping_changes: variant
-            .as_ref()
-            .map_or_else(Vec::new, |v| v.changes.clone()),
+        mapping_changes: crate::bench_slam::mapping_changes(variant.as_ref()),
         ..MissionOptions::default()
     };
     let mut mission = Mission::with_options(World::new(&scenario), options);

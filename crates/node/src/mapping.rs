@@ -402,7 +402,8 @@ impl Mapping {
             mapper: Mapper::new(cfg.mapper),
             hazards: SubmapHazards::new(
                 cfg.traversability.resolution_m,
-                (cfg.traversability.assembled_resolution_m)
+                cfg.traversability
+                    .assembled_resolution_m
                     .unwrap_or(cfg.traversability.resolution_m),
             ),
             tracked_once: false,

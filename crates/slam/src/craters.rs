@@ -193,12 +193,16 @@ fn crater_of(states: &Grid<CellState>, cluster: &[usize], cfg: &CraterDiscs) -> 
     if reach > cfg.max_radius_m {
         return None;
     }
-    let (safe, all) = g
-        .cells_within(centre, reach)
-        .fold((0usize, 0usize), |(s, n), c| {
-            (s + usize::from(cells[g.index(c)] == CellState::Free), n + 1)
-        });
-    (safe as f64 <= cfg.max_safe_share * all as f64).then_some(Crater {
+    // A share of 1 asks nothing: the disc's cells are not counted.
+    let bowl_not_seen_safe = cfg.max_safe_share >= 1.0 || {
+        let (safe, all) = g
+            .cells_within(centre, reach)
+            .fold((0usize, 0usize), |(s, n), c| {
+                (s + usize::from(cells[g.index(c)] == CellState::Free), n + 1)
+            });
+        safe as f64 <= cfg.max_safe_share * all as f64
+    };
+    bowl_not_seen_safe.then_some(Crater {
         centre,
         radius_m: reach,
     })
