@@ -31,6 +31,14 @@ struct RoverGrades {
     path_hazards: usize,
     /// ... and the share of them its map marks.
     path_hazards_flagged: f64,
+    /// Cells the map marks hazard ...
+    hazard_cells: usize,
+    /// ... and the share of them within a cell of ground the rover truly must not enter.
+    hazard_correct: f64,
+    /// Share of the cells the map knows (free, occupied or hazard) that the truth agrees
+    /// with, each graded as [`realms_mission::slam_record::MapGrade`] grades its kind (absent
+    /// without a map).
+    known_correct: Option<f64>,
 }
 
 /// One mission's grades.
@@ -70,6 +78,14 @@ impl MissionGrades {
                         pose_within_0_2_m: r.slam.pose_error.share_within_0_2_m,
                         path_hazards: map.map_or(0, |m| m.path_hazards),
                         path_hazards_flagged: map.map_or(0.0, |m| m.path_hazards_flagged),
+                        hazard_cells: map.map_or(0, |m| m.hazard_cells),
+                        hazard_correct: map.map_or(0.0, |m| m.hazard_correct),
+                        known_correct: map.map(|m| {
+                            let right = m.occupied_correct * m.occupied_cells as f64
+                                + m.free_correct * m.free_cells as f64
+                                + m.hazard_correct * m.hazard_cells as f64;
+                            right / (m.occupied_cells + m.free_cells + m.hazard_cells).max(1) as f64
+                        }),
                     }
                 })
                 .collect(),
@@ -96,6 +112,10 @@ struct Summary {
     pose_within_0_2_m_mean: f64,
     /// Crater cells near the paths marked, pooled over every rover.
     path_hazards_flagged: f64,
+    /// Hazard cells marked truly untraversable, pooled over every rover.
+    hazard_correct: f64,
+    /// Known cells right, mean over the rovers.
+    known_correct_mean: f64,
     /// Absent when no mission merged a map (a lone rover).
     merged_occupied_correct_mean: Option<f64>,
     sim_duration_mean_s: f64,
@@ -119,6 +139,13 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
             n + r.path_hazards,
         )
     });
+    let (hazards_right, hazards) = rovers().fold((0.0, 0usize), |(right, n), r| {
+        (
+            right + r.hazard_correct * r.hazard_cells as f64,
+            n + r.hazard_cells,
+        )
+    });
+    let known: Vec<f64> = rovers().filter_map(|r| r.known_correct).collect();
     let merged: Vec<f64> = missions
         .iter()
         .filter_map(|m| m.merged_occupied_correct)
@@ -139,6 +166,8 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
         pose_within_0_2_m_mean: mean(&rovers().map(|r| r.pose_within_0_2_m).collect::<Vec<_>>()),
         path_hazards_flagged: flagged / near.max(1) as f64,
+        hazard_correct: hazards_right / hazards.max(1) as f64,
+        known_correct_mean: mean(&known),
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),
         coverage_mean: mean(&missions.iter().map(|m| m.coverage).collect::<Vec<_>>()),
@@ -279,11 +308,13 @@ fn print_tables(
     }
     println!();
     println!(
-        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean (missions that got there) | fleet SLAM speed, median |"
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | hazard cells truly untraversable | known cells right (free, occupied, hazard), mean | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean (missions that got there) | fleet SLAM speed, median |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {} | {:.0}x |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
+    println!(
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {} | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -297,6 +328,8 @@ fn print_tables(
         s.rovers_under_10cm,
         100.0 * s.pose_within_0_2_m_mean,
         100.0 * s.path_hazards_flagged,
+        100.0 * s.hazard_correct,
+        100.0 * s.known_correct_mean,
         pct(s.merged_occupied_correct_mean),
         s.sim_duration_mean_s,
         100.0 * s.coverage_mean,

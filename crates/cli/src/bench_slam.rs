@@ -745,6 +745,11 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "hazards-by-centre",
+        what: "the published map's 5 cm cells each take the verdict of the hazard cell holding their centre, not rounded out to the hazard layer's half cell (the rovers' setup before the seventieth session)",
+        apply: |c| c.hazards_rounded_out = false,
+    },
+    Variant {
         name: "depth-at-own-stamp",
         what: "a depth frame's verdicts placed at the pose of the frame's own stamp (the latest scan's moved on by the odometry since), not at the latest scan's",
         apply: |c| c.depth_at_own_stamp = true,

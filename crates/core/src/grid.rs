@@ -141,6 +141,16 @@ impl CentreLookup {
     pub fn index(&self, x: usize, y: usize) -> Option<usize> {
         Some(self.rows.get(y).copied()?? * self.width + self.columns.get(x).copied()??)
     }
+
+    /// The column of the `into` grid holding the centres of column `x` of the `of` grid.
+    pub fn column(&self, x: usize) -> Option<usize> {
+        self.columns.get(x).copied()?
+    }
+
+    /// The row of the `into` grid holding the centres of row `y` of the `of` grid.
+    pub fn row(&self, y: usize) -> Option<usize> {
+        self.rows.get(y).copied()?
+    }
 }
 
 /// A raster of `T` over a [`GridGeometry`], stored row-major from the bottom row up.

@@ -11,7 +11,7 @@
 //! ground it will report as safe; the published map keeps the ROS values.
 
 use realms_core::msgs::OccupancyGrid;
-use realms_core::{CentreLookup, Grid, GridGeometry};
+use realms_core::{CentreLookup, Grid, GridGeometry, Point2};
 use realms_nav::frontier::UNJUDGED;
 use realms_slam::assembly::{LIVE_TILE_CELLS, LiveView};
 use realms_slam::occupancy::CellState;
@@ -22,6 +22,9 @@ pub struct TiledLayer {
     factor: usize,
     /// Whether ground only the lidar saw free is drawn [`UNJUDGED`] rather than free.
     mark_unjudged: bool,
+    /// Whether a cell that would be free is drawn hazard where the hazard layer marks ground
+    /// within half a hazard cell of its centre ([`rounding_hazards_out`](Self::rounding_hazards_out)).
+    round_hazards_out: bool,
     drawn: Option<Drawn>,
 }
 
@@ -45,6 +48,7 @@ impl TiledLayer {
         TiledLayer {
             factor: f,
             mark_unjudged: false,
+            round_hazards_out: false,
             drawn: None,
         }
     }
@@ -54,6 +58,22 @@ impl TiledLayer {
     pub fn marking_unjudged(self) -> Self {
         TiledLayer {
             mark_unjudged: true,
+            ..self
+        }
+    }
+
+    /// The same layer, its hazards rounded out to the hazard layer's half cell: a cell that
+    /// would be free is hazard where the hazard layer marks ground within half a hazard cell
+    /// (per axis) of its centre. The hazard layer judges 10 cm cells, and a cell across a
+    /// crater's crest holds mostly the gentle outer slope, so it is judged safe; drawn on
+    /// 5 cm cells by their centres alone, the hazard then stops a cell short of the crest on
+    /// the crater's inner wall. Rounded out, a 5 cm cell beside a hazardous 10 cm cell takes
+    /// its verdict: the edge lies somewhere within that half cell, and a rover must not
+    /// take it for open ground. Meant for layers finer than the hazard layer (for a layer of
+    /// the hazard layer's own cells it widens every hazard by a whole cell).
+    pub fn rounding_hazards_out(self) -> Self {
+        TiledLayer {
+            round_hazards_out: true,
             ..self
         }
     }
@@ -77,6 +97,19 @@ impl TiledLayer {
             origin: g.origin,
         };
         let lookup = CentreLookup::new(hazards.geometry(), &geo);
+        // Where points half a hazard cell before and after each cell's centre (on each axis)
+        // lie in the hazard layer.
+        let near = self.round_hazards_out.then(|| {
+            let half = 0.5 * hazards.geometry().resolution_m;
+            let shifted = |d: f64| GridGeometry {
+                origin: Point2::new(geo.origin.x_m + d, geo.origin.y_m + d),
+                ..geo
+            };
+            [
+                CentreLookup::new(hazards.geometry(), &shifted(-half)),
+                CentreLookup::new(hazards.geometry(), &shifted(half)),
+            ]
+        });
         let (since, before, mut grid) = match self.drawn.take() {
             Some(d) if d.source == g && d.hazards.geometry() == hazards.geometry() => {
                 (Some(d.version), Some(d.hazards), d.grid)
@@ -103,6 +136,8 @@ impl TiledLayer {
                         view,
                         hazards: &hazards,
                         lookup: &lookup,
+                        // A tile with no hazard under it or beside it has none to round out.
+                        near: near.as_ref().filter(|_| any_hazard(&hazards, &g, fine)),
                         mark_unjudged: self.mark_unjudged,
                     };
                     draw_tile(&mut grid, &source, f, fine);
@@ -125,6 +160,9 @@ struct Source<'a> {
     hazards: &'a Grid<CellState>,
     /// Where each layer cell's centre lies in `hazards`.
     lookup: &'a CentreLookup,
+    /// Where the points half a hazard cell before and after it lie, if hazards are rounded
+    /// out.
+    near: Option<&'a [CentreLookup; 2]>,
     mark_unjudged: bool,
 }
 
@@ -134,6 +172,7 @@ fn draw_tile(grid: &mut Grid<i8>, source: &Source, f: usize, fine: [usize; 4]) {
         view,
         hazards,
         lookup,
+        near,
         mark_unjudged,
     } = *source;
     let [x0, y0, x1, y1] = fine;
@@ -152,6 +191,11 @@ fn draw_tile(grid: &mut Grid<i8>, source: &Source, f: usize, fine: [usize; 4]) {
             }
             let hazard = hazard_at(hazards, lookup, cx, cy);
             grid.cells_mut()[cy * geo.width + cx] = match cell_value(occupied, hazard, free) {
+                OccupancyGrid::FREE
+                    if near.is_some_and(|n| hazard_near(hazards, lookup, n, cx, cy)) =>
+                {
+                    OccupancyGrid::HAZARD
+                }
                 OccupancyGrid::FREE if mark_unjudged && hazard.is_none() => UNJUDGED,
                 v => v,
             };
@@ -168,19 +212,9 @@ fn hazards_differ(
     fine: [usize; 4],
 ) -> bool {
     let h = new.geometry();
-    if h.width == 0 || h.height == 0 {
+    let Some([hx0, hy0, hx1, hy1]) = hazard_box(h, source, fine) else {
         return false;
-    }
-    let [x0, y0, x1, y1] = fine;
-    // The hazard cells holding the box's corners, one more on each side for rounding.
-    let cell = |v: usize, o_src: f64, o_h: f64, n: usize| -> usize {
-        let world = o_src + v as f64 * source.resolution_m;
-        (((world - o_h) / h.resolution_m).floor().max(0.0) as usize).min(n - 1)
     };
-    let hx0 = cell(x0, source.origin.x_m, h.origin.x_m, h.width).saturating_sub(1);
-    let hx1 = (cell(x1, source.origin.x_m, h.origin.x_m, h.width) + 1).min(h.width - 1);
-    let hy0 = cell(y0, source.origin.y_m, h.origin.y_m, h.height).saturating_sub(1);
-    let hy1 = (cell(y1, source.origin.y_m, h.origin.y_m, h.height) + 1).min(h.height - 1);
     // Each row compared without an early exit: a slice of an enum compares cell by cell
     // with a branch each (no byte-wise comparison for it), where a fold of the differences
     // runs many cells to an instruction. Most tiles are unchanged, so all their cells are
@@ -192,6 +226,42 @@ fn hazards_differ(
             .zip(&new.cells()[row + hx0..=row + hx1])
             .fold(false, |differ, (a, b)| differ | (*a as u8 != *b as u8))
     })
+}
+
+/// Whether any hazard cell under SLAM cells `[x0, x1) x [y0, y1)` (`fine`, on `source`), or
+/// a cell beyond, is hazardous.
+fn any_hazard(hazards: &Grid<CellState>, source: &GridGeometry, fine: [usize; 4]) -> bool {
+    let h = hazards.geometry();
+    let Some([hx0, hy0, hx1, hy1]) = hazard_box(h, source, fine) else {
+        return false;
+    };
+    (hy0..=hy1).any(|y| {
+        let row = y * h.width;
+        hazards.cells()[row + hx0..=row + hx1]
+            .iter()
+            .fold(false, |any, c| any | (*c == CellState::Occupied))
+    })
+}
+
+/// The hazard cells `[x0, x1] x [y0, y1]` (inclusive) holding the corners of SLAM cells
+/// `[x0, x1) x [y0, y1)` (`fine`, on `source`), one more on each side for rounding (and for
+/// a layer's hazards rounded out, which reach half a hazard cell past the box); `None` for
+/// an empty hazard layer.
+fn hazard_box(h: &GridGeometry, source: &GridGeometry, fine: [usize; 4]) -> Option<[usize; 4]> {
+    if h.width == 0 || h.height == 0 {
+        return None;
+    }
+    let [x0, y0, x1, y1] = fine;
+    let cell = |v: usize, o_src: f64, o_h: f64, n: usize| -> usize {
+        let world = o_src + v as f64 * source.resolution_m;
+        (((world - o_h) / h.resolution_m).floor().max(0.0) as usize).min(n - 1)
+    };
+    Some([
+        cell(x0, source.origin.x_m, h.origin.x_m, h.width).saturating_sub(1),
+        cell(y0, source.origin.y_m, h.origin.y_m, h.height).saturating_sub(1),
+        (cell(x1, source.origin.x_m, h.origin.x_m, h.width) + 1).min(h.width - 1),
+        (cell(y1, source.origin.y_m, h.origin.y_m, h.height) + 1).min(h.height - 1),
+    ])
 }
 
 /// A published map cell from what the lidar map and the hazard layer say: the lidar passes
@@ -207,6 +277,27 @@ pub fn cell_value(occupied: bool, hazard: Option<bool>, free: bool) -> i8 {
     }
 }
 
+/// Whether the hazard layer marks a cell holding a point half a hazard cell from the centre
+/// of layer cell (`x`, `y`) along either axis or both (`near`: where those points lie).
+fn hazard_near(
+    hazards: &Grid<CellState>,
+    lookup: &CentreLookup,
+    near: &[CentreLookup; 2],
+    x: usize,
+    y: usize,
+) -> bool {
+    let [before, after] = near;
+    let columns = [before.column(x), lookup.column(x), after.column(x)];
+    let rows = [before.row(y), lookup.row(y), after.row(y)];
+    let width = hazards.geometry().width;
+    rows.iter().flatten().any(|row| {
+        columns
+            .iter()
+            .flatten()
+            .any(|column| hazards.cells()[row * width + column] == CellState::Occupied)
+    })
+}
+
 /// What the hazard layer says of the cell holding the centre of layer cell (`x`, `y`) (found
 /// through `lookup`): hazardous, safe, or unseen (`None`).
 fn hazard_at(hazards: &Grid<CellState>, lookup: &CentreLookup, x: usize, y: usize) -> Option<bool> {
@@ -220,7 +311,7 @@ fn hazard_at(hazards: &Grid<CellState>, lookup: &CentreLookup, x: usize, y: usiz
 #[cfg(test)]
 mod tests {
     use super::*;
-    use realms_core::{Point2, Pose2};
+    use realms_core::Pose2;
     use realms_slam::assembly::Assembly;
     use realms_slam::occupancy::OccupancyGrid as LogOdds;
 
@@ -300,11 +391,78 @@ mod tests {
     }
 
     #[test]
+    fn hazards_rounded_out_reach_half_a_hazard_cell_past_its_edge() {
+        let mut asm = Assembly::new(0.05);
+        let mut sub = LogOdds::new(0.05);
+        let sensor = Point2::new(0.0123, 0.0271);
+        let scan = beams(sensor);
+        sub.insert(sensor, &scan);
+        asm.trace(&[(0, Pose2::IDENTITY)], sensor, &scan);
+        let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+        // 10 cm hazard cells covering x 0.5-0.9, y 0.5-0.7; every other judged safe.
+        let hazardous = [([0.5, 0.9], [0.5, 0.7])];
+        let plain = TiledLayer::new(1)
+            .refresh(&view, hazards(&hazardous))
+            .clone();
+        let rounded = TiledLayer::new(1)
+            .rounding_hazards_out()
+            .refresh(&view, hazards(&hazardous))
+            .clone();
+        let at = |g: &Grid<i8>, x: f64, y: f64| {
+            let p = Point2::new(x, y);
+            let c = g.geometry().world_to_cell(p).expect("inside");
+            // The 5 cm cells must line up with the 10 cm ones for the values below.
+            let centre = g.geometry().cell_center(c);
+            assert!((centre.x_m - x).abs() < 1e-9 && (centre.y_m - y).abs() < 1e-9);
+            g.cells()[g.geometry().index(c)]
+        };
+        let (hazard, free) = (OccupancyGrid::HAZARD, OccupancyGrid::FREE);
+        // (x, y) of a 5 cm cell's centre, its value drawn plainly and rounded out.
+        for (x, y, plainly, rounded_out) in [
+            // Inside the hazard.
+            (0.525, 0.575, hazard, hazard),
+            (0.875, 0.675, hazard, hazard),
+            // The near halves of the 10 cm cells beside it: west, east, south, north, and
+            // the corner diagonally south-west.
+            (0.475, 0.625, free, hazard),
+            (0.925, 0.625, free, hazard),
+            (0.725, 0.475, free, hazard),
+            (0.725, 0.725, free, hazard),
+            (0.475, 0.475, free, hazard),
+            // Their far halves, and the next cells out.
+            (0.425, 0.625, free, free),
+            (0.975, 0.625, free, free),
+            (0.725, 0.425, free, free),
+            (0.725, 0.775, free, free),
+            (0.425, 0.475, free, free),
+            (0.475, 0.425, free, free),
+        ] {
+            assert_eq!(at(&plain, x, y), plainly, "plain at ({x}, {y})");
+            assert_eq!(at(&rounded, x, y), rounded_out, "rounded out at ({x}, {y})");
+        }
+        // Nothing else differs: the rounding adds only the ring of half cells around the
+        // hazard, 8 + 4 cells along x, 4 + 4 along y, 4 corners.
+        let differ = (plain.cells().iter())
+            .zip(rounded.cells())
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differ, 2 * 8 + 2 * 4 + 4);
+    }
+
+    #[test]
     fn a_layer_redrawn_by_tiles_equals_one_drawn_whole() {
-        for factor in [1, 2] {
+        for (factor, rounded) in [(1, false), (2, false), (1, true)] {
+            let new_layer = || {
+                let layer = TiledLayer::new(factor);
+                if rounded {
+                    layer.rounding_hazards_out()
+                } else {
+                    layer
+                }
+            };
             let mut asm = Assembly::new(0.05);
             let mut sub = LogOdds::new(0.05);
-            let mut layer = TiledLayer::new(factor);
+            let mut layer = new_layer();
             let mut hazardous = vec![([0.5, 0.9], [0.5, 0.7])];
             let mut sensor = Point2::new(0.0123, 0.0271);
             let mut differences_seen = 0;
@@ -319,15 +477,16 @@ mod tests {
                 let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
                 let before = layer.drawn.as_ref().map(|d| d.grid.clone());
                 let got = layer.refresh(&view, hazards(&hazardous)).clone();
-                let want = TiledLayer::new(factor)
-                    .refresh(&view, hazards(&hazardous))
-                    .clone();
+                let want = new_layer().refresh(&view, hazards(&hazardous)).clone();
                 assert_eq!(got.geometry(), want.geometry());
                 let differ = (got.cells().iter())
                     .zip(want.cells())
                     .filter(|(a, b)| a != b)
                     .count();
-                assert_eq!(differ, 0, "cells differ at factor {factor}, step {step}");
+                assert_eq!(
+                    differ, 0,
+                    "cells differ at factor {factor} (rounded out: {rounded}), step {step}"
+                );
                 if let Some(before) = before
                     && before.geometry() == got.geometry()
                 {

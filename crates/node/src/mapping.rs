@@ -78,6 +78,11 @@ pub struct MappingConfig {
     /// land behind the rover's travel and turned back by its turn (`false`: at the
     /// latest scan's pose).
     pub depth_at_own_stamp: bool,
+    /// The published map's hazards rounded out to the hazard layer's half cell
+    /// ([`TiledLayer::rounding_hazards_out`]): a 5 cm cell beside a hazardous 10 cm cell is
+    /// hazard too (`false`: each 5 cm cell takes the verdict of the cell holding its
+    /// centre). The planner's layer is drawn as before either way.
+    pub hazards_rounded_out: bool,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -397,6 +402,11 @@ pub struct Mapping {
 impl Mapping {
     /// SLAM for rover `id`.
     pub fn new(id: RoverId, cfg: MappingConfig) -> Self {
+        let published_layer = if cfg.hazards_rounded_out {
+            TiledLayer::new(1).rounding_hazards_out()
+        } else {
+            TiledLayer::new(1)
+        };
         Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
@@ -431,7 +441,7 @@ impl Mapping {
             next_delta: Time::ZERO,
             delta_encoder: Encoder::new(),
             snapshot_wanted: false,
-            published_layer: TiledLayer::new(1),
+            published_layer,
             planner_layer: None,
             depth_features: None,
             relief_reference: None,
@@ -1097,6 +1107,7 @@ mod tests {
                 tilt_smoothing: 0.2,
                 tilt_gate: false,
                 depth_at_own_stamp: false,
+                hazards_rounded_out: false,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),

@@ -364,6 +364,7 @@ mod tests {
                     tilt_smoothing: 0.2,
                     tilt_gate: false,
                     depth_at_own_stamp: false,
+                    hazards_rounded_out: false,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),
