@@ -35,9 +35,11 @@ struct RoverGrades {
     hazard_cells: usize,
     /// ... and the share of them within a cell of ground the rover truly must not enter.
     hazard_correct: f64,
-    /// Share of the cells the map knows (free, occupied or hazard) that the truth agrees
-    /// with, each graded as [`realms_mission::slam_record::MapGrade`] grades its kind (absent
-    /// without a map).
+    /// Share of the cells the map knows (free, occupied or hazard) graded right, each as
+    /// [`realms_mission::slam_record::MapGrade`] grades its kind (absent without a map): an
+    /// occupied or hazard cell within a cell of a true obstacle or untraversable ground, a
+    /// free cell where the truth holds no lidar-visible obstacle (a crater's floor too, since
+    /// the lidar cannot see it: so a free cell turned hazard can only lower this).
     known_correct: Option<f64>,
 }
 

@@ -69,8 +69,8 @@ impl TiledLayer {
     /// 5 cm cells by their centres alone, the hazard then stops a cell short of the crest on
     /// the crater's inner wall. Rounded out, a 5 cm cell beside a hazardous 10 cm cell takes
     /// its verdict: the edge lies somewhere within that half cell, and a rover must not
-    /// take it for open ground. Meant for layers finer than the hazard layer (for a layer of
-    /// the hazard layer's own cells it widens every hazard by a whole cell).
+    /// take it for open ground. Only for layers finer than the hazard layer: drawn on cells
+    /// no finer than the hazard layer's, a layer's hazards are not rounded.
     pub fn rounding_hazards_out(self) -> Self {
         TiledLayer {
             round_hazards_out: true,
@@ -85,8 +85,9 @@ impl TiledLayer {
 
     /// The layer drawn from `view` and `hazards`, redrawn only where either changed since
     /// the last call: a cell is an obstacle if any of its SLAM cells is, else hazard if the
-    /// hazard layer says so at its centre, else free if any SLAM cell (or the depth camera)
-    /// saw it free (unjudged, if so marked, where only the lidar did), else unknown.
+    /// hazard layer says so at its centre (or, rounded out, within half a hazard cell of
+    /// it), else free if any SLAM cell (or the depth camera) saw it free (unjudged, if so
+    /// marked, where only the lidar did), else unknown.
     pub fn refresh(&mut self, view: &LiveView, hazards: Grid<CellState>) -> &Grid<i8> {
         let f = self.factor;
         let g = view.geometry;
@@ -99,7 +100,10 @@ impl TiledLayer {
         let lookup = CentreLookup::new(hazards.geometry(), &geo);
         // Where points half a hazard cell before and after each cell's centre (on each axis)
         // lie in the hazard layer.
-        let near = self.round_hazards_out.then(|| {
+        // On cells no finer than the hazard layer's the points would fall on its cells'
+        // edges: nothing to round.
+        let finer = hazards.geometry().resolution_m > geo.resolution_m * (1.0 + 1e-9);
+        let near = (self.round_hazards_out && finer).then(|| {
             let half = 0.5 * hazards.geometry().resolution_m;
             let shifted = |d: f64| GridGeometry {
                 origin: Point2::new(geo.origin.x_m + d, geo.origin.y_m + d),
@@ -441,7 +445,7 @@ mod tests {
             assert_eq!(at(&rounded, x, y), rounded_out, "rounded out at ({x}, {y})");
         }
         // Nothing else differs: the rounding adds only the ring of half cells around the
-        // hazard, 8 + 4 cells along x, 4 + 4 along y, 4 corners.
+        // hazard, 8 + 8 cells along x, 4 + 4 along y, 4 corners.
         let differ = (plain.cells().iter())
             .zip(rounded.cells())
             .filter(|(a, b)| a != b)
@@ -494,6 +498,32 @@ mod tests {
                 }
                 sensor = Point2::new(sensor.x_m + 0.4, sensor.y_m + 0.1);
             }
+            // A hazard seen with the map unchanged, ending at a tile's edge on ground the
+            // room's scans saw open: only the hazards redraw tiles now, and a rounded ring
+            // lies in the next tile, whose own hazard cells stay as they were.
+            let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+            let last = Point2::new(sensor.x_m - 0.4, sensor.y_m - 0.1);
+            let tile_m = LIVE_TILE_CELLS as f64 * view.geometry.resolution_m;
+            let k = ((last.x_m - view.geometry.origin.x_m) / tile_m).floor();
+            let edge = view.geometry.origin.x_m + k * tile_m;
+            assert!(edge > last.x_m - 1.7, "the edge lies in the room");
+            hazardous.push(([edge - 0.3, edge - 0.01], [last.y_m, last.y_m + 0.3]));
+            let got = layer.refresh(&view, hazards(&hazardous)).clone();
+            let want = new_layer().refresh(&view, hazards(&hazardous)).clone();
+            assert_eq!(
+                got, want,
+                "a hazard at a tile's edge, factor {factor}, rounded out: {rounded}"
+            );
+            // The ring's cell across the edge: hazard only when rounded out.
+            let across = *want
+                .at_world(Point2::new(edge + 0.025, last.y_m + 0.15))
+                .expect("inside");
+            let ring = if rounded {
+                OccupancyGrid::HAZARD
+            } else {
+                OccupancyGrid::FREE
+            };
+            assert_eq!(across, ring, "factor {factor}, rounded out: {rounded}");
             assert!(differences_seen >= 4, "the layer changed between calls");
             let hazard_cells = layer
                 .drawn
