@@ -357,14 +357,20 @@ mod tests {
         g
     }
 
-    #[test]
-    fn the_planners_layer_tells_ground_only_the_lidar_saw_from_judged_ground() {
+    /// The live map and submap of one scan of the square room from near the origin.
+    fn room() -> (Assembly, LogOdds) {
         let mut asm = Assembly::new(0.05);
         let mut sub = LogOdds::new(0.05);
         let sensor = Point2::new(0.0123, 0.0271);
         let scan = beams(sensor);
         sub.insert(sensor, &scan);
         asm.trace(&[(0, Pose2::IDENTITY)], sensor, &scan);
+        (asm, sub)
+    }
+
+    #[test]
+    fn the_planners_layer_tells_ground_only_the_lidar_saw_from_judged_ground() {
+        let (mut asm, sub) = room();
         let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
         // The depth camera judged the ground east of x = 0 safe and has not seen the west.
         let mut judged = hazards(&[]);
@@ -396,12 +402,7 @@ mod tests {
 
     #[test]
     fn hazards_rounded_out_reach_half_a_hazard_cell_past_its_edge() {
-        let mut asm = Assembly::new(0.05);
-        let mut sub = LogOdds::new(0.05);
-        let sensor = Point2::new(0.0123, 0.0271);
-        let scan = beams(sensor);
-        sub.insert(sensor, &scan);
-        asm.trace(&[(0, Pose2::IDENTITY)], sensor, &scan);
+        let (mut asm, sub) = room();
         let view = asm.live_states(&[(0, &sub, Pose2::IDENTITY)]);
         // 10 cm hazard cells covering x 0.5-0.9, y 0.5-0.7; every other judged safe.
         let hazardous = [([0.5, 0.9], [0.5, 0.7])];
