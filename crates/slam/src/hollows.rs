@@ -82,6 +82,18 @@ impl HollowFinder {
     /// the cells marked.
     pub fn fill(&mut self, states: &mut Grid<CellState>, open: impl Fn(Point2) -> bool) -> usize {
         let g = *states.geometry();
+        self.fill_cells(states, |cell| open(g.cell_center(cell)))
+    }
+
+    /// [`fill`](Self::fill), with `open(cell)` saying whether the ground of the layer's cell
+    /// was seen open: a caller that holds the lidar's map on another grid can look each cell
+    /// up by table ([`realms_core::CentreLookup`]) rather than by its centre's coordinates.
+    pub fn fill_cells(
+        &mut self,
+        states: &mut Grid<CellState>,
+        open: impl Fn(Cell) -> bool,
+    ) -> usize {
+        let g = *states.geometry();
         let (w, h) = (g.width, g.height);
         let max_cells = (self.cfg.max_area_m2 / (g.resolution_m * g.resolution_m)) as usize;
         let marks = &mut self.marks;
@@ -91,7 +103,7 @@ impl HollowFinder {
         // Asks `open` once a cell, and only of the cells a flood reaches.
         let is_open = |marks: &mut [Mark], i: usize, cell: Cell| -> bool {
             if marks[i] == Mark::Unasked {
-                marks[i] = if cells[i] == CellState::Unknown && open(g.cell_center(cell)) {
+                marks[i] = if cells[i] == CellState::Unknown && open(cell) {
                     Mark::Open
                 } else {
                     Mark::Closed
