@@ -190,13 +190,15 @@ fn normal_equations(
         let dtheta = grad[0] * (-s * p.x_m - c * p.y_m) + grad[1] * (c * p.x_m - s * p.y_m);
         let j = [grad[0], grad[1], dtheta];
         let r = 1.0 - m;
+        // H is symmetric: its upper triangle only, mirrored below.
         for a in 0..3 {
             g[a] += j[a] * r;
-            for b in 0..3 {
+            for b in a..3 {
                 h[a][b] += j[a] * j[b];
             }
         }
     }
+    (h[1][0], h[2][0], h[2][1]) = (h[0][1], h[0][2], h[1][2]);
     let n = points.len() as f64;
     let (wt, wr) = (
         cfg.prior_translation_weight * n,
