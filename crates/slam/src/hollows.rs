@@ -63,7 +63,9 @@ const CHUNK: usize = 32;
 pub struct HollowFinder {
     cfg: HazardHollows,
     marks: Vec<Mark>,
-    stack: Vec<usize>,
+    /// Cells still to flood, with where they lie (so no index is divided by the layer's
+    /// width for every cell a flood reaches).
+    stack: Vec<(usize, Cell)>,
     patch: Vec<usize>,
     hollows: Vec<usize>,
 }
@@ -111,9 +113,8 @@ impl HollowFinder {
             }
             marks[i] == Mark::Open
         };
-        // Each neighbour's index and cell.
-        let neighbours = |i: usize| {
-            let (x, y) = (i % w, i / w);
+        // Each neighbour's index and cell, of cell `i` at (`x`, `y`).
+        let neighbours = |i: usize, Cell { x, y }: Cell| {
             [
                 (x > 0).then(|| (i - 1, Cell { x: x - 1, y })),
                 (x + 1 < w).then(|| (i + 1, Cell { x: x + 1, y })),
@@ -134,25 +135,29 @@ impl HollowFinder {
                 .zip(chunk)
                 .filter(|(_, c)| **c == CellState::Occupied)
             {
-                for (start, cell) in neighbours(seed).into_iter().flatten() {
+                let at = Cell {
+                    x: seed % w,
+                    y: seed / w,
+                };
+                for (start, cell) in neighbours(seed, at).into_iter().flatten() {
                     if !is_open(marks, start, cell) {
                         continue;
                     }
                     marks[start] = Mark::Flooded;
-                    stack.push(start);
+                    stack.push((start, cell));
                     patch.clear();
                     let (mut hazard_sides, mut sides) = (0usize, 0usize);
                     // The ground the lidar sees beyond what the camera has judged is one
                     // wide patch along the hall's walls: once a flood is too large for a
                     // hollow it stops, and a later flood that meets it is the same patch.
                     let mut big = false;
-                    'flood: while let Some(i) = stack.pop() {
+                    'flood: while let Some((i, at)) = stack.pop() {
                         patch.push(i);
                         if patch.len() > max_cells {
                             big = true;
                             break;
                         }
-                        for n in neighbours(i) {
+                        for n in neighbours(i, at) {
                             let Some((j, cell)) = n else {
                                 // The layer's edge borders on nothing judged.
                                 sides += 1;
@@ -168,7 +173,7 @@ impl HollowFinder {
                             }
                             if is_open(marks, j, cell) {
                                 marks[j] = Mark::Flooded;
-                                stack.push(j);
+                                stack.push((j, cell));
                             } else {
                                 sides += 1;
                                 hazard_sides += usize::from(cells[j] == CellState::Occupied);
@@ -176,7 +181,7 @@ impl HollowFinder {
                         }
                     }
                     if big {
-                        for &i in patch.iter().chain(stack.iter()) {
+                        for &i in patch.iter().chain(stack.iter().map(|(i, _)| i)) {
                             marks[i] = Mark::Big;
                         }
                         stack.clear();
