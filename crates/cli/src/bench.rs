@@ -80,6 +80,15 @@ pub(crate) fn explore_to_end(
     mission
 }
 
+/// The share of all the parts' items that are right, from each part's `(share right,
+/// items)`; 0 without items.
+pub(crate) fn pooled(parts: impl Iterator<Item = (f64, usize)>) -> f64 {
+    let (right, all) = parts.fold((0.0, 0usize), |(r, a), (share, n)| {
+        (r + share * n as f64, a + n)
+    });
+    right / all.max(1) as f64
+}
+
 /// The arithmetic mean; NaN for none.
 pub(crate) fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64

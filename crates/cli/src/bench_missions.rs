@@ -6,7 +6,7 @@
 //! mission says little of a change: these figures are read over many seeds (BENCHMARKS.md
 //! compares builds on sixteen). For SLAM alone on fixed paths, see `realms bench slam`.
 
-use crate::bench::{in_parallel, machine, mean, median, workers};
+use crate::bench::{in_parallel, machine, mean, median, pooled, workers};
 use crate::cli::BenchMissionsArgs;
 use crate::mission::{load_scenario, parse_duration_s, run_to_end};
 use anyhow::{Result, bail};
@@ -35,11 +35,7 @@ struct RoverGrades {
     hazard_cells: usize,
     /// ... and the share of them within a cell of ground the rover truly must not enter.
     hazard_correct: f64,
-    /// Share of the cells the map knows (free, occupied or hazard) graded right, each as
-    /// [`realms_mission::slam_record::MapGrade`] grades its kind (absent without a map): an
-    /// occupied or hazard cell within a cell of a true obstacle or untraversable ground, a
-    /// free cell where the truth holds no lidar-visible obstacle (a crater's floor too, since
-    /// the lidar cannot see it: so a free cell turned hazard can only lower this).
+    /// [`realms_mission::slam_record::MapGrade::known_correct`] (absent without a map).
     known_correct: Option<f64>,
 }
 
@@ -82,12 +78,7 @@ impl MissionGrades {
                         path_hazards_flagged: map.map_or(0.0, |m| m.path_hazards_flagged),
                         hazard_cells: map.map_or(0, |m| m.hazard_cells),
                         hazard_correct: map.map_or(0.0, |m| m.hazard_correct),
-                        known_correct: map.map(|m| {
-                            let right = m.occupied_correct * m.occupied_cells as f64
-                                + m.free_correct * m.free_cells as f64
-                                + m.hazard_correct * m.hazard_cells as f64;
-                            right / (m.occupied_cells + m.free_cells + m.hazard_cells).max(1) as f64
-                        }),
+                        known_correct: map.map(|m| m.known_correct()),
                     }
                 })
                 .collect(),
@@ -135,18 +126,6 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
     let rovers = || missions.iter().flat_map(|m| &m.rovers);
     let maps: Vec<f64> = rovers().filter_map(|r| r.occupied_correct).collect();
     let errors: Vec<f64> = rovers().filter_map(|r| r.trajectory_rmse_m).collect();
-    let (flagged, near) = rovers().fold((0.0, 0usize), |(f, n), r| {
-        (
-            f + r.path_hazards_flagged * r.path_hazards as f64,
-            n + r.path_hazards,
-        )
-    });
-    let (hazards_right, hazards) = rovers().fold((0.0, 0usize), |(right, n), r| {
-        (
-            right + r.hazard_correct * r.hazard_cells as f64,
-            n + r.hazard_cells,
-        )
-    });
     let known: Vec<f64> = rovers().filter_map(|r| r.known_correct).collect();
     let merged: Vec<f64> = missions
         .iter()
@@ -167,8 +146,8 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         trajectory_rmse_worst_m: errors.iter().copied().fold(f64::NAN, f64::max),
         rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
         pose_within_0_2_m_mean: mean(&rovers().map(|r| r.pose_within_0_2_m).collect::<Vec<_>>()),
-        path_hazards_flagged: flagged / near.max(1) as f64,
-        hazard_correct: hazards_right / hazards.max(1) as f64,
+        path_hazards_flagged: pooled(rovers().map(|r| (r.path_hazards_flagged, r.path_hazards))),
+        hazard_correct: pooled(rovers().map(|r| (r.hazard_correct, r.hazard_cells))),
         known_correct_mean: mean(&known),
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         sim_duration_mean_s: mean(&lengths),

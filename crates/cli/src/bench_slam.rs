@@ -9,7 +9,7 @@
 //! variants are SLAM's alone. The wall time of each replay is SLAM's cost alone too (the
 //! mission's own figure also counts drawing the planner's map).
 
-use crate::bench::{in_parallel, median};
+use crate::bench::{in_parallel, median, pooled};
 use crate::bench_slam_closures;
 use crate::bench_slam_drift::{BAND_EDGES_M, Band, WINDOW_SCANS, drift_by_band};
 use crate::cli::BenchSlamArgs;
@@ -1416,13 +1416,8 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             })
             .collect();
         // Pooled over the rovers: a rover whose path passed few hazards weighs little.
-        let share = |part: fn(&MapGrade) -> (f64, usize)| {
-            let (hit, all) = of.iter().fold((0.0, 0usize), |(h, a), r| {
-                let (share, n) = part(&r.map);
-                (h + share * n as f64, a + n)
-            });
-            100.0 * hit / all.max(1) as f64
-        };
+        let share =
+            |part: fn(&MapGrade) -> (f64, usize)| 100.0 * pooled(of.iter().map(|r| part(&r.map)));
         println!(
             "| {name} | {:.3} m | {:.3} m | {:.3} m | {:.3} m | {:.1} % | {:.0}x | {:.1} % | {:.1} % |",
             median(of.iter().map(|r| r.last.rmse_m).collect()),
@@ -1431,10 +1426,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
             median(of.iter().map(|r| r.tracked.rmse_m).collect()),
             // Pooled over every tracked scan.
             100.0
-                * of.iter()
-                    .map(|r| r.tracked.share_within_0_2_m * r.tracked_scans as f64)
-                    .sum::<f64>()
-                / of.iter().map(|r| r.tracked_scans).sum::<usize>().max(1) as f64,
+                * pooled(
+                    of.iter()
+                        .map(|r| (r.tracked.share_within_0_2_m, r.tracked_scans))
+                ),
             median(fleet_speed),
             share(|m| (m.path_hazards_flagged, m.path_hazards)),
             share(|m| (m.hazard_correct, m.hazard_cells)),

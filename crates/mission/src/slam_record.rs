@@ -237,6 +237,20 @@ pub struct MapGrade {
     pub obstacle_faces_marked: f64,
 }
 
+impl MapGrade {
+    /// Share of the cells the map knows (free, occupied or hazard) graded right, each as
+    /// its kind is graded above: an occupied or hazard cell within a cell of a true obstacle
+    /// or untraversable ground, a free cell where the truth holds no lidar-visible obstacle
+    /// (a crater's floor too, since the lidar cannot see it: so a free cell turned hazard
+    /// can only lower this).
+    pub fn known_correct(&self) -> f64 {
+        let right = self.occupied_correct * self.occupied_cells as f64
+            + self.free_correct * self.free_cells as f64
+            + self.hazard_correct * self.hazard_cells as f64;
+        right / (self.occupied_cells + self.free_cells + self.hazard_cells).max(1) as f64
+    }
+}
+
 /// How near a true hazard a marked cell must lie for
 /// [`MapGrade::path_hazards_flagged_nearby`], metres.
 pub const NEAR_FLAG_M: f64 = 0.25;
@@ -784,6 +798,22 @@ mod tests {
         // a marked cell within one cell.
         assert_eq!(g.obstacle_faces_seen, 5);
         assert!((g.obstacle_faces_marked - 3.0 / 5.0).abs() < 1e-12, "{g:?}");
+    }
+
+    #[test]
+    fn known_cells_right_weighs_each_kind_by_its_cells() {
+        let g = MapGrade {
+            occupied_cells: 10,
+            occupied_correct: 0.5,
+            free_cells: 80,
+            free_correct: 1.0,
+            hazard_cells: 10,
+            hazard_correct: 0.2,
+            ..MapGrade::default()
+        };
+        // 5 + 80 + 2 of 100 cells right.
+        assert!((g.known_correct() - 0.87).abs() < 1e-12, "{g:?}");
+        assert_eq!(MapGrade::default().known_correct(), 0.0);
     }
 
     #[test]

@@ -62,7 +62,7 @@ impl TiledLayer {
         }
     }
 
-    /// The same layer, its hazards rounded out to the hazard layer's half cell: a cell that
+    /// The same layer, its hazards rounded out to the hazard layer's half cell if `round`: a cell that
     /// would be free is hazard where the hazard layer marks ground within half a hazard cell
     /// (per axis) of its centre. The hazard layer judges 10 cm cells, and a cell across a
     /// crater's crest holds mostly the gentle outer slope, so it is judged safe; drawn on
@@ -71,9 +71,9 @@ impl TiledLayer {
     /// its verdict: the edge lies somewhere within that half cell, and a rover must not
     /// take it for open ground. Only for layers finer than the hazard layer: drawn on cells
     /// no finer than the hazard layer's, a layer's hazards are not rounded.
-    pub fn rounding_hazards_out(self) -> Self {
+    pub fn rounding_hazards_out(self, round: bool) -> Self {
         TiledLayer {
-            round_hazards_out: true,
+            round_hazards_out: round,
             ..self
         }
     }
@@ -99,9 +99,8 @@ impl TiledLayer {
         };
         let lookup = CentreLookup::new(hazards.geometry(), &geo);
         // Where points half a hazard cell before and after each cell's centre (on each axis)
-        // lie in the hazard layer.
-        // On cells no finer than the hazard layer's the points would fall on its cells'
-        // edges: nothing to round.
+        // lie in the hazard layer; on cells no finer than the hazard layer's those points
+        // would fall on its cells' edges, and nothing is rounded.
         let finer = hazards.geometry().resolution_m > geo.resolution_m * (1.0 + 1e-9);
         let near = (self.round_hazards_out && finer).then(|| {
             let half = 0.5 * hazards.geometry().resolution_m;
@@ -410,7 +409,7 @@ mod tests {
             .refresh(&view, hazards(&hazardous))
             .clone();
         let rounded = TiledLayer::new(1)
-            .rounding_hazards_out()
+            .rounding_hazards_out(true)
             .refresh(&view, hazards(&hazardous))
             .clone();
         let at = |g: &Grid<i8>, x: f64, y: f64| {
@@ -457,14 +456,7 @@ mod tests {
     #[test]
     fn a_layer_redrawn_by_tiles_equals_one_drawn_whole() {
         for (factor, rounded) in [(1, false), (2, false), (1, true)] {
-            let new_layer = || {
-                let layer = TiledLayer::new(factor);
-                if rounded {
-                    layer.rounding_hazards_out()
-                } else {
-                    layer
-                }
-            };
+            let new_layer = || TiledLayer::new(factor).rounding_hazards_out(rounded);
             let mut asm = Assembly::new(0.05);
             let mut sub = LogOdds::new(0.05);
             let mut layer = new_layer();

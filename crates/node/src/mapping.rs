@@ -402,11 +402,7 @@ pub struct Mapping {
 impl Mapping {
     /// SLAM for rover `id`.
     pub fn new(id: RoverId, cfg: MappingConfig) -> Self {
-        let published_layer = if cfg.hazards_rounded_out {
-            TiledLayer::new(1).rounding_hazards_out()
-        } else {
-            TiledLayer::new(1)
-        };
+        let published_layer = TiledLayer::new(1).rounding_hazards_out(cfg.hazards_rounded_out);
         Mapping {
             id,
             mapper: Mapper::new(cfg.mapper),
