@@ -13,19 +13,24 @@
 //!   3 degrees around the prior, as the rovers search);
 //! - `graph_optimize`: one Gauss-Newton step of a rover's pose graph after an hour of
 //!   driving (1,500 keyframes on laps of a 10 m square, 273 closures), by the rovers'
-//!   capped block-Jacobi conjugate gradients, and by block elimination (the rovers' solver).
+//!   capped block-Jacobi conjugate gradients, and by block elimination (the rovers' solver);
+//! - `hollows`: the hollows found in a hall-sized hazard layer (50 x 36 m of 10 cm cells:
+//!   three craters' walls judged hazard round unjudged middles, rocks on judged ground,
+//!   unjudged strips between the judged ground and the walls' hazard feet), as the rover
+//!   finds them for every map it publishes.
 //!
 //! `cargo bench -p realms-slam --bench slam`. Figures in BENCHMARKS.md.
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use realms_core::{Point2, Pose2};
+use realms_core::{Grid, GridGeometry, Point2, Pose2};
 use realms_slam::bnb::{PrecomputedMap, SearchWindow};
 use realms_slam::carmen::CarmenLog;
 use realms_slam::frontend::{Densify, densify, scan_points};
+use realms_slam::hollows::{HazardHollows, HollowFinder};
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::ndt::{NdtConfig, NdtMap};
-use realms_slam::occupancy::MissRule;
+use realms_slam::occupancy::{CellState, MissRule};
 use realms_slam::posegraph::{Edge, GraphSolver, PoseGraph};
 use std::hint::black_box;
 
@@ -330,9 +335,115 @@ fn graph_bench(c: &mut Criterion) {
     });
 }
 
+/// A hazard layer the size of the default hall, with what the lidar saw open: the floor the
+/// camera judged safe along a few strips of the rovers' paths, unjudged beyond them up to the
+/// walls' hazard feet, three craters whose walls it judged hazard round unjudged middles, and
+/// rocks (hazard on judged ground, closed to the lidar's floor where they stand).
+fn hall_hazard_layer() -> (Grid<CellState>, Vec<bool>) {
+    let (w, h) = (500usize, 360usize);
+    let geometry = GridGeometry {
+        width: w,
+        height: h,
+        resolution_m: 0.1,
+        origin: Point2::new(0.0, 0.0),
+    };
+    let mut states = Grid::new(geometry, CellState::Unknown);
+    let mut open = vec![true; w * h];
+    let at = |x: usize, y: usize| Point2::new((x as f64 + 0.5) * 0.1, (y as f64 + 0.5) * 0.1);
+    let paths = [
+        (5.0, 5.0, 45.0, 5.0),
+        (45.0, 5.0, 45.0, 31.0),
+        (45.0, 31.0, 5.0, 31.0),
+        (5.0, 31.0, 5.0, 5.0),
+        (5.0, 18.0, 45.0, 18.0),
+        (25.0, 5.0, 25.0, 31.0),
+    ];
+    let from_path = |p: Point2| {
+        paths
+            .iter()
+            .map(|&(x0, y0, x1, y1)| {
+                let (dx, dy) = (x1 - x0, y1 - y0);
+                let t =
+                    (((p.x_m - x0) * dx + (p.y_m - y0) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+                (p.x_m - x0 - t * dx).hypot(p.y_m - y0 - t * dy)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let craters = [
+        (Point2::new(15.0, 12.0), 3.0),
+        (Point2::new(35.0, 25.0), 1.5),
+        (Point2::new(33.0, 10.0), 1.2),
+    ];
+    // Rocks at fixed pseudo-random places (a linear congruential sequence).
+    let mut lcg = 12345u64;
+    let mut next = || {
+        lcg = lcg
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (lcg >> 33) as f64 / (1u64 << 31) as f64
+    };
+    let rocks: Vec<(Point2, f64)> = (0..150)
+        .map(|_| {
+            (
+                Point2::new(1.0 + 48.0 * next(), 1.0 + 34.0 * next()),
+                0.1 + 0.15 * next(),
+            )
+        })
+        .collect();
+    for y in 0..h {
+        for x in 0..w {
+            let p = at(x, y);
+            let i = y * w + x;
+            let wall_foot = x < 3 || y < 3 || x >= w - 3 || y >= h - 3;
+            let mut state = if wall_foot {
+                CellState::Occupied
+            } else if from_path(p) <= 4.0 {
+                CellState::Free
+            } else {
+                CellState::Unknown
+            };
+            for &(c, r) in &craters {
+                let d = p.distance_m(c);
+                if d < 0.6 * r {
+                    state = CellState::Unknown;
+                } else if d <= r {
+                    state = CellState::Occupied;
+                }
+            }
+            for &(c, r) in &rocks {
+                if p.distance_m(c) <= r {
+                    state = CellState::Occupied;
+                    open[i] = false;
+                }
+            }
+            states.cells_mut()[i] = state;
+        }
+    }
+    (states, open)
+}
+
+fn hollows_bench(c: &mut Criterion) {
+    let (layer, open) = hall_hazard_layer();
+    let mut finder = HollowFinder::new(HazardHollows::default());
+    let width = layer.geometry().width;
+    // The craters' middles are hollows; the strips along the walls are too large to be.
+    let marked = finder.fill_cells(&mut layer.clone(), |cell| open[cell.y * width + cell.x]);
+    assert!(
+        (1300..1600).contains(&marked),
+        "the three craters' middles: {marked} cells"
+    );
+    c.bench_function("hollows/hall", |b| {
+        b.iter_batched_ref(
+            || layer.clone(),
+            |states| finder.fill_cells(states, |cell| open[cell.y * width + cell.x]),
+            BatchSize::LargeInput,
+        )
+    });
+}
+
 criterion_group! {
     name = slam;
     config = Criterion::default().sample_size(30);
-    targets = benches, graph_bench
+    targets = benches, graph_bench, hollows_bench
 }
 criterion_main!(slam);

@@ -63,11 +63,20 @@ const CHUNK: usize = 32;
 pub struct HollowFinder {
     cfg: HazardHollows,
     marks: Vec<Mark>,
-    /// Cells still to flood, with where they lie (so no index is divided by the layer's
-    /// width for every cell a flood reaches).
+    /// Cells a flood has yet to start runs from, with where they lie (so no index is
+    /// divided by the layer's width for every run a flood reaches).
     stack: Vec<(usize, Cell)>,
-    patch: Vec<usize>,
+    /// The flood's runs of cells along rows, first and last index.
+    runs: Vec<(usize, usize)>,
     hollows: Vec<usize>,
+}
+
+/// A flood's count of its patch's border: cell sides it shares with cells outside the patch
+/// (the layer's edge included), and those of them that are hazard.
+#[derive(Clone, Copy, Debug, Default)]
+struct Border {
+    sides: usize,
+    hazard_sides: usize,
 }
 
 impl HollowFinder {
@@ -90,6 +99,11 @@ impl HollowFinder {
     /// [`fill`](Self::fill), with `open(cell)` saying whether the ground of the layer's cell
     /// was seen open: a caller that holds the lidar's map on another grid can look each cell
     /// up by table ([`realms_core::CentreLookup`]) rather than by its centre's coordinates.
+    ///
+    /// Each patch is flooded a run of cells along a row at a time (the scanline fill of
+    /// computer graphics, e.g. Heckbert, "A Seed Fill Algorithm", Graphics Gems, 1990): a
+    /// row's cells are asked in order, where a flood cell by cell went back and forth
+    /// between rows for every cell.
     pub fn fill_cells(
         &mut self,
         states: &mut Grid<CellState>,
@@ -113,80 +127,143 @@ impl HollowFinder {
             }
             marks[i] == Mark::Open
         };
-        // Each neighbour's index and cell, of cell `i` at (`x`, `y`).
-        let neighbours = |i: usize, Cell { x, y }: Cell| {
-            [
-                (x > 0).then(|| (i - 1, Cell { x: x - 1, y })),
-                (x + 1 < w).then(|| (i + 1, Cell { x: x + 1, y })),
-                (y > 0).then(|| (i - w, Cell { x, y: y - 1 })),
-                (y + 1 < h).then(|| (i + w, Cell { x, y: y + 1 })),
-            ]
-        };
-        let (stack, patch) = (&mut self.stack, &mut self.patch);
-        self.hollows.clear();
-        for (chunk_at, chunk) in (0..).step_by(CHUNK).zip(cells.chunks(CHUNK)) {
-            let any_hazard = chunk
-                .iter()
-                .fold(false, |any, c| any | (*c == CellState::Occupied));
-            if !any_hazard {
-                continue;
+        // A side shared with cell `j` outside the patch (asked already): counted, or the
+        // flood is part of a patch found too large (`Err`).
+        let border = |marks: &[Mark], j: usize, b: &mut Border| -> Result<(), ()> {
+            if marks[j] == Mark::Big {
+                return Err(());
             }
-            for (seed, _) in (chunk_at..)
-                .zip(chunk)
-                .filter(|(_, c)| **c == CellState::Occupied)
-            {
-                let at = Cell {
-                    x: seed % w,
-                    y: seed / w,
-                };
-                for (start, cell) in neighbours(seed, at).into_iter().flatten() {
-                    if !is_open(marks, start, cell) {
-                        continue;
-                    }
-                    marks[start] = Mark::Flooded;
-                    stack.push((start, cell));
-                    patch.clear();
-                    let (mut hazard_sides, mut sides) = (0usize, 0usize);
-                    // The ground the lidar sees beyond what the camera has judged is one
-                    // wide patch along the hall's walls: once a flood is too large for a
-                    // hollow it stops, and a later flood that meets it is the same patch.
-                    let mut big = false;
-                    'flood: while let Some((i, at)) = stack.pop() {
-                        patch.push(i);
-                        if patch.len() > max_cells {
-                            big = true;
-                            break;
+            b.sides += 1;
+            b.hazard_sides += usize::from(cells[j] == CellState::Occupied);
+            Ok(())
+        };
+        let (stack, runs) = (&mut self.stack, &mut self.runs);
+        self.hollows.clear();
+        for (y, row) in cells.chunks_exact(w.max(1)).enumerate() {
+            for (chunk_x, chunk) in (0..).step_by(CHUNK).zip(row.chunks(CHUNK)) {
+                let any_hazard = chunk
+                    .iter()
+                    .fold(false, |any, c| any | (*c == CellState::Occupied));
+                if !any_hazard {
+                    continue;
+                }
+                for (x, _) in (chunk_x..)
+                    .zip(chunk)
+                    .filter(|(_, c)| **c == CellState::Occupied)
+                {
+                    let seed = y * w + x;
+                    // The four neighbours, each if inside the layer (the others' index and
+                    // cell wrap, unread).
+                    let starts = [
+                        (x > 0, seed.wrapping_sub(1), x.wrapping_sub(1), y),
+                        (x + 1 < w, seed + 1, x + 1, y),
+                        (y > 0, seed.wrapping_sub(w), x, y.wrapping_sub(1)),
+                        (y + 1 < h, seed + w, x, y + 1),
+                    ];
+                    for (inside, start, x, y) in starts {
+                        // Most cells beside hazard are hazard or judged: no patch starts there.
+                        if !inside || cells[start] != CellState::Unknown {
+                            continue;
                         }
-                        for n in neighbours(i, at) {
-                            let Some((j, cell)) = n else {
-                                // The layer's edge borders on nothing judged.
-                                sides += 1;
+                        let cell = Cell { x, y };
+                        if !is_open(marks, start, cell) {
+                            continue;
+                        }
+                        stack.push((start, cell));
+                        runs.clear();
+                        let mut b = Border::default();
+                        let mut count = 0usize;
+                        // The ground the lidar sees beyond what the camera has judged is one
+                        // wide patch along the hall's walls: once a flood is too large for a
+                        // hollow it stops, and a later flood that meets it is the same patch.
+                        let mut big = false;
+                        'flood: while let Some((i, Cell { x, y })) = stack.pop() {
+                            if marks[i] != Mark::Open {
+                                // Taken into a run since it was pushed.
                                 continue;
-                            };
-                            match marks[j] {
-                                Mark::Flooded => continue,
-                                Mark::Big => {
+                            }
+                            let row = i - x;
+                            // The whole run of open cells along the row through it: its
+                            // neighbours along the row are open only if they join it.
+                            let (mut x0, mut x1) = (x, x);
+                            while x0 > 0 && is_open(marks, row + x0 - 1, Cell { x: x0 - 1, y }) {
+                                x0 -= 1;
+                            }
+                            while x1 + 1 < w && is_open(marks, row + x1 + 1, Cell { x: x1 + 1, y })
+                            {
+                                x1 += 1;
+                            }
+                            marks[row + x0..=row + x1].fill(Mark::Flooded);
+                            runs.push((row + x0, row + x1));
+                            count += x1 - x0 + 1;
+                            if count > max_cells {
+                                big = true;
+                                break;
+                            }
+                            for (end, beyond) in [
+                                (x0 > 0, row + x0.wrapping_sub(1)),
+                                (x1 + 1 < w, row + x1 + 1),
+                            ] {
+                                let side = if end {
+                                    border(marks, beyond, &mut b)
+                                } else {
+                                    // The layer's edge borders on nothing judged.
+                                    b.sides += 1;
+                                    Ok(())
+                                };
+                                if side.is_err() {
                                     big = true;
                                     break 'flood;
                                 }
-                                _ => {}
                             }
-                            if is_open(marks, j, cell) {
-                                marks[j] = Mark::Flooded;
-                                stack.push((j, cell));
-                            } else {
-                                sides += 1;
-                                hazard_sides += usize::from(cells[j] == CellState::Occupied);
+                            for (ny, inside) in [(y.wrapping_sub(1), y > 0), (y + 1, y + 1 < h)] {
+                                if !inside {
+                                    b.sides += x1 - x0 + 1;
+                                    continue;
+                                }
+                                let next_row = ny * w;
+                                // A run in the next row is started once, from its first cell
+                                // beside this one.
+                                let mut in_run = false;
+                                for nx in x0..=x1 {
+                                    let j = next_row + nx;
+                                    if marks[j] == Mark::Flooded {
+                                        in_run = false;
+                                        continue;
+                                    }
+                                    let cell = Cell { x: nx, y: ny };
+                                    if marks[j] != Mark::Big && is_open(marks, j, cell) {
+                                        if !in_run {
+                                            stack.push((j, cell));
+                                        }
+                                        in_run = true;
+                                    } else {
+                                        in_run = false;
+                                        if border(marks, j, &mut b).is_err() {
+                                            big = true;
+                                            break 'flood;
+                                        }
+                                    }
+                                }
                             }
                         }
-                    }
-                    if big {
-                        for &i in patch.iter().chain(stack.iter().map(|(i, _)| i)) {
-                            marks[i] = Mark::Big;
+                        if big {
+                            for &(first, last) in runs.iter() {
+                                marks[first..=last].fill(Mark::Big);
+                            }
+                            for &(i, _) in stack.iter() {
+                                if marks[i] == Mark::Open {
+                                    marks[i] = Mark::Big;
+                                }
+                            }
+                            stack.clear();
+                        } else if b.hazard_sides as f64
+                            >= self.cfg.min_hazard_share * b.sides as f64
+                        {
+                            for &(first, last) in runs.iter() {
+                                self.hollows.extend(first..=last);
+                            }
                         }
-                        stack.clear();
-                    } else if hazard_sides as f64 >= self.cfg.min_hazard_share * sides as f64 {
-                        self.hollows.extend_from_slice(patch);
                     }
                 }
             }
