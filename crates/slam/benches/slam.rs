@@ -17,7 +17,9 @@
 //! - `hollows`: the hollows found in a hall-sized hazard layer (50 x 36 m of 10 cm cells:
 //!   three craters' walls judged hazard round unjudged middles, rocks on judged ground,
 //!   unjudged strips between the judged ground and the walls' hazard feet), as the rover
-//!   finds them for every map it publishes.
+//!   finds them for every map it publishes;
+//! - `judge_frame`: one depth frame judged for hazards (106 x 60 pixels of a camera 0.25 m
+//!   up, tilted 15 degrees down over an undulating floor with rocks, as the rovers' D455).
 //!
 //! `cargo bench -p realms-slam --bench slam`. Figures in BENCHMARKS.md.
 
@@ -32,6 +34,7 @@ use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::ndt::{NdtConfig, NdtMap};
 use realms_slam::occupancy::{CellState, MissRule};
 use realms_slam::posegraph::{Edge, GraphSolver, PoseGraph};
+use realms_slam::traversability::{TraversabilityConfig, judge_frame};
 use std::hint::black_box;
 
 /// A scene to match in: a map of a few scans, the scan to match, where it truly is, and the
@@ -441,9 +444,67 @@ fn hollows_bench(c: &mut Criterion) {
     });
 }
 
+/// The points of one depth frame in the rover's levelled frame: each of 106 x 60 pixels of
+/// an 87 x 58 degree camera 0.25 m above the floor, tilted 15 degrees down, meets the
+/// floor's plane, and takes the height there of an undulating floor with a few rocks;
+/// pixels that meet no floor within 6 m return nothing.
+fn depth_frame() -> Vec<[f64; 3]> {
+    let (cols, rows, height_m, pitch) = (106, 60, 0.25, 15f64.to_radians());
+    let (half_w, half_h) = (
+        (87f64 / 2.0).to_radians().tan(),
+        (58f64 / 2.0).to_radians().tan(),
+    );
+    let rocks = [
+        (1.2, 0.3, 0.15, 0.12),
+        (2.0, -0.8, 0.2, 0.06),
+        (3.1, 0.9, 0.25, 0.2),
+        (1.7, 1.4, 0.1, 0.05),
+    ];
+    let floor = |x: f64, y: f64| {
+        let mut z = 0.04 * (x * 1.3).sin() + 0.02 * (y * 2.1).cos();
+        for &(rx, ry, r, h) in &rocks {
+            if (x - rx).hypot(y - ry) < r {
+                z += h;
+            }
+        }
+        z
+    };
+    let mut points = Vec::new();
+    for v in 0..rows {
+        for u in 0..cols {
+            // Camera frame: forward, left, up.
+            let left = half_w * (1.0 - 2.0 * (u as f64 + 0.5) / cols as f64);
+            let up = half_h * (1.0 - 2.0 * (v as f64 + 0.5) / rows as f64);
+            let (forward, up) = (
+                pitch.cos() - up * pitch.sin(),
+                pitch.sin() + up * pitch.cos(),
+            );
+            let down = -up;
+            if down <= 0.0 {
+                continue;
+            }
+            let t = height_m / down;
+            let (x, y) = (forward * t, left * t);
+            if (x * x + y * y + height_m * height_m).sqrt() > 6.0 {
+                continue;
+            }
+            points.push([x, y, floor(x, y)]);
+        }
+    }
+    points
+}
+
+fn traversability_bench(c: &mut Criterion) {
+    let points = depth_frame();
+    let cfg = TraversabilityConfig::default();
+    c.bench_function("judge_frame/rocky_floor", |b| {
+        b.iter(|| judge_frame(black_box(&points), &cfg))
+    });
+}
+
 criterion_group! {
     name = slam;
     config = Criterion::default().sample_size(30);
-    targets = benches, graph_bench, hollows_bench
+    targets = benches, graph_bench, hollows_bench, traversability_bench
 }
 criterion_main!(slam);

@@ -138,16 +138,21 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     // The box of columns any point fell in: a frame covers a wedge of the square, so columns
     // are kept for that box alone (the whole square, 6,561 columns of 32 bytes at the
     // rovers' settings, was allocated and cleared every frame).
+    // Each judged point's column and height, found once (a division and a rounding down
+    // per axis).
+    let placed: Vec<(i64, i64, f64)> = points
+        .iter()
+        .filter(judged)
+        .filter_map(|p| column(p[0], p[1]).map(|(ix, iy)| (ix, iy, p[2])))
+        .collect();
     let mut touched = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
-    for p in points.iter().filter(judged) {
-        if let Some((ix, iy)) = column(p[0], p[1]) {
-            touched = [
-                touched[0].min(ix),
-                touched[1].min(iy),
-                touched[2].max(ix),
-                touched[3].max(iy),
-            ];
-        }
+    for &(ix, iy, _) in &placed {
+        touched = [
+            touched[0].min(ix),
+            touched[1].min(iy),
+            touched[2].max(ix),
+            touched[3].max(iy),
+        ];
     }
     if touched[0] > touched[2] {
         return Vec::new();
@@ -156,19 +161,16 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     let col_at =
         |ix: i64, iy: i64| (iy - touched[1]) as usize * cols_w + (ix - touched[0]) as usize;
     let mut cols = vec![Column::default(); cols_w * (touched[3] - touched[1] + 1) as usize];
-    for p in points.iter().filter(judged) {
-        let Some((ix, iy)) = column(p[0], p[1]) else {
-            continue;
-        };
+    for &(ix, iy, z) in &placed {
         let c = &mut cols[col_at(ix, iy)];
         if c.n == 0 {
-            c.min_z = p[2];
-            c.max_z = p[2];
+            c.min_z = z;
+            c.max_z = z;
         }
         c.n += 1;
-        c.sum_z += p[2];
-        c.min_z = c.min_z.min(p[2]);
-        c.max_z = c.max_z.max(p[2]);
+        c.sum_z += z;
+        c.min_z = c.min_z.min(z);
+        c.max_z = c.max_z.max(z);
     }
     // The slope is measured over two cells so depth noise matters less.
     let baseline = 2i64;
@@ -199,6 +201,21 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             }
         }
     }
+    // The local floor of each column (the lowest point within `reach` cells), and the lowest
+    // mean height within `reach` cells: any neighbour the column is steep above is at least
+    // `least_rise` below it, so a column less than that above the lowest mean is judged not
+    // steep without asking each neighbour. Both by a least-value filter along the rows and
+    // then the columns (van Herk, "A fast algorithm for local minimum and maximum filters on
+    // rectangular and octagonal kernels", 1992, in its plain form): 4 (2 reach + 1) values a
+    // column where asking each neighbour read 2 (2 reach + 1)^2.
+    let reach_cells = reach as usize;
+    let floors = window_min(&min_z, bw, bh, reach_cells);
+    let judged_means: Vec<f64> = mean
+        .iter()
+        .map(|m| if m.is_nan() { f64::INFINITY } else { *m })
+        .collect();
+    let lowest_means = window_min(&judged_means, bw, bh, reach_cells);
+    let least_rise = slope * baseline as f64 * r + SLOPE_NOISE_M;
     // Every neighbour's offset in the box and distance, cells, worked out once a frame.
     let neighbours: Vec<(isize, f64)> = (-reach..=reach)
         .flat_map(|dy| {
@@ -219,21 +236,19 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
                 continue;
             }
             let c = &cols[col_at(ix, iy)];
-            // The local floor: the lowest point within `reach` cells.
-            let mut floor = c.min_z;
-            let mut steep = false;
-            for &(offset, dist) in &neighbours {
-                let j = (k as isize + offset) as usize;
-                floor = floor.min(min_z[j]);
-                // Far from the camera the points thin out to a few cells per row, so the
-                // slope is taken to any judged neighbour at least two cells away. Only the
-                // upper cell of a steep pair is marked: the face of a rock or a crater's wall
-                // is the hazard, not the flat floor at its foot (which would otherwise grow
-                // every rock and wall by a band the width of the baseline).
-                if dist >= baseline as f64 && here - mean[j] > slope * dist * r + SLOPE_NOISE_M {
-                    steep = true;
-                }
-            }
+            // The window's lowest point includes the column's own.
+            let floor = floors[k];
+            // Far from the camera the points thin out to a few cells per row, so the slope
+            // is taken to any judged neighbour at least two cells away. Only the upper cell
+            // of a steep pair is marked: the face of a rock or a crater's wall is the hazard,
+            // not the flat floor at its foot (which would otherwise grow every rock and wall
+            // by a band the width of the baseline). A difference falls as what is taken away
+            // grows, rounded or not, so no neighbour passes where the lowest mean does not.
+            let steep = here - lowest_means[k] > least_rise
+                && neighbours.iter().any(|&(offset, dist)| {
+                    let j = (k as isize + offset) as usize;
+                    dist >= baseline as f64 && here - mean[j] > slope * dist * r + SLOPE_NOISE_M
+                });
             let step = c.max_z - floor > cfg.max_step_m;
             let drop = here < -cfg.max_drop_m;
             let centre = Point2::new(
@@ -241,6 +256,42 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
                 (iy - half) as f64 * r + r / 2.0,
             );
             out.push((centre, step || steep || drop));
+        }
+    }
+    out
+}
+
+/// The least of `values` (a `width` x `height` box, row-major, no NaN) over the square of
+/// `reach` cells each way round each cell at least `reach` from the box's edge (the other
+/// cells, which nothing asks for, hold +inf). Each pass takes the lesser of two whole rows
+/// at a time, which the compiler runs several cells to an instruction.
+fn window_min(values: &[f64], width: usize, height: usize, reach: usize) -> Vec<f64> {
+    let lesser = |a: f64, b: f64| if b < a { b } else { a };
+    let mut out = vec![f64::INFINITY; width * height];
+    if width <= 2 * reach || height <= 2 * reach {
+        return out;
+    }
+    let inner = width - 2 * reach;
+    // Along each row first: cell `reach + i` of a row takes the least of cells `i ..= i + 2
+    // reach` ...
+    let mut rows = vec![f64::INFINITY; width * height];
+    for (src, dst) in values.chunks_exact(width).zip(rows.chunks_exact_mut(width)) {
+        let dst = &mut dst[reach..reach + inner];
+        dst.copy_from_slice(&src[..inner]);
+        for shift in 1..=2 * reach {
+            for (d, v) in dst.iter_mut().zip(&src[shift..shift + inner]) {
+                *d = lesser(*d, *v);
+            }
+        }
+    }
+    // ... then down the columns, likewise.
+    for y in reach..height - reach {
+        let dst = &mut out[y * width..(y + 1) * width];
+        dst.copy_from_slice(&rows[(y - reach) * width..(y - reach + 1) * width]);
+        for above in rows[(y - reach + 1) * width..(y + reach + 1) * width].chunks_exact(width) {
+            for (d, v) in dst.iter_mut().zip(above) {
+                *d = lesser(*d, *v);
+            }
         }
     }
     out
@@ -583,6 +634,117 @@ mod tests {
         safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
         let states = safe.states(&origins[..1]);
         assert_eq!(states.at_world(rock), Some(&CellState::Free));
+    }
+
+    /// [`judge_frame`] by its definition, column by column from the points: each judged
+    /// column's floor is its lowest point within the reach, and it is steep where some
+    /// judged neighbour two or more cells off lies further below it than the slope allows.
+    fn judged_by_definition(
+        points: &[[f64; 3]],
+        cfg: &TraversabilityConfig,
+    ) -> Vec<(Point2, bool)> {
+        let r = cfg.resolution_m;
+        let half = (cfg.max_range_m / r).ceil() as i64;
+        let side = 2 * half + 1;
+        // (n, sum, min, max) per column, keyed row first as the frame is judged.
+        let mut columns: std::collections::BTreeMap<(i64, i64), (usize, f64, f64, f64)> =
+            Default::default();
+        for p in points {
+            if !p.iter().all(|v| v.is_finite()) || beyond(p[0], p[1], cfg.max_range_m) {
+                continue;
+            }
+            let (ix, iy) = (
+                (p[0] / r).floor() as i64 + half,
+                (p[1] / r).floor() as i64 + half,
+            );
+            if ix < 0 || iy < 0 || ix >= side || iy >= side {
+                continue;
+            }
+            let c = columns.entry((iy, ix)).or_insert((0, 0.0, p[2], p[2]));
+            c.0 += 1;
+            c.1 += p[2];
+            c.2 = c.2.min(p[2]);
+            c.3 = c.3.max(p[2]);
+        }
+        let judged: std::collections::BTreeMap<(i64, i64), (f64, f64, f64)> = columns
+            .iter()
+            .filter(|(_, c)| c.0 >= cfg.min_points)
+            .map(|(k, c)| (*k, (c.1 / c.0 as f64, c.2, c.3)))
+            .collect();
+        let reach = (FLOOR_REACH_M / r).ceil() as i64;
+        let slope = cfg.max_slope_rad.tan();
+        judged
+            .iter()
+            .map(|(&(iy, ix), &(here, low, high))| {
+                let mut floor = low;
+                let mut steep = false;
+                for dy in -reach..=reach {
+                    for dx in -reach..=reach {
+                        let Some(&(mean, low, _)) = judged.get(&(iy + dy, ix + dx)) else {
+                            continue;
+                        };
+                        floor = floor.min(low);
+                        let dist = ((dx * dx + dy * dy) as f64).sqrt();
+                        if dist >= 2.0 && here - mean > slope * dist * r + SLOPE_NOISE_M {
+                            steep = true;
+                        }
+                    }
+                }
+                let hazard = high - floor > cfg.max_step_m || steep || here < -cfg.max_drop_m;
+                let centre = Point2::new(
+                    (ix - half) as f64 * r + r / 2.0,
+                    (iy - half) as f64 * r + r / 2.0,
+                );
+                (centre, hazard)
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        /// The least-value filters and the early answer for columns not far enough above
+        /// their lowest neighbour judge every column as asking each neighbour does: on
+        /// random undulating floors with a bank of any slope, rocks, pits, noise, points
+        /// out of range and points that are not numbers, judged for any step and slope.
+        #[test]
+        fn frames_are_judged_as_the_definition_judges_them(
+            points in proptest::collection::vec((0.0f64..4.5, -4.5f64..4.5, -0.005f64..0.005), 0..1500),
+            rocks in proptest::collection::vec((0.3f64..4.0, -3.0f64..3.0, 0.05f64..0.4, -0.3f64..0.3), 0..6),
+            waves in (0.0f64..0.08, 0.5f64..3.0),
+            bank in (0.5f64..3.5, 0.0f64..0.8, 0.0f64..std::f64::consts::TAU),
+            broken in proptest::collection::vec(0usize..1500, 0..5),
+            min_points in 1usize..3,
+            max_step_m in 0.05f64..1.0,
+            max_slope_deg in 5.0f64..40.0,
+        ) {
+            // Steps and slopes of every size: with the rovers' own, a rock steep enough to
+            // be judged so is nearly always a step as well.
+            let cfg = TraversabilityConfig {
+                min_points,
+                max_step_m,
+                max_slope_rad: max_slope_deg.to_radians(),
+                ..TraversabilityConfig::default()
+            };
+            let mut pts: Vec<[f64; 3]> = points
+                .iter()
+                .map(|&(x, y, noise)| {
+                    // A bank rising from a line at `bank.0` m, across the heading `bank.2`.
+                    let across = x * bank.2.cos() + y * bank.2.sin() - bank.0;
+                    let mut z = waves.0 * (x * waves.1).sin() + noise + bank.1 * across.max(0.0);
+                    for &(rx, ry, radius, height) in &rocks {
+                        if (x - rx).hypot(y - ry) < radius {
+                            z += height;
+                        }
+                    }
+                    [x, y, z]
+                })
+                .collect();
+            for &i in &broken {
+                if let Some(p) = pts.get_mut(i) {
+                    p[i % 3] = if i % 2 == 0 { f64::NAN } else { f64::INFINITY };
+                }
+            }
+            proptest::prop_assert_eq!(judge_frame(&pts, &cfg), judged_by_definition(&pts, &cfg));
+        }
     }
 
     #[test]
