@@ -57,6 +57,12 @@ pub struct Assembly {
     occupied_above: f32,
     /// The live map, once asked for.
     live: Option<Live>,
+    /// [`Assembly::states`]' scratch: the state of every cell of the finished submaps' sum,
+    /// until the sum changes (the hazard layers ask every few seconds, and their sum moves
+    /// only when the pose graph moves a layer), and each cell an active submap adds to (NaN
+    /// where none does).
+    summed: Option<Vec<CellState>>,
+    with_active: Vec<f32>,
 }
 
 /// What a submap cell's log-odds contribute to an assembly's sum.
@@ -209,6 +215,7 @@ impl Assembly {
     pub fn with_occupied_above(mut self, occupied_above: f32) -> Self {
         debug_assert!(self.live.is_none(), "set before the live map exists");
         self.occupied_above = occupied_above;
+        self.summed = None;
         self
     }
 
@@ -224,6 +231,8 @@ impl Assembly {
             miss_rule: MissRule::default(),
             occupied_above: OCCUPIED_ABOVE,
             live: None,
+            summed: None,
+            with_active: Vec::new(),
         }
     }
 
@@ -255,6 +264,7 @@ impl Assembly {
             return;
         };
         self.sum = regrow(&self.sum, w, h, g, 0.0);
+        self.summed = None;
         if let Some(live) = &mut self.live {
             let (w2, h2) = (w + g[0] + g[2], h + g[1] + g[3]);
             live.shadow_sum = regrow(&live.shadow_sum, w, h, g, 0.0);
@@ -371,6 +381,7 @@ impl Assembly {
     /// Adds `sign` times `grid` at `pose` to the sum (and brings the live map's states up
     /// to date, if there is one: only cells whose sum changed can change state).
     fn add(&mut self, grid: &OccupancyGrid, pose: Pose2, sign: f32) {
+        self.summed = None;
         let mut sum = std::mem::take(&mut self.sum);
         let mut live = self.live.take();
         self.draw(grid, pose, |i, v| {
@@ -605,14 +616,35 @@ impl Assembly {
             // Nothing drawn yet: one unknown cell.
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
         }
-        let mut sum = self.sum.clone();
+        let occupied_above = self.occupied_above;
+        let sum = &self.sum;
+        let mut cells = self
+            .summed
+            .get_or_insert_with(|| {
+                sum.iter()
+                    .map(|&l| summed_state(l, occupied_above))
+                    .collect()
+            })
+            .clone();
+        // The active submaps added to the sum, in order, in the cells they reach: the same
+        // sums, rounded the same way, as adding them to a copy of the whole sum.
+        let mut with_active = std::mem::take(&mut self.with_active);
+        with_active.resize(sum.len(), f32::NAN);
+        let mut reached = Vec::new();
         for (grid, pose) in active {
-            self.draw(grid, *pose, |i, v| sum[i] += v);
+            self.draw(grid, *pose, |i, v| {
+                if with_active[i].is_nan() {
+                    with_active[i] = sum[i];
+                    reached.push(i);
+                }
+                with_active[i] += v;
+            });
         }
-        let cells = sum
-            .iter()
-            .map(|&l| summed_state(l, self.occupied_above))
-            .collect();
+        for i in reached {
+            cells[i] = summed_state(with_active[i], occupied_above);
+            with_active[i] = f32::NAN;
+        }
+        self.with_active = with_active;
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
 }
@@ -914,5 +946,41 @@ mod tests {
         assert!(with.iter().any(|(_, s)| *s == CellState::Occupied));
         let without = asm.states(&[]);
         assert!(without.iter().all(|(_, s)| *s == CellState::Unknown));
+    }
+
+    #[test]
+    fn states_agree_with_the_rendered_sum_as_submaps_move_and_overlap() {
+        let (a, b, c) = (
+            room(Point2::new(0.0, 0.0)),
+            room(Point2::new(0.6, 0.2)),
+            room(Point2::new(-0.4, 0.5)),
+        );
+        let mut asm = Assembly::new(0.05);
+        // From the rendered log-odds, as the states' definition has it.
+        let rendered = |asm: &mut Assembly, active: &[(&OccupancyGrid, Pose2)]| {
+            let grid = asm.render(active);
+            let states: Vec<CellState> = grid
+                .log_odds()
+                .iter()
+                .map(|&l| summed_state(l, OCCUPIED_ABOVE))
+                .collect();
+            Grid::from_cells(grid.geometry(), states).expect("one state per cell")
+        };
+        asm.place(0, &a, Pose2::new(0.1, 0.0, 0.05));
+        // Two active submaps overlapping each other and the finished one.
+        let active = [
+            (&b, Pose2::new(0.3, -0.2, 0.1)),
+            (&c, Pose2::new(0.0, 0.4, -0.3)),
+        ];
+        for round in 0..3 {
+            if round == 2 {
+                // The finished submap moved: the states follow.
+                asm.place(0, &a, Pose2::new(0.9, 0.4, 0.5));
+            }
+            let got = asm.states(&active);
+            let want = rendered(&mut asm, &active);
+            assert!(got == want, "round {round}");
+            assert!(got.iter().filter(|(_, s)| **s == CellState::Occupied).count() > 300);
+        }
     }
 }
