@@ -980,7 +980,12 @@ mod tests {
             let got = asm.states(&active);
             let want = rendered(&mut asm, &active);
             assert!(got == want, "round {round}");
-            assert!(got.iter().filter(|(_, s)| **s == CellState::Occupied).count() > 300);
+            assert!(
+                got.iter()
+                    .filter(|(_, s)| **s == CellState::Occupied)
+                    .count()
+                    > 300
+            );
         }
     }
 }

@@ -201,7 +201,7 @@ impl HollowFinder {
                                 break;
                             }
                             for (end, beyond) in [
-                                (x0 > 0, row + x0.wrapping_sub(1)),
+                                (x0 > 0, (row + x0).wrapping_sub(1)),
                                 (x1 + 1 < w, row + x1 + 1),
                             ] {
                                 let side = if end {
