@@ -111,35 +111,17 @@ impl HollowFinder {
     ) -> usize {
         let g = *states.geometry();
         let (w, h) = (g.width, g.height);
-        let max_cells = (self.cfg.max_area_m2 / (g.resolution_m * g.resolution_m)) as usize;
-        let marks = &mut self.marks;
-        marks.clear();
-        marks.resize(w * h, Mark::Unasked);
-        let cells = states.cells();
-        // Asks `open` once a cell, and only of the cells a flood reaches.
-        let is_open = |marks: &mut [Mark], i: usize, cell: Cell| -> bool {
-            if marks[i] == Mark::Unasked {
-                marks[i] = if cells[i] == CellState::Unknown && open(cell) {
-                    Mark::Open
-                } else {
-                    Mark::Closed
-                };
-            }
-            marks[i] == Mark::Open
-        };
-        // A side shared with cell `j` outside the patch (asked already): counted, or the
-        // flood is part of a patch found too large (`Err`).
-        let border = |marks: &[Mark], j: usize, b: &mut Border| -> Result<(), ()> {
-            if marks[j] == Mark::Big {
-                return Err(());
-            }
-            b.sides += 1;
-            b.hazard_sides += usize::from(cells[j] == CellState::Occupied);
-            Ok(())
-        };
-        let (stack, runs) = (&mut self.stack, &mut self.runs);
+        self.marks.clear();
+        self.marks.resize(w * h, Mark::Unasked);
         self.hollows.clear();
-        for (y, row) in cells.chunks_exact(w.max(1)).enumerate() {
+        let layer = Layer {
+            cells: states.cells(),
+            open,
+            width: w,
+            height: h,
+            max_cells: (self.cfg.max_area_m2 / (g.resolution_m * g.resolution_m)) as usize,
+        };
+        for (y, row) in layer.cells.chunks_exact(w.max(1)).enumerate() {
             for (chunk_x, chunk) in (0..).step_by(CHUNK).zip(row.chunks(CHUNK)) {
                 let any_hazard = chunk
                     .iter()
@@ -162,105 +144,18 @@ impl HollowFinder {
                     ];
                     for (inside, start, x, y) in starts {
                         // Most cells beside hazard are hazard or judged: no patch starts there.
-                        if !inside || cells[start] != CellState::Unknown {
-                            continue;
-                        }
-                        let cell = Cell { x, y };
-                        if !is_open(marks, start, cell) {
-                            continue;
-                        }
-                        stack.push((start, cell));
-                        runs.clear();
-                        let mut b = Border::default();
-                        let mut count = 0usize;
-                        // The ground the lidar sees beyond what the camera has judged is one
-                        // wide patch along the hall's walls: once a flood is too large for a
-                        // hollow it stops, and a later flood that meets it is the same patch.
-                        let mut big = false;
-                        'flood: while let Some((i, Cell { x, y })) = stack.pop() {
-                            if marks[i] != Mark::Open {
-                                // Taken into a run since it was pushed.
-                                continue;
-                            }
-                            let row = i - x;
-                            // The whole run of open cells along the row through it: its
-                            // neighbours along the row are open only if they join it.
-                            let (mut x0, mut x1) = (x, x);
-                            while x0 > 0 && is_open(marks, row + x0 - 1, Cell { x: x0 - 1, y }) {
-                                x0 -= 1;
-                            }
-                            while x1 + 1 < w && is_open(marks, row + x1 + 1, Cell { x: x1 + 1, y })
-                            {
-                                x1 += 1;
-                            }
-                            marks[row + x0..=row + x1].fill(Mark::Flooded);
-                            runs.push((row + x0, row + x1));
-                            count += x1 - x0 + 1;
-                            if count > max_cells {
-                                big = true;
-                                break;
-                            }
-                            for (end, beyond) in [
-                                (x0 > 0, (row + x0).wrapping_sub(1)),
-                                (x1 + 1 < w, row + x1 + 1),
-                            ] {
-                                let side = if end {
-                                    border(marks, beyond, &mut b)
-                                } else {
-                                    // The layer's edge borders on nothing judged.
-                                    b.sides += 1;
-                                    Ok(())
-                                };
-                                if side.is_err() {
-                                    big = true;
-                                    break 'flood;
-                                }
-                            }
-                            for (ny, inside) in [(y.wrapping_sub(1), y > 0), (y + 1, y + 1 < h)] {
-                                if !inside {
-                                    b.sides += x1 - x0 + 1;
-                                    continue;
-                                }
-                                let next_row = ny * w;
-                                // A run in the next row is started once, from its first cell
-                                // beside this one.
-                                let mut in_run = false;
-                                for nx in x0..=x1 {
-                                    let j = next_row + nx;
-                                    if marks[j] == Mark::Flooded {
-                                        in_run = false;
-                                        continue;
-                                    }
-                                    let cell = Cell { x: nx, y: ny };
-                                    if marks[j] != Mark::Big && is_open(marks, j, cell) {
-                                        if !in_run {
-                                            stack.push((j, cell));
-                                        }
-                                        in_run = true;
-                                    } else {
-                                        in_run = false;
-                                        if border(marks, j, &mut b).is_err() {
-                                            big = true;
-                                            break 'flood;
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        if big {
-                            for &(first, last) in runs.iter() {
-                                marks[first..=last].fill(Mark::Big);
-                            }
-                            for &(i, _) in stack.iter() {
-                                if marks[i] == Mark::Open {
-                                    marks[i] = Mark::Big;
-                                }
-                            }
-                            stack.clear();
-                        } else if b.hazard_sides as f64
-                            >= self.cfg.min_hazard_share * b.sides as f64
+                        if !inside
+                            || layer.cells[start] != CellState::Unknown
+                            || !layer.is_open(&mut self.marks, start, Cell { x, y })
                         {
-                            for &(first, last) in runs.iter() {
+                            continue;
+                        }
+                        let patch =
+                            layer.flood(&mut self.marks, &mut self.stack, &mut self.runs, start);
+                        if patch.is_some_and(|b| {
+                            b.hazard_sides as f64 >= self.cfg.min_hazard_share * b.sides as f64
+                        }) {
+                            for &(first, last) in &self.runs {
                                 self.hollows.extend(first..=last);
                             }
                         }
@@ -273,6 +168,155 @@ impl HollowFinder {
             cells[i] = CellState::Occupied;
         }
         self.hollows.len()
+    }
+}
+
+/// The layer a [`HollowFinder`] floods, and what it asks of it.
+struct Layer<'a, F> {
+    cells: &'a [CellState],
+    open: F,
+    width: usize,
+    height: usize,
+    /// The most cells a hollow has.
+    max_cells: usize,
+}
+
+impl<F: Fn(Cell) -> bool> Layer<'_, F> {
+    /// Whether cell `i` (at `cell`) may join a patch; asks `open` once a cell, and only of
+    /// the cells a flood reaches.
+    #[inline]
+    fn is_open(&self, marks: &mut [Mark], i: usize, cell: Cell) -> bool {
+        if marks[i] == Mark::Unasked {
+            marks[i] = if self.cells[i] == CellState::Unknown && (self.open)(cell) {
+                Mark::Open
+            } else {
+                Mark::Closed
+            };
+        }
+        marks[i] == Mark::Open
+    }
+
+    /// A side the patch shares with cell `j` outside it (asked already): counted, or the
+    /// flood is part of a patch found too large (`None`).
+    #[inline]
+    fn border(&self, marks: &[Mark], j: usize, b: &mut Border) -> Option<()> {
+        if marks[j] == Mark::Big {
+            return None;
+        }
+        b.sides += 1;
+        b.hazard_sides += usize::from(self.cells[j] == CellState::Occupied);
+        Some(())
+    }
+
+    /// Floods the patch of open cell `start` into `runs` (each run's first and last index),
+    /// a run of cells along a row at a time; returns its border, or `None` for a patch too
+    /// large to be a hollow (its cells, and those waiting on `stack`, then marked so).
+    fn flood(
+        &self,
+        marks: &mut [Mark],
+        stack: &mut Vec<(usize, Cell)>,
+        runs: &mut Vec<(usize, usize)>,
+        start: usize,
+    ) -> Option<Border> {
+        let w = self.width;
+        stack.push((
+            start,
+            Cell {
+                x: start % w,
+                y: start / w,
+            },
+        ));
+        runs.clear();
+        let mut b = Border::default();
+        // The ground the lidar sees beyond what the camera has judged is one wide patch
+        // along the hall's walls: once a flood is too large for a hollow it stops, and a
+        // later flood that meets it is the same patch.
+        let patch = self.runs_of_patch(marks, stack, runs, &mut b);
+        if patch.is_none() {
+            for &(first, last) in runs.iter() {
+                marks[first..=last].fill(Mark::Big);
+            }
+            for &(i, _) in stack.iter() {
+                if marks[i] == Mark::Open {
+                    marks[i] = Mark::Big;
+                }
+            }
+            stack.clear();
+        }
+        patch.map(|()| b)
+    }
+
+    /// [`flood`](Self::flood)'s runs, until the stack is empty (`Some`) or the patch is
+    /// found too large (`None`).
+    fn runs_of_patch(
+        &self,
+        marks: &mut [Mark],
+        stack: &mut Vec<(usize, Cell)>,
+        runs: &mut Vec<(usize, usize)>,
+        b: &mut Border,
+    ) -> Option<()> {
+        let (w, h) = (self.width, self.height);
+        let mut count = 0usize;
+        while let Some((i, Cell { x, y })) = stack.pop() {
+            if marks[i] != Mark::Open {
+                // Taken into a run since it was pushed.
+                continue;
+            }
+            let row = i - x;
+            // The whole run of open cells along the row through it: its neighbours along
+            // the row are open only if they join it.
+            let (mut x0, mut x1) = (x, x);
+            while x0 > 0 && self.is_open(marks, row + x0 - 1, Cell { x: x0 - 1, y }) {
+                x0 -= 1;
+            }
+            while x1 + 1 < w && self.is_open(marks, row + x1 + 1, Cell { x: x1 + 1, y }) {
+                x1 += 1;
+            }
+            marks[row + x0..=row + x1].fill(Mark::Flooded);
+            runs.push((row + x0, row + x1));
+            count += x1 - x0 + 1;
+            if count > self.max_cells {
+                return None;
+            }
+            for (end, beyond) in [
+                (x0 > 0, (row + x0).wrapping_sub(1)),
+                (x1 + 1 < w, row + x1 + 1),
+            ] {
+                if end {
+                    self.border(marks, beyond, b)?;
+                } else {
+                    // The layer's edge borders on nothing judged.
+                    b.sides += 1;
+                }
+            }
+            for (ny, inside) in [(y.wrapping_sub(1), y > 0), (y + 1, y + 1 < h)] {
+                if !inside {
+                    b.sides += x1 - x0 + 1;
+                    continue;
+                }
+                // A run in the next row is started once, from its first cell beside this
+                // one.
+                let mut in_run = false;
+                for nx in x0..=x1 {
+                    let j = ny * w + nx;
+                    if marks[j] == Mark::Flooded {
+                        in_run = false;
+                        continue;
+                    }
+                    let cell = Cell { x: nx, y: ny };
+                    if marks[j] != Mark::Big && self.is_open(marks, j, cell) {
+                        if !in_run {
+                            stack.push((j, cell));
+                        }
+                        in_run = true;
+                    } else {
+                        in_run = false;
+                        self.border(marks, j, b)?;
+                    }
+                }
+            }
+        }
+        Some(())
     }
 }
 
