@@ -57,11 +57,12 @@ pub struct Assembly {
     occupied_above: f32,
     /// The live map, once asked for.
     live: Option<Live>,
-    /// [`Assembly::states`]' scratch: the state of every cell of the finished submaps' sum,
-    /// until the sum changes (the hazard layers ask every few seconds, and their sum moves
-    /// only when the pose graph moves a layer), and each cell an active submap adds to (NaN
-    /// where none does).
+    /// The state of every cell of the finished submaps' sum, for [`Assembly::states`], kept
+    /// until the sum changes: the hazard layers are asked for every few seconds, and their
+    /// sum moves only when the pose graph moves a layer.
     summed: Option<Vec<CellState>>,
+    /// [`Assembly::states`]' scratch: each cell's sum with the active submaps added, where
+    /// they reach (NaN elsewhere, between calls everywhere).
     with_active: Vec<f32>,
 }
 

@@ -135,9 +135,6 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
             && p[2].is_finite()
             && !beyond(p[0], p[1], cfg.max_range_m)
     };
-    // The box of columns any point fell in: a frame covers a wedge of the square, so columns
-    // are kept for that box alone (the whole square, 6,561 columns of 32 bytes at the
-    // rovers' settings, was allocated and cleared every frame).
     // Each judged point's column and height, found once (a division and a rounding down
     // per axis).
     let placed: Vec<(i64, i64, f64)> = points
@@ -145,6 +142,9 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
         .filter(judged)
         .filter_map(|p| column(p[0], p[1]).map(|(ix, iy)| (ix, iy, p[2])))
         .collect();
+    // The box of columns any point fell in: a frame covers a wedge of the square, so columns
+    // are kept for that box alone (the whole square, 6,561 columns of 32 bytes at the
+    // rovers' settings, was allocated and cleared every frame).
     let mut touched = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
     for &(ix, iy, _) in &placed {
         touched = [
@@ -205,9 +205,8 @@ pub fn judge_frame(points: &[[f64; 3]], cfg: &TraversabilityConfig) -> Vec<(Poin
     // mean height within `reach` cells: any neighbour the column is steep above is at least
     // `least_rise` below it, so a column less than that above the lowest mean is judged not
     // steep without asking each neighbour. Both by a least-value filter along the rows and
-    // then the columns (van Herk, "A fast algorithm for local minimum and maximum filters on
-    // rectangular and octagonal kernels", 1992, in its plain form): 4 (2 reach + 1) values a
-    // column where asking each neighbour read 2 (2 reach + 1)^2.
+    // then down the columns (a square's least is the least of its rows' least): 4 (2 reach
+    // + 1) values a column where asking each neighbour read 2 (2 reach + 1)^2.
     let reach_cells = reach as usize;
     let floors = window_min(&min_z, bw, bh, reach_cells);
     let judged_means: Vec<f64> = mean
