@@ -500,6 +500,13 @@ pub struct MapperConfig {
     pub ndt_refine: Option<NdtConfig>,
     /// Accepted closures are folded into the graph at every this many keyframes ...
     pub optimize_every_keyframes: usize,
+    /// Submaps whose closure-search precomputation is kept at once: the submaps searched
+    /// last. Each holds seven levels of a byte a cell over the submap and the search
+    /// window's margin, some 5 MB for a submap of a rover's reach, and kept for every
+    /// submap ever searched they grew with the mission (a rover's 70 MB of the default
+    /// mission's 1.65 GB). A submap searched again after it was dropped is precomputed
+    /// again (under a millisecond), to the same answers.
+    pub precomputed_kept: usize,
     /// ... by this many Gauss-Newton steps ...
     pub graph_iterations: usize,
     /// ... the iterative solvers' steps after the first stopped after this many
@@ -848,6 +855,7 @@ impl Default for MapperConfig {
             }),
             ndt_refine: None,
             optimize_every_keyframes: 20,
+            precomputed_kept: 24,
             graph_iterations: 3,
             graph_later_cap: None,
             drop_closures_beyond: None,
@@ -871,8 +879,11 @@ struct Submap {
     map: MultiResMap,
     keyframes: usize,
     finished: bool,
-    /// The closure search's precomputation, made when first searched (the map is final).
+    /// The closure search's precomputation, made when searched (the map is final) and kept
+    /// while it is among the submaps searched last ([`MapperConfig::precomputed_kept`]).
     precomputed: Option<PrecomputedMap>,
+    /// When it was last searched, by the mapper's count of searches.
+    searched_at: u64,
     /// Its grids were dropped because a newer submap covers the same ground.
     trimmed: bool,
     /// Its keyframes' hits per cell, for refining tracking matches; while it is active.
@@ -1041,6 +1052,9 @@ pub struct Mapper {
     pub heading_anchor_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
+    /// Searches of a submap for a closure or a relocalisation so far (a clock for which
+    /// submaps were searched last).
+    searches: u64,
     /// Scans whose headings were searched for a fast turn ...
     pub fast_turn_searches: usize,
     /// ... and the matches from the searched heading that were kept.
@@ -1101,6 +1115,7 @@ impl Mapper {
             heading_holds: 0,
             heading_anchor_holds: 0,
             relocalise_searches: 0,
+            searches: 0,
             fast_turn_searches: 0,
             fast_turn_taken: 0,
             stall_turn_searches: 0,
@@ -1713,7 +1728,12 @@ impl Mapper {
         // Unknown cells around the submap as far as a closure's window reaches: a scan that
         // reaches no farther past the submap than the window is scored without bounds checks.
         let margin = (self.cfg.loop_window_m / self.cfg.frontend.resolution_m).ceil() as usize;
+        self.searches += 1;
+        if self.submaps[s].precomputed.is_none() {
+            self.drop_precomputed_beyond(self.cfg.precomputed_kept.saturating_sub(1));
+        }
         let sub = &mut self.submaps[s];
+        sub.searched_at = self.searches;
         let precomputed = sub.precomputed.get_or_insert_with(|| {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
@@ -1739,6 +1759,27 @@ impl Mapper {
         let moved = m.pose.relative_to(&found.pose);
         (m.score >= self.cfg.loop_min_score && moved.x_m.hypot(moved.y_m) < MAX_REFINE_SHIFT_M)
             .then_some((found, m))
+    }
+
+    /// Drops the closure-search precomputations of the submaps searched longest ago until
+    /// at most `kept` remain.
+    fn drop_precomputed_beyond(&mut self, kept: usize) {
+        loop {
+            let held = self.submaps.iter().filter(|s| s.precomputed.is_some());
+            if held.clone().count() <= kept {
+                return;
+            }
+            let Some(oldest) = held.min_by_key(|s| s.searched_at).map(|s| s.searched_at) else {
+                return;
+            };
+            if let Some(sub) = self
+                .submaps
+                .iter_mut()
+                .find(|s| s.precomputed.is_some() && s.searched_at == oldest)
+            {
+                sub.precomputed = None;
+            }
+        }
     }
 
     /// The current pose estimate.
@@ -1826,6 +1867,7 @@ impl Mapper {
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
+                searched_at: 0,
                 trimmed: false,
                 hits: self.cfg.ndt_refine.map(NdtMap::new),
                 drawn: Vec::new(),
@@ -2697,6 +2739,7 @@ mod tests {
                 keyframes: 1,
                 finished: true,
                 precomputed: None,
+                searched_at: 0,
                 trimmed: false,
                 hits: None,
                 drawn: vec![Pose2::IDENTITY],
@@ -2745,6 +2788,7 @@ mod tests {
             keyframes: 30,
             finished: true,
             precomputed: None,
+            searched_at: 0,
             trimmed: false,
             hits: None,
             drawn: (0..30)
@@ -3088,6 +3132,52 @@ mod tests {
             sum += err.abs().to_degrees();
         }
         sum / 40.0
+    }
+
+    /// The poses of a mapper driving laps round a 2 m circle in the sparse hall with exact
+    /// odometry, small submaps searched for closures at every keyframe, keeping at most
+    /// `kept` closure-search precomputations; and how many it holds at the end, and held
+    /// at most along the way.
+    fn laps_keeping(kept: usize) -> (Vec<Pose2>, usize) {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.submap_keyframes = 4;
+        cfg.loop_every_keyframes = 1;
+        cfg.precomputed_kept = kept;
+        let mut mapper = Mapper::new(cfg);
+        let (mut poses, mut most) = (Vec::new(), 0);
+        for k in 0..240 {
+            let a = (6.0 * k as f64).to_radians();
+            let truth = Pose2::new(
+                2.0 * a.cos(),
+                -1.0 + 2.0 * a.sin(),
+                a + std::f64::consts::FRAC_PI_2,
+            );
+            poses.push(
+                mapper
+                    .add_points(0.5 * k as f64, truth, sparse_hall_scan(truth))
+                    .pose,
+            );
+            let held = mapper
+                .submaps
+                .iter()
+                .filter(|s| s.precomputed.is_some())
+                .count();
+            most = most.max(held);
+        }
+        (poses, most)
+    }
+
+    #[test]
+    fn closure_precomputations_beyond_the_kept_are_dropped_and_the_answers_stay() {
+        let (bounded, most_bounded) = laps_keeping(3);
+        let (unbounded, most_unbounded) = laps_keeping(usize::MAX);
+        assert!(most_bounded <= 3, "{most_bounded} held");
+        assert!(
+            most_unbounded > 6,
+            "the laps search {most_unbounded} submaps"
+        );
+        assert!(bounded == unbounded, "the same poses either way");
     }
 
     #[test]
