@@ -341,7 +341,7 @@ fn graph_bench(c: &mut Criterion) {
 /// A hazard layer the size of the default hall, with what the lidar saw open: the floor the
 /// camera judged safe along a few strips of the rovers' paths, unjudged beyond them up to the
 /// walls' hazard feet, three craters whose walls it judged hazard round unjudged middles, and
-/// rocks (hazard on judged ground, closed to the lidar's floor where they stand).
+/// rocks scattered over it all (hazard, and not seen open by the lidar where they stand).
 fn hall_hazard_layer() -> (Grid<CellState>, Vec<bool>) {
     let (w, h) = (500usize, 360usize);
     let geometry = GridGeometry {

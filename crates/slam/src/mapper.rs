@@ -1764,21 +1764,15 @@ impl Mapper {
     /// Drops the closure-search precomputations of the submaps searched longest ago until
     /// at most `kept` remain.
     fn drop_precomputed_beyond(&mut self, kept: usize) {
-        loop {
-            let held = self.submaps.iter().filter(|s| s.precomputed.is_some());
-            if held.clone().count() <= kept {
-                return;
-            }
-            let Some(oldest) = held.min_by_key(|s| s.searched_at).map(|s| s.searched_at) else {
-                return;
-            };
-            if let Some(sub) = self
-                .submaps
-                .iter_mut()
-                .find(|s| s.precomputed.is_some() && s.searched_at == oldest)
-            {
-                sub.precomputed = None;
-            }
+        let mut held: Vec<&mut Submap> = self
+            .submaps
+            .iter_mut()
+            .filter(|s| s.precomputed.is_some())
+            .collect();
+        let excess = held.len().saturating_sub(kept);
+        held.sort_by_key(|s| s.searched_at);
+        for sub in held.into_iter().take(excess) {
+            sub.precomputed = None;
         }
     }
 
@@ -3136,8 +3130,7 @@ mod tests {
 
     /// The poses of a mapper driving laps round a 2 m circle in the sparse hall with exact
     /// odometry, small submaps searched for closures at every keyframe, keeping at most
-    /// `kept` closure-search precomputations; and how many it holds at the end, and held
-    /// at most along the way.
+    /// `kept` closure-search precomputations; and the most it held at once.
     fn laps_keeping(kept: usize) -> (Vec<Pose2>, usize) {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
