@@ -480,15 +480,15 @@ fn search_rivals(
 
     let mut best: Option<Candidate> = None;
     let n = (255 * points.len()) as f64;
-    descend(
-        &roots,
+    let mut tree = SearchTree::new(roots, n_cells, &score_at);
+    let (anywhere, never_enough) = (|_: &Candidate| true, |_: &Candidate| false);
+    tree.descend(
+        tree.roots(),
         top,
         threshold,
-        n_cells,
-        &score_at,
         &mut best,
-        &|_| true,
-        &|_| false,
+        &anywhere,
+        &never_enough,
     );
     let winner = best?;
     // The rival: the same search, leaves near the winner excluded.
@@ -511,12 +511,10 @@ fn search_rivals(
     let winner_score = winner.score as f64 / n;
     let close_rival = |c: &Candidate| ambiguous(winner_score, c.score as f64 / n, rival_margin);
     let mut rival: Option<Candidate> = None;
-    descend(
-        &roots,
+    tree.descend(
+        tree.roots(),
         top,
         rival_threshold,
-        n_cells,
-        &score_at,
         &mut rival,
         &|c| !near(c),
         &|c| stop_when_ambiguous && close_rival(c),
@@ -533,12 +531,10 @@ fn search_rivals(
         let ends =
             [1, -1].map(|sign| ridge_end(&winner, &first, sign, n_cells, floor, &leaf_score));
         let mut off_ridge: Option<Candidate> = None;
-        descend(
-            &roots,
+        tree.descend(
+            tree.roots(),
             top,
             rival_threshold,
-            n_cells,
-            &score_at,
             &mut off_ridge,
             &|c| !near(c) && !near_segment(&ends[0], &ends[1], c, angle_step),
             &|c| stop_when_ambiguous && close_rival(c),
@@ -674,42 +670,56 @@ fn lazy_table<T>(depth: usize, headings: usize) -> Vec<Vec<OnceCell<T>>> {
         .collect()
 }
 
-/// Branch and bound below `candidates` (sorted best first, scored at `depth`): keeps in
-/// `best` the highest-scoring leaf that `allowed` accepts and beats `threshold`, and stops
-/// (returning `true`) as soon as it keeps one that is `enough`.
-#[allow(clippy::too_many_arguments)]
-fn descend(
-    candidates: &[Candidate],
-    depth: usize,
-    threshold: u32,
+/// The branch-and-bound tree of one search, as far as its descents have expanded it. Each
+/// expanded node's children are kept, scored and sorted best first, so a later descent over
+/// the same window reads them instead of scoring them again: the rival's descent passes
+/// through most of the nodes the winner's did (in the rovers' missions four in five of its
+/// scorings were of a node the winner's had scored). The scores and their order are the
+/// same either way, and so is every answer.
+struct SearchTree<'a> {
+    /// The roots (sorted best first) and then every expanded node's children.
+    nodes: Vec<Candidate>,
+    /// Where each node's children lie in `nodes`, once it was expanded.
+    children: Vec<Option<std::ops::Range<usize>>>,
+    /// How many roots there are.
+    roots: usize,
     n_cells: i64,
-    score_at: &dyn Fn(usize, &Candidate) -> u32,
-    best: &mut Option<Candidate>,
-    allowed: &dyn Fn(&Candidate) -> bool,
-    enough: &dyn Fn(&Candidate) -> bool,
-) -> bool {
-    for c in candidates {
-        let bar = best.as_ref().map_or(threshold, |b| b.score.max(threshold));
-        if c.score < bar || (best.is_some() && c.score == bar) {
-            // Sorted: nothing after this can win either.
-            return false;
+    score_at: &'a dyn Fn(usize, &Candidate) -> u32,
+}
+
+impl<'a> SearchTree<'a> {
+    /// A tree of `roots` (sorted best first) only.
+    fn new(
+        roots: Vec<Candidate>,
+        n_cells: i64,
+        score_at: &'a dyn Fn(usize, &Candidate) -> u32,
+    ) -> Self {
+        SearchTree {
+            children: vec![None; roots.len()],
+            roots: roots.len(),
+            nodes: roots,
+            n_cells,
+            score_at,
         }
-        if depth == 0 {
-            if allowed(c) {
-                *best = Some(*c);
-                if enough(c) {
-                    return true;
-                }
-            }
-            continue;
+    }
+
+    /// The roots' places in `nodes`.
+    fn roots(&self) -> std::ops::Range<usize> {
+        0..self.roots
+    }
+
+    /// The children of node `id` (scored at `depth`, at least 1), scored at `depth - 1` and
+    /// sorted best first: at most four, those of its block within the window.
+    fn expand(&mut self, id: usize, depth: usize) -> std::ops::Range<usize> {
+        if let Some(kept) = &self.children[id] {
+            return kept.clone();
         }
+        let c = self.nodes[id];
         let half = 1i64 << (depth - 1);
-        // At most four children, kept on the stack: a search expands thousands of nodes.
-        let mut children = [*c; 4];
-        let mut n = 0;
+        let first = self.nodes.len();
         for (ox, oy) in [(0, 0), (half, 0), (0, half), (half, half)] {
             let (dx, dy) = (c.dx + ox, c.dy + oy);
-            if dx > n_cells || dy > n_cells {
+            if dx > self.n_cells || dy > self.n_cells {
                 continue;
             }
             let mut child = Candidate {
@@ -718,26 +728,51 @@ fn descend(
                 dy,
                 score: 0,
             };
-            child.score = score_at(depth - 1, &child);
-            children[n] = child;
-            n += 1;
+            child.score = (self.score_at)(depth - 1, &child);
+            self.nodes.push(child);
+            self.children.push(None);
         }
-        let children = &mut children[..n];
-        children.sort_by_key(|c| std::cmp::Reverse(c.score));
-        if descend(
-            children,
-            depth - 1,
-            threshold,
-            n_cells,
-            score_at,
-            best,
-            allowed,
-            enough,
-        ) {
-            return true;
-        }
+        let range = first..self.nodes.len();
+        self.nodes[range.clone()].sort_by_key(|c| std::cmp::Reverse(c.score));
+        self.children[id] = Some(range.clone());
+        range
     }
-    false
+
+    /// Branch and bound below `ids` (nodes sorted best first, scored at `depth`): keeps in
+    /// `best` the highest-scoring leaf that `allowed` accepts and beats `threshold`, and
+    /// stops (returning `true`) as soon as it keeps one that is `enough`.
+    fn descend(
+        &mut self,
+        ids: std::ops::Range<usize>,
+        depth: usize,
+        threshold: u32,
+        best: &mut Option<Candidate>,
+        allowed: &dyn Fn(&Candidate) -> bool,
+        enough: &dyn Fn(&Candidate) -> bool,
+    ) -> bool {
+        for id in ids {
+            let c = self.nodes[id];
+            let bar = best.as_ref().map_or(threshold, |b| b.score.max(threshold));
+            if c.score < bar || (best.is_some() && c.score == bar) {
+                // Sorted: nothing after this can win either.
+                return false;
+            }
+            if depth == 0 {
+                if allowed(&c) {
+                    *best = Some(c);
+                    if enough(&c) {
+                        return true;
+                    }
+                }
+                continue;
+            }
+            let children = self.expand(id, depth);
+            if self.descend(children, depth - 1, threshold, best, allowed, enough) {
+                return true;
+            }
+        }
+        false
+    }
 }
 
 #[cfg(test)]
@@ -847,6 +882,91 @@ mod tests {
             "{} vs {exhaustive}",
             found.score
         );
+    }
+
+    /// The best score of any pose of the window clearly away (see [`RIVAL_CELLS`] and
+    /// [`RIVAL_RAD`]) from `winner`, by brute force.
+    fn brute_force_rival(
+        map: &PrecomputedMap,
+        points: &[Point2],
+        prior: Pose2,
+        window: &SearchWindow,
+        winner: Pose2,
+    ) -> f64 {
+        let grid = Discretised::new(map, window);
+        let (n_a, n_c) = (grid.n_angles, grid.n_cells);
+        let r = map.resolution_m;
+        let (wx, wy) = (
+            ((winner.x_m - prior.x_m) / r).round() as i64,
+            ((winner.y_m - prior.y_m) / r).round() as i64,
+        );
+        let wk = ((winner.yaw_rad - prior.yaw_rad) / grid.angle_step).round() as i64;
+        let mut best = 0u32;
+        for k in -n_a..=n_a {
+            let cells = grid.cells(map, points, prior, k);
+            for dx in -n_c..=n_c {
+                for dy in -n_c..=n_c {
+                    let near = (dx - wx).abs() <= RIVAL_CELLS
+                        && (dy - wy).abs() <= RIVAL_CELLS
+                        && ((k - wk) as f64 * grid.angle_step).abs() <= RIVAL_RAD;
+                    if near {
+                        continue;
+                    }
+                    let s: u32 = cells
+                        .iter()
+                        .map(|(x, y)| map.level(0).at(x + dx, y + dy) as u32)
+                        .sum();
+                    best = best.max(s);
+                }
+            }
+        }
+        best as f64 / (255 * points.len()) as f64
+    }
+
+    /// The rival's descent reads the children the winner's descent scored (see
+    /// [`SearchTree`]): the best rival it finds must still be the best of the whole window
+    /// away from the winner, in a scene with one answer and in one with many.
+    #[test]
+    fn the_rival_found_through_the_winners_tree_equals_brute_force() {
+        let corridor = vec![
+            (Point2::new(-20.0, -1.0), Point2::new(20.0, -1.0)),
+            (Point2::new(-20.0, 1.0), Point2::new(20.0, 1.0)),
+            (Point2::new(2.0, -1.0), Point2::new(2.0, -0.7)),
+        ];
+        let scenes = [
+            (
+                world(),
+                Pose2::new(1.2, -1.1, 0.3),
+                Pose2::new(0.9, -0.8, 0.25),
+            ),
+            (
+                corridor,
+                Pose2::new(1.0, 0.0, 0.0),
+                Pose2::new(1.2, 0.1, 0.02),
+            ),
+        ];
+        for (walls, truth, prior) in scenes {
+            let grid = map_of(
+                &walls,
+                &[Pose2::new(0.0, 0.0, 0.0), Pose2::new(2.5, 0.5, 0.5)],
+            );
+            let map = PrecomputedMap::new(&grid, 5);
+            let points = scan(&walls, truth);
+            let window = SearchWindow {
+                linear_m: 0.8,
+                angular_rad: 6f64.to_radians(),
+                step_range_m: 6.0,
+            };
+            let found = search_rivals(&map, &points, prior, &window, 0.1, 1.0, false, None)
+                .expect("a match");
+            let exhaustive = brute_force_rival(&map, &points, prior, &window, found.pose);
+            assert!(found.rival_score > 0.1, "{found:?}");
+            assert!(
+                (found.rival_score - exhaustive).abs() < 1e-12,
+                "{} vs {exhaustive}",
+                found.rival_score
+            );
+        }
     }
 
     #[test]
