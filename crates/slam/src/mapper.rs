@@ -505,7 +505,11 @@ pub struct MapperConfig {
     /// window's margin, some 5 MB for a submap of a rover's reach, and kept for every
     /// submap ever searched they grew with the mission (a rover's 70 MB of the default
     /// mission's 1.65 GB). A submap searched again after it was dropped is precomputed
-    /// again (under a millisecond), to the same answers.
+    /// again (under a millisecond), to the same answers. A finished submap's probabilities
+    /// are kept while its precomputation is ([`crate::occupancy::OccupancyGrid::drop_probabilities`]).
+    /// Eight, not 24: a rover's searches stay among the submaps near it, and over a
+    /// 30-minute mission the fleet precomputed 248 times instead of 219 (BENCHMARKS.md,
+    /// "A rover's memory").
     pub precomputed_kept: usize,
     /// ... by this many Gauss-Newton steps ...
     pub graph_iterations: usize,
@@ -855,7 +859,7 @@ impl Default for MapperConfig {
             }),
             ndt_refine: None,
             optimize_every_keyframes: 20,
-            precomputed_kept: 24,
+            precomputed_kept: 8,
             graph_iterations: 3,
             graph_later_cap: None,
             drop_closures_beyond: None,
@@ -1734,6 +1738,9 @@ impl Mapper {
         }
         let sub = &mut self.submaps[s];
         sub.searched_at = self.searches;
+        // A finished submap's probabilities are kept while its precomputation is: the
+        // refinement below looks them up.
+        sub.map.restore_probabilities();
         let precomputed = sub.precomputed.get_or_insert_with(|| {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
@@ -1773,6 +1780,9 @@ impl Mapper {
         held.sort_by_key(|s| s.searched_at);
         for sub in held.into_iter().take(excess) {
             sub.precomputed = None;
+            if sub.finished {
+                sub.map.drop_probabilities();
+            }
         }
     }
 
@@ -1877,6 +1887,8 @@ impl Mapper {
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
                 self.submaps[s].hits = None;
+                // Kept again while a closure search's precomputation of it is.
+                self.submaps[s].map.drop_probabilities();
                 self.trim_submaps(s);
             }
         }
@@ -2489,6 +2501,9 @@ impl Mapper {
                     None => self.keyframe_points[node].clone(),
                 };
                 self.insert_within(s, node, &dense, hit_range_m);
+            }
+            if self.submaps[s].finished {
+                self.submaps[s].map.drop_probabilities();
             }
         }
         if redrawn {

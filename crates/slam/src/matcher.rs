@@ -51,6 +51,21 @@ impl MultiResMap {
         }
     }
 
+    /// Drops every level's probabilities (see [`OccupancyGrid::drop_probabilities`]).
+    pub fn drop_probabilities(&mut self) {
+        for l in &mut self.levels {
+            l.drop_probabilities();
+        }
+    }
+
+    /// Works every level's probabilities out again (see
+    /// [`OccupancyGrid::restore_probabilities`]).
+    pub fn restore_probabilities(&mut self) {
+        for l in &mut self.levels {
+            l.restore_probabilities();
+        }
+    }
+
     /// Gives the memory of every level back (see [`OccupancyGrid::release`]).
     pub fn release(&mut self) {
         for l in &mut self.levels {

@@ -59,6 +59,9 @@ pub struct OccupancyGrid {
     width: usize,
     height: usize,
     log_odds: Vec<f32>,
+    /// Each cell's occupancy probability, [`probability`] of its log-odds, kept for the
+    /// matcher's lookups; empty while dropped ([`OccupancyGrid::drop_probabilities`]), when
+    /// each is worked out from its log-odds as it is read.
     prob: Vec<f32>,
     /// The world box holding every cell ever updated (none yet: `None`).
     content: Option<(Point2, Point2)>,
@@ -164,7 +167,9 @@ impl OccupancyGrid {
             return;
         };
         self.log_odds = regrow(&self.log_odds, w, h, g, 0.0);
-        self.prob = regrow(&self.prob, w, h, g, 0.5);
+        if !self.prob.is_empty() {
+            self.prob = regrow(&self.prob, w, h, g, 0.5);
+        }
         let r = self.resolution_m;
         self.origin = Point2::new(
             self.origin.x_m - g[0] as f64 * r,
@@ -182,7 +187,9 @@ impl OccupancyGrid {
         // and its probability need not be worked out again.
         if l != old {
             self.log_odds[i] = l;
-            self.prob[i] = probabilities.of(l);
+            if let Some(p) = self.prob.get_mut(i) {
+                *p = probabilities.of(l);
+            }
         }
     }
 
@@ -305,6 +312,33 @@ impl OccupancyGrid {
         )
     }
 
+    /// Drops the probabilities kept beside the log-odds, half the grid's memory: a finished
+    /// submap is looked up only when a closure search comes its way. Every answer stays the
+    /// same; lookups work each probability out again until
+    /// [`restore_probabilities`](Self::restore_probabilities).
+    pub fn drop_probabilities(&mut self) {
+        self.prob = Vec::new();
+    }
+
+    /// Works the probabilities out again after [`drop_probabilities`](Self::drop_probabilities)
+    /// (nothing to do if they are kept).
+    pub fn restore_probabilities(&mut self) {
+        if self.prob.is_empty() {
+            self.prob = self.worked_out_probabilities();
+        }
+    }
+
+    /// Whether the probabilities are kept (see [`drop_probabilities`](Self::drop_probabilities)).
+    pub fn keeps_probabilities(&self) -> bool {
+        !self.prob.is_empty()
+    }
+
+    /// Every cell's probability from its log-odds, as [`OccupancyGrid::update`] sets it.
+    fn worked_out_probabilities(&self) -> Vec<f32> {
+        let mut probabilities = ProbabilityCache::new();
+        self.log_odds.iter().map(|l| probabilities.of(*l)).collect()
+    }
+
     /// Gives the memory back: an empty one-cell grid remains (for a submap that another
     /// covers).
     pub fn release(&mut self) {
@@ -358,11 +392,12 @@ impl OccupancyGrid {
         let (x0, y0) = (fx as usize, fy as usize);
         let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
         let i = y0 * self.width + x0;
-        let (p00, p10) = (self.prob[i] as f64, self.prob[i + 1] as f64);
-        let (p01, p11) = (
-            self.prob[i + self.width] as f64,
-            self.prob[i + self.width + 1] as f64,
-        );
+        let corners = [i, i + 1, i + self.width, i + self.width + 1];
+        let [p00, p10, p01, p11] = if self.prob.is_empty() {
+            corners.map(|k| probability(self.log_odds[k]) as f64)
+        } else {
+            corners.map(|k| self.prob[k] as f64)
+        };
         let v = (p00 * (1.0 - tx) + p10 * tx) * (1.0 - ty) + (p01 * (1.0 - tx) + p11 * tx) * ty;
         let gx = ((p10 - p00) * (1.0 - ty) + (p11 - p01) * ty) / r;
         let gy = ((p01 - p00) * (1.0 - tx) + (p11 - p10) * tx) / r;
@@ -371,8 +406,12 @@ impl OccupancyGrid {
 
     /// Occupancy probability of every cell, row by row from the grid's origin (see
     /// [`OccupancyGrid::geometry`]).
-    pub fn probabilities(&self) -> &[f32] {
-        &self.prob
+    pub fn probabilities(&self) -> std::borrow::Cow<'_, [f32]> {
+        if self.prob.is_empty() {
+            std::borrow::Cow::Owned(self.worked_out_probabilities())
+        } else {
+            std::borrow::Cow::Borrowed(&self.prob)
+        }
     }
 
     /// The state of every cell (log-odds beyond +-0.5 count as known).
@@ -912,6 +951,61 @@ mod tests {
             }
             proptest::prop_assert_eq!(got, expected);
         }
+    }
+
+    /// A finished submap's grid drops its probabilities: every lookup must give the same
+    /// bits as before, a grid updated meanwhile must end as one that kept them, and the
+    /// probabilities worked out again must be the ones kept.
+    #[test]
+    fn dropped_probabilities_look_up_as_kept_ones() {
+        let scan = |k: usize| -> (Point2, Vec<(Point2, bool)>) {
+            let sensor = Point2::new(0.3 * k as f64, 0.1 * k as f64);
+            let ends = (0..90)
+                .map(|b| {
+                    let a = b as f64 * 4f64.to_radians();
+                    let r = 2.0 + (b % 7) as f64 * 0.3;
+                    (
+                        Point2::new(sensor.x_m + r * a.cos(), sensor.y_m + r * a.sin()),
+                        b % 11 != 0,
+                    )
+                })
+                .collect();
+            (sensor, ends)
+        };
+        let mut kept = OccupancyGrid::new(0.05).with_miss_rule(MissRule::OncePerScan);
+        for k in 0..3 {
+            let (sensor, ends) = scan(k);
+            kept.insert(sensor, &ends);
+        }
+        let mut dropped = kept.clone();
+        dropped.drop_probabilities();
+        assert!(!dropped.keeps_probabilities());
+        let probe = |g: &OccupancyGrid| -> Vec<u64> {
+            (0..4000)
+                .flat_map(|i| {
+                    let p = Point2::new(
+                        -3.0 + (i % 80) as f64 * 0.1013,
+                        -3.0 + (i / 80) as f64 * 0.1317,
+                    );
+                    let (v, [gx, gy]) = g.probability_and_gradient(p);
+                    [v.to_bits(), gx.to_bits(), gy.to_bits()]
+                })
+                .collect()
+        };
+        assert_eq!(probe(&dropped), probe(&kept));
+        assert_eq!(dropped.probabilities(), kept.probabilities());
+        // Updated while dropped (the grid grows too), then worked out again.
+        for k in 3..6 {
+            let (sensor, ends) = scan(k);
+            kept.insert(sensor, &ends);
+            dropped.insert(sensor, &ends);
+        }
+        assert!(!dropped.keeps_probabilities());
+        assert_eq!(probe(&dropped), probe(&kept));
+        dropped.restore_probabilities();
+        assert!(dropped.keeps_probabilities());
+        assert_eq!(dropped.probabilities(), kept.probabilities());
+        assert_eq!(dropped.log_odds(), kept.log_odds());
     }
 
     #[test]
