@@ -317,7 +317,9 @@ impl Assembly {
         let x1 = (cell(max.x_m, self.origin.x_m) as usize).min(self.width.saturating_sub(1));
         let y1 = (cell(max.y_m, self.origin.y_m) as usize).min(self.height.saturating_sub(1));
         let g = grid.geometry();
-        let src = grid.log_odds();
+        // A finished submap keeps only its content's cells; every other cell holds 0, which
+        // is passed over anyway.
+        let (kept, src) = grid.kept_log_odds();
         let inv = pose.inverse();
         let (c, s) = (inv.yaw_rad.cos(), inv.yaw_rad.sin());
         // Stepping one target cell along x moves the sample by (c, s) * r in the submap.
@@ -327,7 +329,6 @@ impl Assembly {
         // under a millionth of a cell across a whole row.
         let fixed = |v: f64| (v * FIXED_ONE).floor() as i64;
         let (dx, dy) = (fixed(c * r / g.resolution_m), fixed(s * r / g.resolution_m));
-        let (w, h) = (g.width as u64, g.height as u64);
         // The submap's content box in its own cells, a cell wider on each side: a row's
         // samples outside it read zeros, so each row is cut to the stretch that can fall
         // inside (the placed box's corners hold half its cells for a square submap turned 45
@@ -367,8 +368,8 @@ impl Assembly {
             for x in x0 + k_lo as usize..=x0 + k_hi as usize {
                 // A negative position wraps to a huge cell, outside like any other.
                 let (cx, cy) = ((lx as u64) >> FIXED_BITS, (ly as u64) >> FIXED_BITS);
-                if cx < w && cy < h {
-                    let v = src[(cy * w + cx) as usize];
+                if let Some(i) = kept.index(cx as usize, cy as usize) {
+                    let v = src[i];
                     if v != 0.0 {
                         visit(row + x, weigh(v));
                     }

@@ -506,7 +506,8 @@ pub struct MapperConfig {
     /// submap ever searched they grew with the mission (a rover's 70 MB of the default
     /// mission's 1.65 GB). A submap searched again after it was dropped is precomputed
     /// again (under a millisecond), to the same answers. A finished submap's probabilities
-    /// are kept while its precomputation is ([`crate::occupancy::OccupancyGrid::drop_probabilities`]).
+    /// is kept whole while its precomputation is, else cut to its content
+    /// ([`crate::occupancy::OccupancyGrid::cut_to_content`]).
     /// Eight, not 24: a rover's searches stay among the submaps near it, and over a
     /// 30-minute mission the fleet precomputed 248 times instead of 219 (BENCHMARKS.md,
     /// "A rover's memory").
@@ -1738,9 +1739,9 @@ impl Mapper {
         }
         let sub = &mut self.submaps[s];
         sub.searched_at = self.searches;
-        // A finished submap's probabilities are kept while its precomputation is: the
-        // refinement below looks them up.
-        sub.map.restore_probabilities();
+        // A finished submap is kept whole while its precomputation is: the refinement below
+        // looks up its probabilities.
+        sub.map.make_whole();
         let precomputed = sub.precomputed.get_or_insert_with(|| {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
@@ -1781,7 +1782,7 @@ impl Mapper {
         for sub in held.into_iter().take(excess) {
             sub.precomputed = None;
             if sub.finished {
-                sub.map.drop_probabilities();
+                sub.map.cut_to_content();
             }
         }
     }
@@ -1887,8 +1888,8 @@ impl Mapper {
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
                 self.submaps[s].hits = None;
-                // Kept again while a closure search's precomputation of it is.
-                self.submaps[s].map.drop_probabilities();
+                // Made whole again while a closure search's precomputation of it is kept.
+                self.submaps[s].map.cut_to_content();
                 self.trim_submaps(s);
             }
         }
@@ -2432,14 +2433,16 @@ impl Mapper {
         let covering = self.submaps[new].map.finest();
         let geo = grid.geometry();
         let (mut known, mut covered) = (0usize, 0usize);
-        for (i, l) in grid.log_odds().iter().enumerate() {
+        // The cells not kept (see `OccupancyGrid::cut_to_content`) are unknown.
+        let (kept, log_odds) = grid.kept_log_odds();
+        for (i, l) in log_odds.iter().enumerate() {
             if CellState::from_log_odds(*l) == CellState::Unknown {
                 continue;
             }
             known += 1;
             let centre = geo.cell_center(Cell {
-                x: i % geo.width,
-                y: i / geo.width,
+                x: kept.x0 + i % kept.width,
+                y: kept.y0 + i / kept.width,
             });
             let there = covering.log_odds_at(new_from_old.transform_point(centre));
             if CellState::from_log_odds(there) != CellState::Unknown {
@@ -2503,7 +2506,7 @@ impl Mapper {
                 self.insert_within(s, node, &dense, hit_range_m);
             }
             if self.submaps[s].finished {
-                self.submaps[s].map.drop_probabilities();
+                self.submaps[s].map.cut_to_content();
             }
         }
         if redrawn {

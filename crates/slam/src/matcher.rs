@@ -51,18 +51,17 @@ impl MultiResMap {
         }
     }
 
-    /// Drops every level's probabilities (see [`OccupancyGrid::drop_probabilities`]).
-    pub fn drop_probabilities(&mut self) {
+    /// Cuts every level to its content (see [`OccupancyGrid::cut_to_content`]).
+    pub fn cut_to_content(&mut self) {
         for l in &mut self.levels {
-            l.drop_probabilities();
+            l.cut_to_content();
         }
     }
 
-    /// Works every level's probabilities out again (see
-    /// [`OccupancyGrid::restore_probabilities`]).
-    pub fn restore_probabilities(&mut self) {
+    /// Makes every level whole again (see [`OccupancyGrid::make_whole`]).
+    pub fn make_whole(&mut self) {
         for l in &mut self.levels {
-            l.restore_probabilities();
+            l.make_whole();
         }
     }
 

@@ -58,14 +58,43 @@ pub struct OccupancyGrid {
     origin: Point2,
     width: usize,
     height: usize,
+    /// The log-odds of the cells kept in memory: every cell, row by row, or only those of
+    /// `window` once the grid was cut ([`OccupancyGrid::cut_to_content`]); a cell outside it
+    /// holds 0.
     log_odds: Vec<f32>,
-    /// Each cell's occupancy probability, [`probability`] of its log-odds, kept for the
-    /// matcher's lookups; empty while dropped ([`OccupancyGrid::drop_probabilities`]), when
-    /// each is worked out from its log-odds as it is read.
+    /// Each kept cell's occupancy probability, [`probability`] of its log-odds, for the
+    /// matcher's lookups; empty once the grid was cut, when each is worked out from its
+    /// log-odds as it is read.
     prob: Vec<f32>,
+    /// The cells kept in memory, if not all.
+    window: Option<CellWindow>,
     /// The world box holding every cell ever updated (none yet: `None`).
     content: Option<(Point2, Point2)>,
     miss_rule: MissRule,
+}
+
+/// A rectangle of a grid's cells: columns `x0..x0 + width`, rows `y0..y0 + height`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CellWindow {
+    /// First column.
+    pub x0: usize,
+    /// First row.
+    pub y0: usize,
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+}
+
+impl CellWindow {
+    /// The index of cell (`x`, `y`) (of the whole grid) among the window's, row by row, if
+    /// it lies inside.
+    #[inline]
+    pub fn index(&self, x: usize, y: usize) -> Option<usize> {
+        // Cells before the window wrap to huge offsets: one comparison per axis.
+        let (dx, dy) = (x.wrapping_sub(self.x0), y.wrapping_sub(self.y0));
+        (dx < self.width && dy < self.height).then(|| dy * self.width + dx)
+    }
 }
 
 impl OccupancyGrid {
@@ -82,6 +111,7 @@ impl OccupancyGrid {
             height: side,
             log_odds: vec![0.0; side * side],
             prob: vec![0.5; side * side],
+            window: None,
             content: None,
             miss_rule: MissRule::default(),
         }
@@ -111,14 +141,124 @@ impl OccupancyGrid {
             height: geometry.height,
             log_odds,
             prob,
+            window: None,
             content: Some((geometry.origin, max)),
             miss_rule: MissRule::default(),
         })
     }
 
     /// The log-odds of every cell, row by row from the grid's origin.
-    pub fn log_odds(&self) -> &[f32] {
-        &self.log_odds
+    pub fn log_odds(&self) -> std::borrow::Cow<'_, [f32]> {
+        match self.window {
+            None => std::borrow::Cow::Borrowed(&self.log_odds),
+            Some(w) => std::borrow::Cow::Owned(self.whole(w, &self.log_odds, 0.0)),
+        }
+    }
+
+    /// The cells kept in memory and their log-odds, row by row; every cell outside holds 0
+    /// (see [`cut_to_content`](Self::cut_to_content)).
+    pub fn kept_log_odds(&self) -> (CellWindow, &[f32]) {
+        (self.kept_window(), &self.log_odds)
+    }
+
+    /// The cells kept in memory.
+    fn kept_window(&self) -> CellWindow {
+        self.window.unwrap_or(CellWindow {
+            x0: 0,
+            y0: 0,
+            width: self.width,
+            height: self.height,
+        })
+    }
+
+    /// `kept`, the values of `window`'s cells, spread over the whole grid with `fill`
+    /// elsewhere.
+    fn whole<T: Copy>(&self, window: CellWindow, kept: &[T], fill: T) -> Vec<T> {
+        let mut cells = vec![fill; self.width * self.height];
+        if window.width > 0 {
+            for (row, values) in kept.chunks_exact(window.width).enumerate() {
+                let at = (window.y0 + row) * self.width + window.x0;
+                cells[at..at + window.width].copy_from_slice(values);
+            }
+        }
+        cells
+    }
+
+    /// Keeps in memory only the cells holding evidence (the smallest rectangle holding every
+    /// cell whose log-odds are not 0) and drops the probabilities kept beside them: a
+    /// finished submap's grid, which nothing updates any more and a closure search looks up
+    /// only now and then, takes a fifth of its memory or less. Every answer stays the same
+    /// to the bit: a cell outside the rectangle holds 0 as before, and each probability is
+    /// worked out from its log-odds as it is read. Updating the grid makes it whole again
+    /// first, as does [`make_whole`](Self::make_whole).
+    pub fn cut_to_content(&mut self) {
+        let kept = self.kept_window();
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        if kept.width > 0 {
+            for (row, values) in self.log_odds.chunks_exact(kept.width).enumerate() {
+                // Bits, not values: a -0.0 is kept as it was.
+                let filled = |l: &f32| l.to_bits() != 0;
+                if let (Some(first), Some(last)) = (
+                    values.iter().position(filled),
+                    values.iter().rposition(filled),
+                ) {
+                    (x0, x1) = (x0.min(first), x1.max(last));
+                    (y0, y1) = (y0.min(row), y1.max(row));
+                }
+            }
+        }
+        let window = if x0 > x1 {
+            CellWindow {
+                x0: 0,
+                y0: 0,
+                width: 0,
+                height: 0,
+            }
+        } else {
+            CellWindow {
+                x0: kept.x0 + x0,
+                y0: kept.y0 + y0,
+                width: x1 + 1 - x0,
+                height: y1 + 1 - y0,
+            }
+        };
+        let mut cut = Vec::with_capacity(window.width * window.height);
+        if window.width > 0 {
+            for y in y0..=y1 {
+                let at = y * kept.width + x0;
+                cut.extend_from_slice(&self.log_odds[at..at + window.width]);
+            }
+        }
+        self.log_odds = cut;
+        self.prob = Vec::new();
+        self.window = Some(window);
+    }
+
+    /// Keeps every cell and its probability in memory again (undoes
+    /// [`cut_to_content`](Self::cut_to_content); nothing to do for a whole grid).
+    pub fn make_whole(&mut self) {
+        if let Some(w) = self.window.take() {
+            self.log_odds = self.whole(w, &self.log_odds, 0.0);
+        }
+        if self.prob.is_empty() {
+            let mut probabilities = ProbabilityCache::new();
+            self.prob = self.log_odds.iter().map(|l| probabilities.of(*l)).collect();
+        }
+    }
+
+    /// Whether every cell and its probability are kept in memory (see
+    /// [`cut_to_content`](Self::cut_to_content)).
+    pub fn is_whole(&self) -> bool {
+        self.window.is_none() && !self.prob.is_empty()
+    }
+
+    /// The log-odds of cell (`x`, `y`), inside the grid.
+    #[inline]
+    fn kept_at(&self, x: usize, y: usize) -> f32 {
+        match self.window {
+            None => self.log_odds[y * self.width + x],
+            Some(w) => w.index(x, y).map_or(0.0, |i| self.log_odds[i]),
+        }
     }
 
     /// The world box holding every cell that was ever updated, if any was.
@@ -154,6 +294,8 @@ impl OccupancyGrid {
 
     /// Grows the grid so the world box `[min, max]` lies inside it.
     fn ensure(&mut self, min: Point2, max: Point2) {
+        // Updates index every cell.
+        self.make_whole();
         let (w, h) = (self.width, self.height);
         let Some(g) = growth(
             self.origin,
@@ -167,9 +309,7 @@ impl OccupancyGrid {
             return;
         };
         self.log_odds = regrow(&self.log_odds, w, h, g, 0.0);
-        if !self.prob.is_empty() {
-            self.prob = regrow(&self.prob, w, h, g, 0.5);
-        }
+        self.prob = regrow(&self.prob, w, h, g, 0.5);
         let r = self.resolution_m;
         self.origin = Point2::new(
             self.origin.x_m - g[0] as f64 * r,
@@ -187,9 +327,7 @@ impl OccupancyGrid {
         // and its probability need not be worked out again.
         if l != old {
             self.log_odds[i] = l;
-            if let Some(p) = self.prob.get_mut(i) {
-                *p = probabilities.of(l);
-            }
+            self.prob[i] = probabilities.of(l);
         }
     }
 
@@ -238,7 +376,7 @@ impl OccupancyGrid {
             floor_f64((p.y_m - self.origin.y_m) / r),
         );
         if fx >= 0.0 && fy >= 0.0 && fx < self.width as f64 && fy < self.height as f64 {
-            self.log_odds[fy as usize * self.width + fx as usize]
+            self.kept_at(fx as usize, fy as usize)
         } else {
             0.0
         }
@@ -312,33 +450,6 @@ impl OccupancyGrid {
         )
     }
 
-    /// Drops the probabilities kept beside the log-odds, half the grid's memory: a finished
-    /// submap is looked up only when a closure search comes its way. Every answer stays the
-    /// same; lookups work each probability out again until
-    /// [`restore_probabilities`](Self::restore_probabilities).
-    pub fn drop_probabilities(&mut self) {
-        self.prob = Vec::new();
-    }
-
-    /// Works the probabilities out again after [`drop_probabilities`](Self::drop_probabilities)
-    /// (nothing to do if they are kept).
-    pub fn restore_probabilities(&mut self) {
-        if self.prob.is_empty() {
-            self.prob = self.worked_out_probabilities();
-        }
-    }
-
-    /// Whether the probabilities are kept (see [`drop_probabilities`](Self::drop_probabilities)).
-    pub fn keeps_probabilities(&self) -> bool {
-        !self.prob.is_empty()
-    }
-
-    /// Every cell's probability from its log-odds, as [`OccupancyGrid::update`] sets it.
-    fn worked_out_probabilities(&self) -> Vec<f32> {
-        let mut probabilities = ProbabilityCache::new();
-        self.log_odds.iter().map(|l| probabilities.of(*l)).collect()
-    }
-
     /// Gives the memory back: an empty one-cell grid remains (for a submap that another
     /// covers).
     pub fn release(&mut self) {
@@ -346,6 +457,7 @@ impl OccupancyGrid {
         self.height = 1;
         self.log_odds = vec![0.0];
         self.prob = vec![0.5];
+        self.window = None;
         self.content = None;
     }
 
@@ -391,12 +503,13 @@ impl OccupancyGrid {
         }
         let (x0, y0) = (fx as usize, fy as usize);
         let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-        let i = y0 * self.width + x0;
-        let corners = [i, i + 1, i + self.width, i + self.width + 1];
         let [p00, p10, p01, p11] = if self.prob.is_empty() {
-            corners.map(|k| probability(self.log_odds[k]) as f64)
+            // Cut to its content: the same probabilities, worked out as they are read.
+            [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)]
+                .map(|(x, y)| probability(self.kept_at(x, y)) as f64)
         } else {
-            corners.map(|k| self.prob[k] as f64)
+            let i = y0 * self.width + x0;
+            [i, i + 1, i + self.width, i + self.width + 1].map(|k| self.prob[k] as f64)
         };
         let v = (p00 * (1.0 - tx) + p10 * tx) * (1.0 - ty) + (p01 * (1.0 - tx) + p11 * tx) * ty;
         let gx = ((p10 - p00) * (1.0 - ty) + (p11 - p01) * ty) / r;
@@ -408,7 +521,9 @@ impl OccupancyGrid {
     /// [`OccupancyGrid::geometry`]).
     pub fn probabilities(&self) -> std::borrow::Cow<'_, [f32]> {
         if self.prob.is_empty() {
-            std::borrow::Cow::Owned(self.worked_out_probabilities())
+            let mut probabilities = ProbabilityCache::new();
+            let log_odds = self.log_odds();
+            std::borrow::Cow::Owned(log_odds.iter().map(|l| probabilities.of(*l)).collect())
         } else {
             std::borrow::Cow::Borrowed(&self.prob)
         }
@@ -417,7 +532,7 @@ impl OccupancyGrid {
     /// The state of every cell (log-odds beyond +-0.5 count as known).
     pub fn states(&self) -> Grid<CellState> {
         let cells = self
-            .log_odds
+            .log_odds()
             .iter()
             .map(|l| CellState::from_log_odds(*l))
             .collect();
@@ -953,11 +1068,11 @@ mod tests {
         }
     }
 
-    /// A finished submap's grid drops its probabilities: every lookup must give the same
-    /// bits as before, a grid updated meanwhile must end as one that kept them, and the
-    /// probabilities worked out again must be the ones kept.
+    /// A finished submap's grid is cut to its content: every lookup must give the same bits
+    /// as before, a grid updated meanwhile must end as one that stayed whole, and the grid
+    /// made whole again must hold the same cells and probabilities.
     #[test]
-    fn dropped_probabilities_look_up_as_kept_ones() {
+    fn a_grid_cut_to_its_content_answers_as_the_whole_grid() {
         let scan = |k: usize| -> (Point2, Vec<(Point2, bool)>) {
             let sensor = Point2::new(0.3 * k as f64, 0.1 * k as f64);
             let ends = (0..90)
@@ -972,40 +1087,69 @@ mod tests {
                 .collect();
             (sensor, ends)
         };
-        let mut kept = OccupancyGrid::new(0.05).with_miss_rule(MissRule::OncePerScan);
+        let mut whole = OccupancyGrid::new(0.05).with_miss_rule(MissRule::OncePerScan);
         for k in 0..3 {
             let (sensor, ends) = scan(k);
-            kept.insert(sensor, &ends);
+            whole.insert(sensor, &ends);
         }
-        let mut dropped = kept.clone();
-        dropped.drop_probabilities();
-        assert!(!dropped.keeps_probabilities());
+        let mut cut = whole.clone();
+        cut.cut_to_content();
+        assert!(!cut.is_whole());
+        // Lookups across the content's edge and far outside it, on and off cell centres.
         let probe = |g: &OccupancyGrid| -> Vec<u64> {
-            (0..4000)
+            (0..6400)
                 .flat_map(|i| {
                     let p = Point2::new(
-                        -3.0 + (i % 80) as f64 * 0.1013,
-                        -3.0 + (i / 80) as f64 * 0.1317,
+                        -7.0 + (i % 80) as f64 * 0.1913,
+                        -7.0 + (i / 80) as f64 * 0.1717,
                     );
                     let (v, [gx, gy]) = g.probability_and_gradient(p);
-                    [v.to_bits(), gx.to_bits(), gy.to_bits()]
+                    [
+                        v.to_bits(),
+                        gx.to_bits(),
+                        gy.to_bits(),
+                        g.log_odds_at(p).to_bits() as u64,
+                    ]
                 })
                 .collect()
         };
-        assert_eq!(probe(&dropped), probe(&kept));
-        assert_eq!(dropped.probabilities(), kept.probabilities());
-        // Updated while dropped (the grid grows too), then worked out again.
+        assert_eq!(probe(&cut), probe(&whole));
+        assert_eq!(cut.geometry(), whole.geometry());
+        assert_eq!(cut.log_odds(), whole.log_odds());
+        assert_eq!(cut.probabilities(), whole.probabilities());
+        assert_eq!(cut.states().cells(), whole.states().cells());
+        // The kept cells are the content's only: fewer than half the grid's.
+        let (kept, kept_cells) = cut.kept_log_odds();
+        assert_eq!(kept_cells.len(), kept.width * kept.height);
+        assert!(kept_cells.len() * 2 < whole.log_odds().len(), "{kept:?}");
+        // Updated after the cut (the grid grows too), and cut again.
         for k in 3..6 {
             let (sensor, ends) = scan(k);
-            kept.insert(sensor, &ends);
-            dropped.insert(sensor, &ends);
+            whole.insert(sensor, &ends);
+            cut.insert(sensor, &ends);
+            assert_eq!(probe(&cut), probe(&whole));
+            cut.cut_to_content();
         }
-        assert!(!dropped.keeps_probabilities());
-        assert_eq!(probe(&dropped), probe(&kept));
-        dropped.restore_probabilities();
-        assert!(dropped.keeps_probabilities());
-        assert_eq!(dropped.probabilities(), kept.probabilities());
-        assert_eq!(dropped.log_odds(), kept.log_odds());
+        assert_eq!(probe(&cut), probe(&whole));
+        cut.make_whole();
+        assert!(cut.is_whole());
+        assert_eq!(cut.kept_log_odds().1, whole.kept_log_odds().1);
+        assert_eq!(cut.probabilities(), whole.probabilities());
+    }
+
+    /// A grid with nothing in it is cut to no cells and still answers as empty.
+    #[test]
+    fn an_empty_grid_cut_to_its_content_keeps_no_cells() {
+        let mut g = OccupancyGrid::new(0.1);
+        g.cut_to_content();
+        assert!(g.kept_log_odds().1.is_empty());
+        assert_eq!(g.log_odds_at(Point2::new(0.0, 0.0)), 0.0);
+        assert_eq!(
+            g.probability_and_gradient(Point2::new(0.33, -0.21)),
+            (0.5, [0.0, 0.0])
+        );
+        g.make_whole();
+        assert_eq!(g.log_odds().len(), g.geometry().len());
     }
 
     #[test]

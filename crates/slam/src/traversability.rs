@@ -531,6 +531,12 @@ impl SubmapHazards {
         if self.layers.len() <= submap {
             self.layers.resize(submap + 1, None);
         }
+        if let Some(done) = self.current.filter(|c| *c != submap)
+            && let Some(Some(layer)) = self.layers.get_mut(done)
+        {
+            // Final from now on: only its content is kept, the same answers.
+            layer.grid.cut_to_content();
+        }
         let resolution = self.resolution_m;
         self.layers[submap]
             .get_or_insert_with(|| HazardMap::new(resolution))
