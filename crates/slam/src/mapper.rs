@@ -505,12 +505,12 @@ pub struct MapperConfig {
     /// window's margin, some 5 MB for a submap of a rover's reach, and kept for every
     /// submap ever searched they grew with the mission (a rover's 70 MB of the default
     /// mission's 1.65 GB). A submap searched again after it was dropped is precomputed
-    /// again (under a millisecond), to the same answers. A finished submap's probabilities
-    /// is kept whole while its precomputation is, else cut to its content
-    /// ([`crate::occupancy::OccupancyGrid::cut_to_content`]).
-    /// Eight, not 24: a rover's searches stay among the submaps near it, and over a
-    /// 30-minute mission the fleet precomputed 248 times instead of 219 (BENCHMARKS.md,
-    /// "A rover's memory").
+    /// again (under a millisecond), to the same answers. A finished submap is kept whole
+    /// while its precomputation is, and cut to its content
+    /// ([`crate::occupancy::OccupancyGrid::cut_to_content`]) once it is dropped or, if never
+    /// searched, once the next submap finishes. Eight, not 24: a rover's searches stay
+    /// among the submaps near it, and over a 30-minute mission the fleet precomputed 248
+    /// times instead of 219 (BENCHMARKS.md, "A rover's memory bounded by what it maps").
     pub precomputed_kept: usize,
     /// ... by this many Gauss-Newton steps ...
     pub graph_iterations: usize,
@@ -1787,6 +1787,23 @@ impl Mapper {
         }
     }
 
+    /// Cuts to their content the finished submaps but `newest` that no closure search has
+    /// precomputed since they finished or were last searched: they are looked up only now
+    /// and then (see [`MapperConfig::precomputed_kept`]). The newest is left whole for the
+    /// searches that come its way soon after it finishes.
+    fn cut_unsearched(&mut self, newest: usize) {
+        for (i, sub) in self.submaps.iter_mut().enumerate() {
+            if i != newest
+                && sub.finished
+                && !sub.trimmed
+                && sub.precomputed.is_none()
+                && sub.map.is_whole()
+            {
+                sub.map.cut_to_content();
+            }
+        }
+    }
+
     /// The current pose estimate.
     pub fn pose(&self) -> Pose2 {
         self.pose
@@ -1888,8 +1905,7 @@ impl Mapper {
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
                 self.submaps[s].hits = None;
-                // Made whole again while a closure search's precomputation of it is kept.
-                self.submaps[s].map.cut_to_content();
+                self.cut_unsearched(s);
                 self.trim_submaps(s);
             }
         }

@@ -58,6 +58,11 @@ impl MultiResMap {
         }
     }
 
+    /// Whether every level is whole (see [`OccupancyGrid::is_whole`]).
+    pub fn is_whole(&self) -> bool {
+        self.levels.iter().all(OccupancyGrid::is_whole)
+    }
+
     /// Makes every level whole again (see [`OccupancyGrid::make_whole`]).
     pub fn make_whole(&mut self) {
         for l in &mut self.levels {

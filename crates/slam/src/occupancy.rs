@@ -68,6 +68,10 @@ pub struct OccupancyGrid {
     prob: Vec<f32>,
     /// The cells kept in memory, if not all.
     window: Option<CellWindow>,
+    /// The largest cell-centre coordinates whose bilinear lookup reads the kept
+    /// probabilities, (`width - 1`, `height - 1`), or below zero once they are dropped: the
+    /// one test a lookup takes on its short way ([`OccupancyGrid::probability_and_gradient`]).
+    lookup_limits: (f64, f64),
     /// The world box holding every cell ever updated (none yet: `None`).
     content: Option<(Point2, Point2)>,
     miss_rule: MissRule,
@@ -112,6 +116,7 @@ impl OccupancyGrid {
             log_odds: vec![0.0; side * side],
             prob: vec![0.5; side * side],
             window: None,
+            lookup_limits: ((side - 1) as f64, (side - 1) as f64),
             content: None,
             miss_rule: MissRule::default(),
         }
@@ -142,6 +147,7 @@ impl OccupancyGrid {
             log_odds,
             prob,
             window: None,
+            lookup_limits: (geometry.width as f64 - 1.0, geometry.height as f64 - 1.0),
             content: Some((geometry.origin, max)),
             miss_rule: MissRule::default(),
         })
@@ -232,6 +238,7 @@ impl OccupancyGrid {
         self.log_odds = cut;
         self.prob = Vec::new();
         self.window = Some(window);
+        self.lookup_limits = (-1.0, -1.0);
     }
 
     /// Keeps every cell and its probability in memory again (undoes
@@ -244,6 +251,7 @@ impl OccupancyGrid {
             let mut probabilities = ProbabilityCache::new();
             self.prob = self.log_odds.iter().map(|l| probabilities.of(*l)).collect();
         }
+        self.lookup_limits = (self.width as f64 - 1.0, self.height as f64 - 1.0);
     }
 
     /// Whether every cell and its probability are kept in memory (see
@@ -317,6 +325,7 @@ impl OccupancyGrid {
         );
         self.width = w + g[0] + g[2];
         self.height = h + g[1] + g[3];
+        self.lookup_limits = (self.width as f64 - 1.0, self.height as f64 - 1.0);
     }
 
     /// Adds `delta` to cell `i`'s log-odds, its probability from `probabilities`.
@@ -458,6 +467,7 @@ impl OccupancyGrid {
         self.log_odds = vec![0.0];
         self.prob = vec![0.5];
         self.window = None;
+        self.lookup_limits = (0.0, 0.0);
         self.content = None;
     }
 
@@ -490,31 +500,47 @@ impl OccupancyGrid {
 
     /// Occupancy probability at a world point, bilinear between cell centres, with its
     /// gradient per metre; 0.5 (unknown) outside the grid.
+    #[inline(always)]
     pub fn probability_and_gradient(&self, p: Point2) -> (f64, [f64; 2]) {
         let r = self.resolution_m;
         let fx = (p.x_m - self.origin.x_m) / r - 0.5;
         let fy = (p.y_m - self.origin.y_m) / r - 0.5;
-        if !(fx >= 0.0
-            && fy >= 0.0
-            && fx < (self.width - 1) as f64
-            && fy < (self.height - 1) as f64)
-        {
+        let (x_limit, y_limit) = self.lookup_limits;
+        if !(fx >= 0.0 && fy >= 0.0 && fx < x_limit && fy < y_limit) {
+            return self.probability_and_gradient_cut(fx, fy);
+        }
+        let (x0, y0) = (fx as usize, fy as usize);
+        let i = y0 * self.width + x0;
+        let (p00, p10) = (self.prob[i] as f64, self.prob[i + 1] as f64);
+        let (p01, p11) = (
+            self.prob[i + self.width] as f64,
+            self.prob[i + self.width + 1] as f64,
+        );
+        bilinear(fx, fy, [p00, p10, p01, p11], r)
+    }
+
+    /// [`probability_and_gradient`](Self::probability_and_gradient) at cell-centre
+    /// coordinates (`fx`, `fy`) outside its short way: outside the grid, or in a grid cut to
+    /// its content, whose probabilities are worked out from the kept log-odds. Out of line,
+    /// so the matcher's lookups into a whole grid stay as short as they were.
+    #[cold]
+    #[inline(never)]
+    fn probability_and_gradient_cut(&self, fx: f64, fy: f64) -> (f64, [f64; 2]) {
+        // A whole grid comes here only from outside it.
+        let inside =
+            fx >= 0.0 && fy >= 0.0 && fx < (self.width - 1) as f64 && fy < (self.height - 1) as f64;
+        if !inside || !self.prob.is_empty() {
             return (0.5, [0.0, 0.0]);
         }
         let (x0, y0) = (fx as usize, fy as usize);
-        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-        let [p00, p10, p01, p11] = if self.prob.is_empty() {
-            // Cut to its content: the same probabilities, worked out as they are read.
-            [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)]
-                .map(|(x, y)| probability(self.kept_at(x, y)) as f64)
-        } else {
-            let i = y0 * self.width + x0;
-            [i, i + 1, i + self.width, i + self.width + 1].map(|k| self.prob[k] as f64)
-        };
-        let v = (p00 * (1.0 - tx) + p10 * tx) * (1.0 - ty) + (p01 * (1.0 - tx) + p11 * tx) * ty;
-        let gx = ((p10 - p00) * (1.0 - ty) + (p11 - p01) * ty) / r;
-        let gy = ((p01 - p00) * (1.0 - tx) + (p11 - p10) * tx) / r;
-        (v, [gx, gy])
+        let at = |x, y| probability(self.kept_at(x, y)) as f64;
+        let corners = [
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        ];
+        bilinear(fx, fy, corners, self.resolution_m)
     }
 
     /// Occupancy probability of every cell, row by row from the grid's origin (see
@@ -538,6 +564,18 @@ impl OccupancyGrid {
             .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
+}
+
+/// The bilinear value at cell-centre coordinates (`fx`, `fy`) (inside the grid) between the
+/// probabilities of its four cells (`[p00, p10, p01, p11]`), and its gradient per metre on
+/// cells of `r` metres.
+#[inline(always)]
+fn bilinear(fx: f64, fy: f64, [p00, p10, p01, p11]: [f64; 4], r: f64) -> (f64, [f64; 2]) {
+    let (tx, ty) = (fx - (fx as usize) as f64, fy - (fy as usize) as f64);
+    let v = (p00 * (1.0 - tx) + p10 * tx) * (1.0 - ty) + (p01 * (1.0 - tx) + p11 * tx) * ty;
+    let gx = ((p10 - p00) * (1.0 - ty) + (p11 - p01) * ty) / r;
+    let gy = ((p01 - p00) * (1.0 - tx) + (p11 - p10) * tx) / r;
+    (v, [gx, gy])
 }
 
 /// `v.floor()`, without the call to the C library's `floor` that the baseline x86-64 target
