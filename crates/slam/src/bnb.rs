@@ -836,13 +836,25 @@ mod tests {
         prior: Pose2,
         window: &SearchWindow,
     ) -> f64 {
+        brute_force_where(map, points, prior, window, |_, _, _| true)
+    }
+
+    /// The best score, by brute force, of the poses of the window (heading step, x and y
+    /// cells from the prior) that `counted` accepts.
+    fn brute_force_where(
+        map: &PrecomputedMap,
+        points: &[Point2],
+        prior: Pose2,
+        window: &SearchWindow,
+        counted: impl Fn(i64, i64, i64) -> bool,
+    ) -> f64 {
         let grid = Discretised::new(map, window);
         let (n_a, n_c) = (grid.n_angles, grid.n_cells);
         let mut best = 0u32;
         for k in -n_a..=n_a {
             let cells = grid.cells(map, points, prior, k);
             for dx in -n_c..=n_c {
-                for dy in -n_c..=n_c {
+                for dy in (-n_c..=n_c).filter(|dy| counted(k, dx, *dy)) {
                     let s: u32 = cells
                         .iter()
                         .map(|(x, y)| map.level(0).at(x + dx, y + dy) as u32)
@@ -894,33 +906,18 @@ mod tests {
         winner: Pose2,
     ) -> f64 {
         let grid = Discretised::new(map, window);
-        let (n_a, n_c) = (grid.n_angles, grid.n_cells);
         let r = map.resolution_m;
         let (wx, wy) = (
             ((winner.x_m - prior.x_m) / r).round() as i64,
             ((winner.y_m - prior.y_m) / r).round() as i64,
         );
         let wk = ((winner.yaw_rad - prior.yaw_rad) / grid.angle_step).round() as i64;
-        let mut best = 0u32;
-        for k in -n_a..=n_a {
-            let cells = grid.cells(map, points, prior, k);
-            for dx in -n_c..=n_c {
-                for dy in -n_c..=n_c {
-                    let near = (dx - wx).abs() <= RIVAL_CELLS
-                        && (dy - wy).abs() <= RIVAL_CELLS
-                        && ((k - wk) as f64 * grid.angle_step).abs() <= RIVAL_RAD;
-                    if near {
-                        continue;
-                    }
-                    let s: u32 = cells
-                        .iter()
-                        .map(|(x, y)| map.level(0).at(x + dx, y + dy) as u32)
-                        .sum();
-                    best = best.max(s);
-                }
-            }
-        }
-        best as f64 / (255 * points.len()) as f64
+        brute_force_where(map, points, prior, window, |k, dx, dy| {
+            let near = (dx - wx).abs() <= RIVAL_CELLS
+                && (dy - wy).abs() <= RIVAL_CELLS
+                && ((k - wk) as f64 * grid.angle_step).abs() <= RIVAL_RAD;
+            !near
+        })
     }
 
     /// The rival's descent reads the children the winner's descent scored (see
