@@ -153,7 +153,8 @@ impl OccupancyGrid {
         })
     }
 
-    /// The log-odds of every cell, row by row from the grid's origin.
+    /// The log-odds of every cell, row by row from the grid's origin (spread out afresh for
+    /// a grid cut to its content: [`kept_log_odds`](Self::kept_log_odds) reads it as kept).
     pub fn log_odds(&self) -> std::borrow::Cow<'_, [f32]> {
         match self.window {
             None => std::borrow::Cow::Borrowed(&self.log_odds),
@@ -193,7 +194,7 @@ impl OccupancyGrid {
     /// Keeps in memory only the cells holding evidence (the smallest rectangle holding every
     /// cell whose log-odds are not 0) and drops the probabilities kept beside them: a
     /// finished submap's grid, which nothing updates any more and a closure search looks up
-    /// only now and then, takes a fifth of its memory or less. Every answer stays the same
+    /// only now and then, takes about a fifth of its memory. Every answer stays the same
     /// to the bit: a cell outside the rectangle holds 0 as before, and each probability is
     /// worked out from its log-odds as it is read. Updating the grid makes it whole again
     /// first, as does [`make_whole`](Self::make_whole).
