@@ -116,7 +116,7 @@ impl OccupancyGrid {
             log_odds: vec![0.0; side * side],
             prob: vec![0.5; side * side],
             window: None,
-            lookup_limits: ((side - 1) as f64, (side - 1) as f64),
+            lookup_limits: lookup_limits(side, side, true),
             content: None,
             miss_rule: MissRule::default(),
         }
@@ -147,7 +147,7 @@ impl OccupancyGrid {
             log_odds,
             prob,
             window: None,
-            lookup_limits: (geometry.width as f64 - 1.0, geometry.height as f64 - 1.0),
+            lookup_limits: lookup_limits(geometry.width, geometry.height, true),
             content: Some((geometry.origin, max)),
             miss_rule: MissRule::default(),
         })
@@ -158,7 +158,7 @@ impl OccupancyGrid {
     pub fn log_odds(&self) -> std::borrow::Cow<'_, [f32]> {
         match self.window {
             None => std::borrow::Cow::Borrowed(&self.log_odds),
-            Some(w) => std::borrow::Cow::Owned(self.whole(w, &self.log_odds, 0.0)),
+            Some(w) => std::borrow::Cow::Owned(self.spread_out(w)),
         }
     }
 
@@ -178,12 +178,12 @@ impl OccupancyGrid {
         })
     }
 
-    /// `kept`, the values of `window`'s cells, spread over the whole grid with `fill`
+    /// The kept log-odds, those of `window`'s cells, spread over the whole grid with 0
     /// elsewhere.
-    fn whole<T: Copy>(&self, window: CellWindow, kept: &[T], fill: T) -> Vec<T> {
-        let mut cells = vec![fill; self.width * self.height];
+    fn spread_out(&self, window: CellWindow) -> Vec<f32> {
+        let mut cells = vec![0.0; self.width * self.height];
         if window.width > 0 {
-            for (row, values) in kept.chunks_exact(window.width).enumerate() {
+            for (row, values) in self.log_odds.chunks_exact(window.width).enumerate() {
                 let at = (window.y0 + row) * self.width + window.x0;
                 cells[at..at + window.width].copy_from_slice(values);
             }
@@ -239,20 +239,25 @@ impl OccupancyGrid {
         self.log_odds = cut;
         self.prob = Vec::new();
         self.window = Some(window);
-        self.lookup_limits = (-1.0, -1.0);
+        self.set_lookup_limits();
     }
 
     /// Keeps every cell and its probability in memory again (undoes
     /// [`cut_to_content`](Self::cut_to_content); nothing to do for a whole grid).
     pub fn make_whole(&mut self) {
         if let Some(w) = self.window.take() {
-            self.log_odds = self.whole(w, &self.log_odds, 0.0);
+            self.log_odds = self.spread_out(w);
         }
         if self.prob.is_empty() {
-            let mut probabilities = ProbabilityCache::new();
-            self.prob = self.log_odds.iter().map(|l| probabilities.of(*l)).collect();
+            self.prob = probabilities_of(&self.log_odds);
         }
-        self.lookup_limits = (self.width as f64 - 1.0, self.height as f64 - 1.0);
+        self.set_lookup_limits();
+    }
+
+    /// Sets [`OccupancyGrid::lookup_limits`] for the grid's size and whether it keeps its
+    /// probabilities.
+    fn set_lookup_limits(&mut self) {
+        self.lookup_limits = lookup_limits(self.width, self.height, !self.prob.is_empty());
     }
 
     /// Whether every cell and its probability are kept in memory (see
@@ -326,7 +331,7 @@ impl OccupancyGrid {
         );
         self.width = w + g[0] + g[2];
         self.height = h + g[1] + g[3];
-        self.lookup_limits = (self.width as f64 - 1.0, self.height as f64 - 1.0);
+        self.set_lookup_limits();
     }
 
     /// Adds `delta` to cell `i`'s log-odds, its probability from `probabilities`.
@@ -468,7 +473,7 @@ impl OccupancyGrid {
         self.log_odds = vec![0.0];
         self.prob = vec![0.5];
         self.window = None;
-        self.lookup_limits = (0.0, 0.0);
+        self.set_lookup_limits();
         self.content = None;
     }
 
@@ -548,9 +553,7 @@ impl OccupancyGrid {
     /// [`OccupancyGrid::geometry`]).
     pub fn probabilities(&self) -> std::borrow::Cow<'_, [f32]> {
         if self.prob.is_empty() {
-            let mut probabilities = ProbabilityCache::new();
-            let log_odds = self.log_odds();
-            std::borrow::Cow::Owned(log_odds.iter().map(|l| probabilities.of(*l)).collect())
+            std::borrow::Cow::Owned(probabilities_of(&self.log_odds()))
         } else {
             std::borrow::Cow::Borrowed(&self.prob)
         }
@@ -565,6 +568,22 @@ impl OccupancyGrid {
             .collect();
         Grid::from_cells(self.geometry(), cells).expect("one state per cell")
     }
+}
+
+/// [`OccupancyGrid::lookup_limits`] for a grid of `width` x `height` cells that keeps its
+/// probabilities or not.
+fn lookup_limits(width: usize, height: usize, keeps_probabilities: bool) -> (f64, f64) {
+    if keeps_probabilities {
+        ((width - 1) as f64, (height - 1) as f64)
+    } else {
+        (-1.0, -1.0)
+    }
+}
+
+/// Each cell's probability from its log-odds, as [`OccupancyGrid::update`] sets it.
+fn probabilities_of(log_odds: &[f32]) -> Vec<f32> {
+    let mut probabilities = ProbabilityCache::new();
+    log_odds.iter().map(|l| probabilities.of(*l)).collect()
 }
 
 /// The bilinear value at cell-centre coordinates (`fx`, `fy`) (inside the grid) between the
