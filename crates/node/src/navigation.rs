@@ -148,6 +148,11 @@ pub struct Navigator {
     planner: Planner,
     follower: Follower,
     costmap: Option<Costmap>,
+    /// The map (with the bumps drawn in) `costmap` was made from, and how many of its cells
+    /// are explored: the same map again gives the same costmap and count, so they are kept
+    /// rather than worked out anew (a rover parked at home is sent the same map every few
+    /// seconds for hours).
+    costmap_source: Option<(Grid<i8>, usize)>,
     /// Frontiers carried from one map to the next.
     frontiers: FrontierTracker,
     goal: Option<Goal>,
@@ -222,6 +227,7 @@ impl Navigator {
             follower: Follower::new(cfg.follower),
             cfg,
             costmap: None,
+            costmap_source: None,
             frontiers: FrontierTracker::new(),
             goal: None,
             operator_goal: None,
@@ -413,14 +419,25 @@ impl Navigator {
             bumped = self.with_bumps(map);
             &bumped
         };
-        let costmap = Costmap::from_map(map, &self.cfg.costmap);
+        let (costmap, explored) = match (self.costmap.take(), &self.costmap_source) {
+            (Some(kept), Some((source, explored))) if source == map => (kept, *explored),
+            _ => {
+                let explored = map
+                    .cells()
+                    .iter()
+                    .filter(|v| !still_to_explore(**v))
+                    .count();
+                self.costmap_source = Some((map.clone(), explored));
+                (Costmap::from_map(map, &self.cfg.costmap), explored)
+            }
+        };
         let here = pose.position();
         let geo = *costmap.geometry();
         // Checked before anything below changes state; the flood's own check then holds.
         if geo.world_to_cell(here).is_none() {
             return self.off_map(now, costmap);
         }
-        let stalled = self.stalled(now, map);
+        let stalled = self.stalled(now, explored, map.geometry().resolution_m);
         // Operator goals first.
         if let Some(op) = self.operator_goal
             && self.goal.is_none_or(|g| g.kind != GoalKind::Operator)
@@ -566,16 +583,11 @@ impl Navigator {
         self.costmap = Some(costmap);
     }
 
-    /// Whether the explored part of `map` (known, and judged where the lidar alone saw it)
-    /// has not grown by [`NavigationConfig::stall_growth_m2`] for the stall window: no
-    /// frontier is then worth a drive until it grows again.
-    fn stalled(&mut self, now: Time, map: &Grid<i8>) -> bool {
-        let known = map
-            .cells()
-            .iter()
-            .filter(|v| !still_to_explore(**v))
-            .count();
-        let r = map.geometry().resolution_m;
+    /// Whether the explored part of the map (`known` cells, `r` metres a side: known, and
+    /// judged where the lidar alone saw it) has not grown by
+    /// [`NavigationConfig::stall_growth_m2`] for the stall window: no frontier is then worth a
+    /// drive until it grows again.
+    fn stalled(&mut self, now: Time, known: usize, r: f64) -> bool {
         let step = (self.cfg.stall_growth_m2 / (r * r)).ceil() as usize;
         let since = match self.grown {
             Some((before, since)) if known < before + step => since,
