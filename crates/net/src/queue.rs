@@ -24,6 +24,11 @@ pub enum DropReason {
     HopLimit,
     /// The node holding it went down.
     NodeDown,
+    /// The mesh node it was addressed to is down. A node whose radio is off lets its
+    /// subscriptions lapse (as a zenoh session's declarations go when its lease runs out), so
+    /// nothing waits for it: what was queued for it is dropped when it goes down, and what is
+    /// sent to it while it is down is dropped at once.
+    ReceiverDown,
 }
 
 /// A bounded priority queue of packets.

@@ -183,6 +183,13 @@ impl SimNetwork {
             let mut lost = Vec::new();
             n.queue
                 .remove_where(|_| true, DropReason::NodeDown, &mut lost);
+            // Left queued, packets for it would wait for ever and be looked through at every
+            // transmission (a powered-off rover's peers had 1,600 each after four hours).
+            for other in self.mesh.values_mut() {
+                other
+                    .queue
+                    .remove_where(|p| p.dst == node, DropReason::ReceiverDown, &mut lost);
+            }
             self.in_air.retain(|(_, to, p)| {
                 let keep = *to != node;
                 if !keep {
@@ -633,6 +640,9 @@ impl SimNetwork {
                     dir.free_at = dir.free_at.max(now);
                 }
                 dir.queue.push(p, &mut dropped);
+            }
+            _ if self.mesh.get(&p.dst).is_some_and(|d| !d.up) => {
+                dropped.push((p, DropReason::ReceiverDown));
             }
             _ => match self.mesh.get_mut(&node) {
                 Some(n) if n.up => n.queue.push(p, &mut dropped),

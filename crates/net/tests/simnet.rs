@@ -5,6 +5,7 @@
 use realms_core::{Duration, Point2, Time, Topic};
 use realms_net::experiment::flood_throughput_mbps;
 use realms_net::qos::{Priority, Qos};
+use realms_net::queue::DropReason;
 use realms_net::{Delivery, NetworkConfig, NodeAddr, SimNetwork};
 
 const R1: NodeAddr = NodeAddr::Rover(1);
@@ -330,10 +331,10 @@ fn map_updates_sent_twice_reach_the_ground_without_waiting_for_a_resend() {
 }
 
 #[test]
-fn packets_held_for_a_rover_that_is_down_do_not_hold_up_the_rest() {
-    // rover2 (down) and the ground both take rover1's localisation: rover1's queue fills
-    // with copies for rover2 that cannot leave, each ahead of the copy for the ground, and
-    // every transmission must look past them.
+fn nothing_waits_for_a_rover_that_is_down() {
+    // rover2 (down) and the ground both take rover1's localisation. A rover that is down
+    // has let its subscriptions lapse: the copies for it are dropped at once, rather than
+    // filling rover1's queue ahead of the ground's copies for as long as it stays down.
     let mut net = SimNetwork::new(config(), Point2::new(0.0, 0.0));
     net.add_mesh_node(R1, Point2::new(20.0, 0.0));
     net.add_mesh_node(R2, Point2::new(25.0, 0.0));
@@ -353,5 +354,57 @@ fn packets_held_for_a_rover_that_is_down_do_not_hold_up_the_rest() {
         |node: NodeAddr| -> Vec<u32> { got.iter().filter(|d| d.to == node).map(index).collect() };
     assert_eq!(at(NodeAddr::Ground), (0..sent).collect::<Vec<_>>());
     assert!(at(R2).is_empty(), "nothing reaches a rover that is down");
-    assert!(net.queued_bytes(R1) > 0, "rover1 holds rover2's copies");
+    assert_eq!(net.queued_bytes(R1), 0, "nothing waits in rover1's queue");
+    assert_eq!(
+        net.stats().dropped(DropReason::ReceiverDown),
+        u64::from(sent),
+        "each copy for rover2 dropped once"
+    );
+}
+
+#[test]
+fn copies_queued_for_a_rover_go_when_it_goes_down_and_it_hears_again_once_up() {
+    // rover2 sits out of radio range, so rover1 keeps its reliable copies for it; when
+    // rover2 powers off they go, and once it is back up and in range it hears what is
+    // published from then on, in order.
+    let mut net = SimNetwork::new(config(), Point2::new(0.0, 0.0));
+    net.add_mesh_node(R1, Point2::new(20.0, 0.0));
+    net.add_mesh_node(R2, Point2::new(5000.0, 0.0));
+    let topic = Topic::new("rover1/localisation");
+    net.subscribe(R2, topic.clone());
+    let publish = |net: &mut SimNetwork, i: u32| {
+        let mut payload = i.to_le_bytes().to_vec();
+        payload.resize(60, 0);
+        net.publish(R1, &topic, payload, Qos::for_topic(&topic));
+    };
+    let mut t = Time::ZERO;
+    for i in 0..50 {
+        net.advance_to(t);
+        publish(&mut net, i);
+        t += Duration::from_millis(100);
+    }
+    net.advance_to(t);
+    assert!(
+        net.queued_bytes(R1) > 0,
+        "copies wait for rover2 out of range"
+    );
+    assert!(net.take_deliveries().is_empty());
+    net.set_up(R2, false);
+    assert_eq!(net.queued_bytes(R1), 0, "they go when rover2 goes down");
+    assert_eq!(net.stats().dropped(DropReason::ReceiverDown), 50);
+    net.set_position(R2, Point2::new(25.0, 0.0));
+    net.set_up(R2, true);
+    for i in 50..100 {
+        net.advance_to(t);
+        publish(&mut net, i);
+        t += Duration::from_millis(100);
+    }
+    net.advance_to(t + Duration::from_secs(10));
+    let heard: Vec<u32> = net
+        .take_deliveries()
+        .iter()
+        .filter(|d| d.to == R2)
+        .map(index)
+        .collect();
+    assert_eq!(heard, (50..100).collect::<Vec<_>>());
 }
