@@ -153,6 +153,9 @@ pub struct Navigator {
     /// rather than worked out anew (a rover parked at home is sent the same map every few
     /// seconds for hours).
     costmap_source: Option<(Grid<i8>, usize)>,
+    /// The peers' areas the last map's cells were checked against, and which cells they had
+    /// mapped.
+    seen_cache: Option<(Vec<ExploredArea>, Option<Vec<bool>>)>,
     /// Frontiers carried from one map to the next.
     frontiers: FrontierTracker,
     goal: Option<Goal>,
@@ -228,6 +231,7 @@ impl Navigator {
             cfg,
             costmap: None,
             costmap_source: None,
+            seen_cache: None,
             frontiers: FrontierTracker::new(),
             goal: None,
             operator_goal: None,
@@ -354,34 +358,25 @@ impl Navigator {
         }
     }
 
-    /// Per cell of `map`, whether a peer (heard from recently) has mapped it.
-    fn seen_by_peers(&self, now: Time, map: &Grid<i8>) -> Option<Vec<bool>> {
+    /// Works out in `seen_cache`, per cell of `map`, whether a peer (heard from recently) has
+    /// mapped it; `map_same`: `map` is the one the last call saw.
+    fn update_seen_by_peers(&mut self, now: Time, map: &Grid<i8>, map_same: bool) {
         let live: Vec<&ExploredArea> = self
             .peer_areas
             .values()
             .filter(|(_, heard)| now - *heard <= self.cfg.claim_lifetime)
             .map(|(a, _)| a)
             .collect();
-        if live.is_empty() {
-            return None;
+        // Peers send their areas every few seconds, mostly unchanged once the hall is mapped:
+        // the same map and the same areas mark the same cells.
+        let same = map_same
+            && self.seen_cache.as_ref().is_some_and(|(areas, _)| {
+                areas.len() == live.len() && areas.iter().zip(&live).all(|(a, b)| a == *b)
+            });
+        if !same {
+            let seen = seen_by(&live, map);
+            self.seen_cache = Some((live.into_iter().cloned().collect(), seen));
         }
-        let geo = *map.geometry();
-        // Where each of our cells' centres lies in each peer's area, worked out per row and
-        // per column rather than per cell.
-        let lookups: Vec<(&ExploredArea, CentreLookup)> = live
-            .iter()
-            .filter_map(|a| Some((*a, CentreLookup::new(&a.geometry()?, &geo))))
-            .collect();
-        let mut seen = vec![false; geo.len()];
-        for (y, row) in map.cells().chunks(geo.width).enumerate() {
-            for (x, v) in row.iter().enumerate() {
-                seen[y * geo.width + x] = still_to_explore(*v)
-                    && lookups
-                        .iter()
-                        .any(|(a, l)| l.index(x, y).is_some_and(|i| a.is_known_at(i)));
-            }
-        }
-        Some(seen)
     }
 
     /// Peers' live claims; a peer with a higher id than ours does not displace our current
@@ -419,8 +414,8 @@ impl Navigator {
             bumped = self.with_bumps(map);
             &bumped
         };
-        let (costmap, explored) = match (self.costmap.take(), &self.costmap_source) {
-            (Some(kept), Some((source, explored))) if source == map => (kept, *explored),
+        let (costmap, explored, map_same) = match (self.costmap.take(), &self.costmap_source) {
+            (Some(kept), Some((source, explored))) if source == map => (kept, *explored, true),
             _ => {
                 let explored = map
                     .cells()
@@ -428,7 +423,7 @@ impl Navigator {
                     .filter(|v| !still_to_explore(**v))
                     .count();
                 self.costmap_source = Some((map.clone(), explored));
-                (Costmap::from_map(map, &self.cfg.costmap), explored)
+                (Costmap::from_map(map, &self.cfg.costmap), explored, false)
             }
         };
         let here = pose.position();
@@ -448,13 +443,13 @@ impl Navigator {
         let exploring =
             self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous;
         let frontiers = if exploring {
-            let seen = self.seen_by_peers(now, map);
-            self.frontiers.update(
-                map,
-                &costmap,
-                self.cfg.explore.min_frontier_cells,
-                seen.as_deref(),
-            )
+            self.update_seen_by_peers(now, map, map_same);
+            let seen = self
+                .seen_cache
+                .as_ref()
+                .and_then(|(_, seen)| seen.as_deref());
+            self.frontiers
+                .update(map, &costmap, self.cfg.explore.min_frontier_cells, seen)
         } else {
             Vec::new()
         };
@@ -789,6 +784,31 @@ pub struct Guarded {
     pub front_blocked: bool,
     /// Something is right behind it.
     pub rear_blocked: bool,
+}
+
+/// Per cell of `map`, whether one of `areas` (peers' explored areas) has mapped it; `None`
+/// without any.
+fn seen_by(areas: &[&ExploredArea], map: &Grid<i8>) -> Option<Vec<bool>> {
+    if areas.is_empty() {
+        return None;
+    }
+    let geo = *map.geometry();
+    // Where each of our cells' centres lies in each peer's area, worked out per row and
+    // per column rather than per cell.
+    let lookups: Vec<(&ExploredArea, CentreLookup)> = areas
+        .iter()
+        .filter_map(|a| Some((*a, CentreLookup::new(&a.geometry()?, &geo))))
+        .collect();
+    let mut seen = vec![false; geo.len()];
+    for (y, row) in map.cells().chunks(geo.width).enumerate() {
+        for (x, v) in row.iter().enumerate() {
+            seen[y * geo.width + x] = still_to_explore(*v)
+                && lookups
+                    .iter()
+                    .any(|(a, l)| l.index(x, y).is_some_and(|i| a.is_known_at(i)));
+        }
+    }
+    Some(seen)
 }
 
 #[cfg(test)]
