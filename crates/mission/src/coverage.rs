@@ -6,7 +6,7 @@
 
 use crate::slam_record::map_grid;
 use realms_core::msgs::OccupancyGrid;
-use realms_core::{Cell, Grid};
+use realms_core::{CentreLookup, Grid};
 use realms_sim::GroundTruth;
 
 /// Per truth cell, which rovers' maps know it (bit per rover), and the series so far.
@@ -43,12 +43,14 @@ impl Coverage {
         let bit = 1u32 << (rover % 32);
         let Some(grid) = map_grid(map) else { return };
         let geo = *self.known_by.geometry();
+        // The map's cell under each truth cell's centre, per column and per row: a division
+        // a column and a row rather than two a cell, every map of every rover.
+        let under = CentreLookup::new(grid.geometry(), &geo);
+        let values = grid.cells();
         for &i in &self.explorable {
-            let p = geo.cell_center(Cell {
-                x: i % geo.width,
-                y: i / geo.width,
-            });
-            let known = grid.at_world(p).is_some_and(|v| *v >= 0);
+            let known = under
+                .index(i % geo.width, i / geo.width)
+                .is_some_and(|j| values[j] >= 0);
             let cell = &mut self.known_by.cells_mut()[i];
             if known {
                 *cell |= bit;
