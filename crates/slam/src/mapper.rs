@@ -2521,9 +2521,8 @@ impl Mapper {
                 };
                 self.insert_within(s, node, &dense, hit_range_m);
             }
-            if self.submaps[s].finished {
-                self.submaps[s].map.cut_to_content();
-            }
+            // Only finished submaps are redrawn: final again, only their content is kept.
+            self.submaps[s].map.cut_to_content();
         }
         if redrawn {
             self.sync_assembly();
