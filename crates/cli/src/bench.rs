@@ -140,15 +140,23 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     // Speed trials, each paired with a trial on plain cell-by-cell ray casting: the shared
     // machine's speed drifts between runs, the ratio within a pair much less.
     let (mut speeds, mut ratios) = (Vec::new(), Vec::new());
-    let mut msgs = 0usize;
+    let (mut msgs, mut still) = (0usize, 0u64);
+    let mut reusing = Vec::new();
     for trial in 0..args.trials {
-        let fast = speed_trial(&scenario, sim_s, false, &mut msgs);
+        let fast = speed_trial(&scenario, sim_s, Casting::EveryFrame, &mut msgs, &mut still);
         speeds.push(fast);
+        reusing.push(speed_trial(
+            &scenario,
+            sim_s,
+            Casting::ReuseStill,
+            &mut 0,
+            &mut 0,
+        ));
         if args.no_plain {
             eprintln!("trial {trial}: {fast:.0}x real time");
             continue;
         }
-        let plain = speed_trial(&scenario, sim_s, true, &mut 0);
+        let plain = speed_trial(&scenario, sim_s, Casting::Plain, &mut 0, &mut 0);
         eprintln!("trial {trial}: {fast:.0}x real time (plain ray casting: {plain:.0}x)");
         ratios.push(fast / plain);
     }
@@ -163,11 +171,16 @@ fn sim(args: BenchSimArgs) -> Result<()> {
             )
         };
         println!(
-            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial){ratio}",
+            "speed: {:.0}x real time (median of {} trials of {:.0} simulated s; {} messages per trial; every scan and depth frame cast){ratio}",
             median(speeds),
             args.trials,
             sim_s,
             msgs / args.trials,
+        );
+        println!(
+            "speed as a mission runs it: {:.0}x real time ({} scans and depth frames a trial taken where the one before was, the rover stuck or still, and measured on its cast)",
+            median(reusing),
+            still / args.trials as u64,
         );
         println!();
     }
@@ -342,12 +355,32 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     Ok(())
 }
 
-/// Simulated seconds per wall second with the rovers driving steady arcs.
-fn speed_trial(scenario: &realms_sim::Scenario, sim_s: f64, plain: bool, msgs: &mut usize) -> f64 {
+/// How a speed trial's sensors cast their rays.
+#[derive(Clone, Copy, PartialEq)]
+enum Casting {
+    /// Every scan and frame cast through the pyramid and distance fields.
+    EveryFrame,
+    /// As the mission runs: a rover that has not moved measures on its last cast.
+    ReuseStill,
+    /// Every scan and frame cast cell by cell (the baseline).
+    Plain,
+}
+
+/// Simulated seconds per wall second with the rovers driving steady arcs (stopping where
+/// they collide); adds the messages published to `msgs` and the scans and frames taken
+/// where the one before was to `still`.
+fn speed_trial(
+    scenario: &realms_sim::Scenario,
+    sim_s: f64,
+    casting: Casting,
+    msgs: &mut usize,
+    still: &mut u64,
+) -> f64 {
     let mut w = World::new(scenario);
-    if plain {
+    if casting == Casting::Plain {
         w.use_plain_ray_casting();
     }
+    w.reuse_still_casts(casting == Casting::ReuseStill);
     let mut out = Vec::new();
     let start = Instant::now();
     let step = Duration::from_millis(250);
@@ -376,7 +409,9 @@ fn speed_trial(scenario: &realms_sim::Scenario, sim_s: f64, plain: bool, msgs: &
         *msgs += out.len();
         out.clear();
     }
-    sim_s / start.elapsed().as_secs_f64()
+    let speed = sim_s / start.elapsed().as_secs_f64();
+    *still += w.still_casts();
+    speed
 }
 
 pub(crate) fn machine() -> String {

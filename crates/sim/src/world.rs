@@ -11,7 +11,8 @@ use crate::rover::{RoverBody, StepOutcome};
 use crate::scenario::{FaultKind, Scenario, SensorKind};
 use crate::scheduler::Scheduler;
 use crate::sensors::depth::BODY_FROM_OPTICAL;
-use crate::sensors::{Frame3, camera, depth, lidar, proprio};
+use crate::sensors::lidar::SweepSegment;
+use crate::sensors::{Frame3, LastCast, camera, depth, lidar, proprio};
 use crate::terrain::Terrain;
 use crate::truth::GroundTruth;
 use realms_core::geometry::normalize_angle_rad;
@@ -73,6 +74,10 @@ struct RoverSlot {
     /// `world_from_lidar` and the heading at each physics step of the last scan's length,
     /// oldest first, for a sweeping lidar's beams (each from where the rover was at its time).
     lidar_frames: VecDeque<(Time, Frame3, f64)>,
+    /// The last scan's true ranges and the segments they were cast from.
+    lidar_cast: LastCast<Vec<SweepSegment>, Vec<Option<f64>>>,
+    /// The last depth frame's true depths and the frame they were cast from.
+    depth_cast: LastCast<Frame3, Vec<Option<f64>>>,
 }
 
 /// The whole simulated world.
@@ -92,6 +97,8 @@ pub struct World {
     /// Each rover's sweeping scans taken again at once, once asked for
     /// ([`World::keep_lidar_twins`]).
     lidar_twins: Option<Vec<Vec<LaserScan>>>,
+    /// A still rover's scans and depth frames are measured on its last cast (`LastCast`).
+    reuse_casts: bool,
 }
 
 impl World {
@@ -124,6 +131,8 @@ impl World {
                     camera_wanted: false,
                     dropped: BTreeMap::new(),
                     lidar_frames: VecDeque::new(),
+                    lidar_cast: LastCast::default(),
+                    depth_cast: LastCast::default(),
                 }
             })
             .collect();
@@ -168,6 +177,7 @@ impl World {
             state_time: Time::ZERO,
             events: Vec::new(),
             lidar_twins: None,
+            reuse_casts: true,
         };
         world.keep_lidar_frames(Time::ZERO);
         world
@@ -177,6 +187,26 @@ impl World {
     /// slower): the baseline `realms bench sim` measures against in the same run.
     pub fn use_plain_ray_casting(&mut self) {
         self.pyramid = HeightPyramid::with_max_level(&self.terrain.heights, 0);
+        for slot in &mut self.rovers {
+            slot.lidar_cast.clear();
+            slot.depth_cast.clear();
+        }
+    }
+
+    /// Whether a rover that has not moved since its last scan or depth frame is measured on
+    /// that one's true ranges (the default) or cast again to the same answers: the sensors'
+    /// own cost is measured with every frame cast (`realms bench sim`).
+    pub fn reuse_still_casts(&mut self, reuse: bool) {
+        self.reuse_casts = reuse;
+    }
+
+    /// How many lidar scans and depth frames were taken from where the one before was (and
+    /// measured on its true ranges, unless [`World::reuse_still_casts`] said not to).
+    pub fn still_casts(&self) -> u64 {
+        self.rovers
+            .iter()
+            .map(|s| s.lidar_cast.repeats() + s.depth_cast.repeats())
+            .sum()
     }
 
     /// The scenario this world runs.
@@ -398,7 +428,8 @@ impl World {
             SensorKind::Lidar => {
                 let pose = world_from_base.compose(&base_from_lidar);
                 let frame = format!("{ns}/laser");
-                let scan = if let Some(sweep) = lidar::sweep_length(&spec.lidar) {
+                let sweeping = lidar::sweep_length(&spec.lidar);
+                let (stamp, segments) = if let Some(sweep) = sweeping {
                     // The last beam is measured now, the first a sweep earlier; each from
                     // where the rover was at its own time.
                     let stamp = t - sweep;
@@ -420,37 +451,34 @@ impl World {
                         spec.lidar.beams as usize,
                         lidar::time_increment_s(&spec.lidar),
                     );
-                    lidar::sweep(
-                        &self.pyramid,
-                        &segments,
-                        &spec.lidar,
-                        &mut slot.lidar_rng,
-                        stamp,
-                        &frame,
-                    )
+                    (stamp, segments)
                 } else {
-                    lidar::scan(
-                        &self.pyramid,
-                        &pose,
-                        &spec.lidar,
-                        &mut slot.lidar_rng,
-                        t,
-                        &frame,
-                    )
+                    (t, vec![SweepSegment::still(0, pose)])
                 };
+                let pyramid = &self.pyramid;
+                let hits = slot
+                    .lidar_cast
+                    .get_or_cast(segments, self.reuse_casts, |segments| {
+                        lidar::cast_hits(pyramid, segments, &spec.lidar)
+                    });
+                let scan = lidar::measured(
+                    &spec.lidar,
+                    hits,
+                    sweeping.is_some(),
+                    &mut slot.lidar_rng,
+                    stamp,
+                    &frame,
+                );
                 (id.topic("scan"), Message::LaserScan(scan))
             }
             SensorKind::Depth => {
                 let pose = world_from_base.compose(&base_from_optical);
                 let frame = format!("{ns}/depth_optical");
-                let cloud = depth::frame(
-                    &self.pyramid,
-                    &pose,
-                    &spec.depth,
-                    &mut slot.depth_rng,
-                    t,
-                    &frame,
-                );
+                let pyramid = &self.pyramid;
+                let depths = slot.depth_cast.get_or_cast(pose, self.reuse_casts, |pose| {
+                    depth::cast_depths(pyramid, pose, &spec.depth)
+                });
+                let cloud = depth::measured(&spec.depth, depths, &mut slot.depth_rng, t, &frame);
                 (id.topic("depth/points"), Message::PointCloud(cloud))
             }
             SensorKind::Camera => {

@@ -525,3 +525,48 @@ fn each_sweep_keeps_a_twin_taken_at_once_from_its_last_beam() {
     );
     assert!(world.take_lidar_twins()[0].is_empty(), "taken once");
 }
+
+#[test]
+fn a_still_rover_measured_on_its_last_cast_reads_what_a_fresh_cast_gives() {
+    // Rover 1 stands, drives, turns, and stands again; rover 2 stands throughout. With the
+    // casts of a rover that has not moved reused and without, every message is the same
+    // to the byte: the same true ranges, the same noise drawn on them in the same order.
+    let run = |reuse: bool| {
+        let s = scenario(2);
+        let mut world = flat_world(
+            &s,
+            &[Pose2::new(5.0, 10.0, 0.3), Pose2::new(14.0, 6.0, 2.0)],
+            |t| {
+                t.add_boulder(Boulder {
+                    center: Point2::new(9.0, 11.0),
+                    radius_m: 0.4,
+                    height_m: 0.3,
+                })
+            },
+        );
+        world.reuse_still_casts(reuse);
+        let mut out = idle_until(&mut world, Time::from_secs_f64(2.0));
+        out.extend(common::drive(&mut world, RoverId(1), 0.3, 0.0, 2.0));
+        out.extend(common::drive(&mut world, RoverId(1), 0.0, 0.8, 1.0));
+        out.extend(common::drive(&mut world, RoverId(1), 0.0, 0.0, 3.0));
+        let bytes: Vec<(String, Vec<u8>)> = out
+            .iter()
+            .map(|(topic, m)| (topic.to_string(), realms_core::codec::encode(m)))
+            .collect();
+        (bytes, world.still_casts())
+    };
+    let (reused, still) = run(true);
+    let (cast, still_too) = run(false);
+    assert_eq!(still, still_too);
+    // Rover 2's eight seconds and rover 1's standing stretches: most of the 96 scans and 16
+    // frames a rover takes in that time were taken where the one before was.
+    assert!(still > 100, "{still} casts from where the last one was");
+    let kinds = |b: &[(String, Vec<u8>)], suffix: &str| {
+        b.iter().filter(|(t, _)| t.ends_with(suffix)).count()
+    };
+    assert!(kinds(&reused, "/scan") > 150 && kinds(&reused, "/depth/points") > 25);
+    assert_eq!(reused.len(), cast.len());
+    for (i, (a, b)) in reused.iter().zip(&cast).enumerate() {
+        assert!(a == b, "message {i} on {} differs", a.0);
+    }
+}

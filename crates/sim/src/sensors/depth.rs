@@ -81,29 +81,65 @@ pub fn frame(
     stamp: Time,
     frame_id: &str,
 ) -> PointCloud {
+    measured(
+        spec,
+        &cast_depths(world, world_from_optical, spec),
+        rng,
+        stamp,
+        frame_id,
+    )
+}
+
+/// Every pixel's true optical depth from `world_from_optical`, row by row (`None`: nothing
+/// within the camera's maximum depth).
+pub fn cast_depths(
+    world: &HeightPyramid,
+    world_from_optical: &Frame3,
+    spec: &DepthCamera,
+) -> Vec<Option<f64>> {
     let k = Intrinsics::from_fov(spec.width, spec.height, spec.hfov_deg, spec.vfov_deg);
-    let (w, h) = (spec.width, spec.height);
-    let mut points = vec![[f32::NAN; 3]; (w * h) as usize];
+    let w = spec.width;
+    let mut depths = vec![None; (w * spec.height) as usize];
     cast_image(
         world,
         world_from_optical,
         &k,
         w,
-        h,
+        spec.height,
         spec.range_max_m,
-        |u, v, r, hit| {
-            let Some(z) = hit else { return };
+        |u, v, _, hit| depths[(v * w + u) as usize] = hit,
+    );
+    depths
+}
+
+/// The frame of the pixels' true depths `depths` ([`cast_depths`]): each given its noise in
+/// the order [`cast_image`] visits them (column by column, bottom row first), so a frame
+/// measured from depths cast earlier draws the noise a fresh cast would.
+pub fn measured(
+    spec: &DepthCamera,
+    depths: &[Option<f64>],
+    rng: &mut SimRng,
+    stamp: Time,
+    frame_id: &str,
+) -> PointCloud {
+    let k = Intrinsics::from_fov(spec.width, spec.height, spec.hfov_deg, spec.vfov_deg);
+    let (w, h) = (spec.width, spec.height);
+    let mut points = vec![[f32::NAN; 3]; (w * h) as usize];
+    // A pixel's ray is its column's x and its row's y, as `cast_image` makes it.
+    let row_y: Vec<f64> = (0..h).map(|v| k.ray(0, v)[1]).collect();
+    for u in 0..w {
+        let x = k.ray(u, 0)[0];
+        for v in (0..h).rev() {
+            let i = (v * w + u) as usize;
+            let Some(z) = depths[i] else { continue };
             if z < spec.range_min_m {
-                return;
+                continue;
             }
             let z_noisy = z + gaussian(rng, spec.noise_per_m2 * z * z);
-            points[(v * w + u) as usize] = [
-                (r[0] * z_noisy) as f32,
-                (r[1] * z_noisy) as f32,
-                z_noisy as f32,
-            ];
-        },
-    );
+            let y = row_y[v as usize];
+            points[i] = [(x * z_noisy) as f32, (y * z_noisy) as f32, z_noisy as f32];
+        }
+    }
     PointCloud {
         header: Header {
             stamp,

@@ -47,13 +47,8 @@ pub fn scan(
     stamp: Time,
     frame_id: &str,
 ) -> LaserScan {
-    let ranges = cast_beams(
-        world,
-        &[SweepSegment::still(0, *world_from_lidar)],
-        spec,
-        rng,
-    );
-    message(spec, ranges, 0.0, stamp, frame_id)
+    let hits = cast_hits(world, &[SweepSegment::still(0, *world_from_lidar)], spec);
+    measured(spec, &hits, false, rng, stamp, frame_id)
 }
 
 /// The time between beams of a sweeping scan: one turn of the head per scan.
@@ -80,18 +75,55 @@ pub fn sweep(
     stamp: Time,
     frame_id: &str,
 ) -> LaserScan {
-    let ranges = cast_beams(world, segments, spec, rng);
-    message(spec, ranges, time_increment_s(spec), stamp, frame_id)
+    measured(
+        spec,
+        &cast_hits(world, segments, spec),
+        true,
+        rng,
+        stamp,
+        frame_id,
+    )
 }
 
-/// Every beam's range (with its noise, in beam order), each cast from where its segment puts
-/// the lidar.
-fn cast_beams(
+/// The scan of the beams' true ranges `hits` ([`cast_hits`]): each given its noise in beam
+/// order, `sweeping` if each beam was measured at its own time.
+pub fn measured(
+    spec: &Lidar,
+    hits: &[Option<f64>],
+    sweeping: bool,
+    rng: &mut SimRng,
+    stamp: Time,
+    frame_id: &str,
+) -> LaserScan {
+    let ranges = hits
+        .iter()
+        .map(|hit| match *hit {
+            Some(t) => {
+                let noisy = t + gaussian(rng, spec.noise_m + spec.noise_per_m * t);
+                if noisy < spec.range_min_m || noisy > spec.range_max_m {
+                    f32::INFINITY
+                } else {
+                    noisy as f32
+                }
+            }
+            None => f32::INFINITY,
+        })
+        .collect();
+    let increment = if sweeping {
+        time_increment_s(spec)
+    } else {
+        0.0
+    };
+    message(spec, ranges, increment, stamp, frame_id)
+}
+
+/// Every beam's true range (`None`: nothing within the lidar's reach), in beam order, each
+/// cast from where its segment puts the lidar.
+pub fn cast_hits(
     world: &HeightPyramid,
     segments: &[SweepSegment],
     spec: &Lidar,
-    rng: &mut SimRng,
-) -> Vec<f32> {
+) -> Vec<Option<f64>> {
     let n = spec.beams as usize;
     let increment = std::f64::consts::TAU / n as f64;
     let angle_min = -std::f64::consts::PI;
@@ -101,8 +133,8 @@ fn cast_beams(
     // segment's turn is stepped the same way.
     let (s_inc, c_inc) = increment.sin_cos();
     let (mut s_a, mut c_a) = angle_min.sin_cos();
-    // Beams are cast eight side by side, then given their noise in order (four were 2-4 %
-    // slower in the lidar-only trial, six and twelve no faster; BENCHMARKS.md).
+    // Beams are cast eight side by side (four were 2-4 % slower in the lidar-only trial, six
+    // and twelve no faster; BENCHMARKS.md).
     const SIDE_BY_SIDE: usize = 8;
     let mut dirs = [[0.0; 3]; SIDE_BY_SIDE];
     let mut origins = [[0.0; 3]; SIDE_BY_SIDE];
@@ -139,20 +171,7 @@ fn cast_beams(
                 }
                 hits
             };
-            for hit in hits.into_iter().take(count) {
-                let range = match hit {
-                    Some(t) => {
-                        let noisy = t + gaussian(rng, spec.noise_m + spec.noise_per_m * t);
-                        if noisy < spec.range_min_m || noisy > spec.range_max_m {
-                            f32::INFINITY
-                        } else {
-                            noisy as f32
-                        }
-                    }
-                    None => f32::INFINITY,
-                };
-                ranges.push(range);
-            }
+            ranges.extend(hits.into_iter().take(count));
             done += count;
         }
     }

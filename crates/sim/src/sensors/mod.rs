@@ -7,6 +7,58 @@ pub mod depth;
 pub mod lidar;
 pub mod proprio;
 
+/// A sensor's last noiseless cast and what it was cast from. The ground does not move, so a
+/// rover that stands still (parked at home, waiting for a plan, powered but idle) would cast
+/// the same rays again to the same answers: only the noise drawn on them is new. The poses
+/// compare bit for bit, so a reused cast is the cast that would have been made.
+#[derive(Clone, Debug)]
+pub struct LastCast<K, V> {
+    last: Option<(K, V)>,
+    repeats: u64,
+}
+
+impl<K, V> Default for LastCast<K, V> {
+    fn default() -> Self {
+        LastCast {
+            last: None,
+            repeats: 0,
+        }
+    }
+}
+
+impl<K: PartialEq, V> LastCast<K, V> {
+    /// The cast from `from`: the kept one if it was cast from there and `reuse` allows, else
+    /// `cast(&from)`, kept.
+    pub fn get_or_cast(&mut self, from: K, reuse: bool, cast: impl FnOnce(&K) -> V) -> &V {
+        if matches!(&self.last, Some((k, _)) if *k == from) {
+            self.repeats += 1;
+            if !reuse {
+                self.last = None;
+            }
+        } else {
+            self.last = None;
+        }
+        &self
+            .last
+            .get_or_insert_with(|| {
+                let v = cast(&from);
+                (from, v)
+            })
+            .1
+    }
+
+    /// How many casts were asked for from where the one before was cast (and answered from
+    /// it, where reuse was allowed).
+    pub fn repeats(&self) -> u64 {
+        self.repeats
+    }
+
+    /// Forgets the kept cast (the world it was cast in changed).
+    pub fn clear(&mut self) {
+        self.last = None;
+    }
+}
+
 /// A rigid 3D frame: `world_from_sensor` as an origin and a rotation matrix (columns are the
 /// sensor's axes in the world).
 #[derive(Clone, Copy, Debug, PartialEq)]
