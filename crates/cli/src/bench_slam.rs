@@ -750,6 +750,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.hazards_rounded_out = false,
     },
     Variant {
+        name: "depth-every-frame",
+        what: "every depth frame judged, however long the rover has stood still (the rovers' setup before the seventy-fourth session; they judge 240 frames, two minutes, from where they stand)",
+        apply: |c| c.depth_motion_filter = None,
+    },
+    Variant {
         name: "depth-at-own-stamp",
         what: "a depth frame's verdicts placed at the pose of the frame's own stamp (the latest scan's moved on by the odometry since), not at the latest scan's",
         apply: |c| c.depth_at_own_stamp = true,

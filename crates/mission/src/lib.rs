@@ -151,6 +151,15 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         deskew: true,
         depth_features: false,
         relief_odometry: None,
+        // A rover parked for hours judged every frame at 2 Hz and redrew its hazard layers
+        // for nothing; two minutes from one spot settle everything it sees (it stands one
+        // minute at the start), and the sixteen missions came out the same to the rover
+        // (BENCHMARKS.md, "A parked rover's sensors and maps").
+        depth_motion_filter: Some(realms_node::mapping::DepthStillFilter {
+            min_travel_m: 0.02,
+            min_turn_rad: 0.5f64.to_radians(),
+            frames_while_still: 240,
+        }),
     };
     for change in &options.mapping_changes {
         change(&mut cfg);

@@ -94,6 +94,8 @@ pub struct Planner {
     generation: u32,
     /// The search generation that marked each cell a target of a flood.
     target: Vec<u32>,
+    /// The cells the last search closed, in the order it closed them.
+    closed_cells: Vec<u32>,
     heap: RadixHeap,
 }
 
@@ -232,6 +234,7 @@ impl Planner {
             self.generation = 1;
         }
         self.heap.clear();
+        self.closed_cells.clear();
     }
 
     /// The search, A* when `heuristic` is set, Dijkstra otherwise; stops at `goal` if given.
@@ -325,6 +328,7 @@ impl Planner {
                 break;
             }
             self.cells[i].closed = gen_;
+            self.closed_cells.push(i as u32);
             last_closed = self.cells[i].g;
             expanded += 1;
             if Some(i) == goal_index {
@@ -486,6 +490,16 @@ impl Planner {
 
     /// The last search's costs, `INFINITY` where it did not close a cell.
     fn field(&self) -> Vec<f32> {
+        // A flood that closed few cells (a rover with no frontier left, or one right beside
+        // it) writes those into a fresh field; one that closed many reads every cell in
+        // order, as cheap as filling the field.
+        if self.closed_cells.len() < self.cells.len() / 8 {
+            let mut field = vec![f32::INFINITY; self.cells.len()];
+            for &i in &self.closed_cells {
+                field[i as usize] = self.cells[i as usize].g;
+            }
+            return field;
+        }
         let gen_ = self.generation;
         self.cells
             .iter()

@@ -230,8 +230,20 @@ impl Decoder {
         if cells > 100_000_000 {
             return Err(malformed("more than 100 million cells"));
         }
-        let mut map = match update.base {
-            None => Grid::new(g, UNKNOWN),
+        // The runs are checked before anything is written: the map kept stays whole if the
+        // update turns out malformed.
+        let mut i = 0usize;
+        for run in &update.runs {
+            i = i
+                .checked_add(run.skip as usize)
+                .and_then(|start| start.checked_add(run.len as usize))
+                .filter(|end| *end <= cells)
+                .ok_or_else(|| malformed("run past the end of the map"))?;
+        }
+        // A fresh grid for a snapshot or a map that grew; most updates change the kept one
+        // where it lies.
+        let fresh = match update.base {
+            None => Some(Grid::new(g, UNKNOWN)),
             Some(base) => {
                 if self.applied != Some(base) {
                     return Err(DeltaError::Gap {
@@ -244,26 +256,25 @@ impl Decoder {
                     .map
                     .as_ref()
                     .ok_or_else(|| malformed("no map to change"))?;
-                // A copy: the map kept stays whole if the update turns out malformed.
-                relay_onto(old, g)
-                    .ok_or_else(|| malformed("geometry off the old lattice"))?
-                    .into_owned()
+                match relay_onto(old, g).ok_or_else(|| malformed("geometry off the old lattice"))? {
+                    Cow::Borrowed(_) => None,
+                    Cow::Owned(grown) => Some(grown),
+                }
             }
         };
-        let mut i = 0usize;
-        let out = map.cells_mut();
-        for run in &update.runs {
-            i = i
-                .checked_add(run.skip as usize)
-                .ok_or_else(|| malformed("run overflows"))?;
-            let end = i
-                .checked_add(run.len as usize)
-                .filter(|e| *e <= cells)
-                .ok_or_else(|| malformed("run past the end of the map"))?;
-            out[i..end].fill(run.value);
-            i = end;
+        if let Some(grid) = fresh {
+            self.map = Some(grid);
         }
-        self.map = Some(map);
+        let Some(map) = self.map.as_mut() else {
+            return Err(malformed("no map to change"));
+        };
+        let out = map.cells_mut();
+        let mut i = 0usize;
+        for run in &update.runs {
+            let start = i + run.skip as usize;
+            i = start + run.len as usize;
+            out[start..i].fill(run.value);
+        }
         self.applied = Some(update.seq);
         Ok(())
     }

@@ -34,6 +34,8 @@ struct Drawn {
     version: u64,
     source: GridGeometry,
     hazards: Grid<CellState>,
+    /// The hazards' version, if the caller gave one.
+    hazards_version: Option<u64>,
     grid: Grid<i8>,
 }
 
@@ -89,8 +91,32 @@ impl TiledLayer {
     /// it), else free if any SLAM cell (or the depth camera) saw it free (unjudged, if so
     /// marked, where only the lidar did), else unknown.
     pub fn refresh(&mut self, view: &LiveView, hazards: Grid<CellState>) -> &Grid<i8> {
-        let f = self.factor;
+        self.refresh_versioned(view, hazards, None)
+    }
+
+    /// [`refresh`](Self::refresh) with the hazard layer's version, if the caller keeps one:
+    /// hazards of the version last drawn are taken for the same grid without comparing it
+    /// cell by cell.
+    pub fn refresh_versioned(
+        &mut self,
+        view: &LiveView,
+        hazards: Grid<CellState>,
+        hazards_version: Option<u64>,
+    ) -> &Grid<i8> {
         let g = view.geometry;
+        // Nothing changed since the last drawing (a rover standing still): it stands.
+        if let Some(mut d) = self.drawn.take_if(|d| {
+            d.source == g
+                && !view.changed_anywhere_since(d.version)
+                && match (hazards_version, d.hazards_version) {
+                    (Some(now), Some(drawn)) => now == drawn,
+                    _ => d.hazards == hazards,
+                }
+        }) {
+            d.version = view.version;
+            return &self.drawn.insert(d).grid;
+        }
+        let f = self.factor;
         let geo = GridGeometry {
             width: g.width / f,
             height: g.height / f,
@@ -151,6 +177,7 @@ impl TiledLayer {
             version: view.version,
             source: g,
             hazards,
+            hazards_version,
             grid,
         });
         &drawn.grid

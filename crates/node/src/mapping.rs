@@ -123,6 +123,23 @@ pub struct MappingConfig {
     /// ([`realms_slam::relief`]), and the travel found is kept ([`Mapping::relief_hops`])
     /// (`None`: not done). Measured only, not yet used by the SLAM.
     pub relief_odometry: Option<ReliefConfig>,
+    /// Depth frames judged while the rover stands still (`None`: every frame). A rover
+    /// standing still sees the same ground frame after frame: a few frames settle the
+    /// cells it sees (two safe verdicts make a cell safe, ten hold it there), and judging
+    /// hours more of them at a parked rover only lets its noise wander the borderline cells.
+    pub depth_motion_filter: Option<DepthStillFilter>,
+}
+
+/// How many depth frames a still rover judges ([`MappingConfig::depth_motion_filter`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthStillFilter {
+    /// The rover stands still while its wheels have moved less than this (metres) ...
+    pub min_travel_m: f64,
+    /// ... and turned less than this (radians) since it stopped, in one submap. The wheels
+    /// alone say so: a gyro's heading wanders by its noise while the rover stands.
+    pub min_turn_rad: f64,
+    /// Frames judged from where it stands; the rest are dropped until it moves.
+    pub frames_while_still: u32,
 }
 
 /// A depth frame fitted onto the relief of a reference frame.
@@ -397,6 +414,31 @@ pub struct Mapping {
     relief_hops: Vec<ReliefHop>,
     /// The wheels' and gyro's last half second, to de-skew sweeping scans.
     recent: RecentMotion,
+    /// The newest submap and the wheels' reading where the rover last moved, for
+    /// [`MappingConfig::depth_motion_filter`].
+    last_judged: Option<(usize, Pose2)>,
+    /// Frames judged since the rover last moved.
+    still_frames: u32,
+    /// Depth frames fused into the hazard layers so far.
+    hazard_frames: u64,
+    /// The hazard states last worked out, and what from.
+    hazard_cache: Option<HazardStatesFrom>,
+    /// Hazard states worked out so far: each new one's version.
+    hazard_versions: u64,
+}
+
+/// Hazard states ([`Mapping::hazard_states`]) and what they were worked out from: the hazard
+/// layers after this many frames, drawn at these submap poses, the hollows and craters
+/// judged against this view of the live map. While none of it changes (a rover standing
+/// still, its frames not judged), neither do the states.
+#[derive(Debug)]
+struct HazardStatesFrom {
+    /// Counts the states worked out anew: the same version, the same states.
+    version: u64,
+    frames: u64,
+    origins: Vec<Pose2>,
+    live: Option<(GridGeometry, u64)>,
+    states: Grid<CellState>,
 }
 
 impl Mapping {
@@ -443,6 +485,11 @@ impl Mapping {
             relief_reference: None,
             relief_hops: Vec::new(),
             recent: RecentMotion::default(),
+            last_judged: None,
+            still_frames: 0,
+            hazard_frames: 0,
+            hazard_cache: None,
+            hazard_versions: 0,
         }
     }
 
@@ -643,6 +690,29 @@ impl Mapping {
         if self.mapper.state() == LocalisationState::Lost || !self.tracked_once {
             return;
         }
+        if let Some(filter) = self.cfg.depth_motion_filter {
+            let now = self
+                .mapper
+                .newest_submap()
+                .map(|(i, _)| i)
+                .zip(self.last_wheel);
+            let moved = match (now, self.last_judged) {
+                (Some((submap, odom)), Some((last_submap, last_odom))) => {
+                    let step = last_odom.inverse() * odom;
+                    submap != last_submap
+                        || step.x_m.hypot(step.y_m) >= filter.min_travel_m
+                        || step.yaw_rad.abs() >= filter.min_turn_rad
+                }
+                _ => true,
+            };
+            if moved {
+                self.last_judged = now;
+                self.still_frames = 0;
+            } else if self.still_frames >= filter.frames_while_still {
+                return;
+            }
+            self.still_frames += 1;
+        }
         let level = self.levelling();
         let (r, o) = (self.cfg.depth_rot, self.cfg.depth_origin_m);
         let levelled_from_optical = |p: [f64; 3]| {
@@ -695,6 +765,7 @@ impl Mapping {
         if let Some((submap, origin)) = self.mapper.newest_submap() {
             let rover = origin.inverse() * self.pose_at(cloud.header.stamp);
             self.hazards.insert(submap, rover, &verdicts);
+            self.hazard_frames += 1;
         }
         if self.cfg.depth_features {
             let stamp = cloud.header.stamp;
@@ -943,9 +1014,11 @@ impl Mapping {
     pub fn publish_delta(&mut self, now: Time, out: &mut Vec<Outgoing>) {
         self.next_delta = now + self.cfg.delta_period;
         let header = self.header(now);
-        let hazards = self.hazard_states();
+        let (hazards, version) = self.hazard_states();
         let view = self.mapper.live_map();
-        let grid = self.published_layer.refresh(&view, hazards);
+        let grid = self
+            .published_layer
+            .refresh_versioned(&view, hazards, Some(version));
         // Updates carry the geometry of the map message (whose resolution is a float32, as
         // in ROS), so a map rebuilt from them and the map itself agree exactly.
         let geometry = GridGeometry {
@@ -1005,44 +1078,68 @@ impl Mapping {
 
     /// The hazard layer drawn at the submaps' poses now, with the craters or hollows it
     /// implies marked if the rover infers them.
-    fn hazard_states(&mut self) -> Grid<CellState> {
-        let mut states = self.hazards.states(&self.mapper.submap_origins());
+    fn hazard_states(&mut self) -> (Grid<CellState>, u64) {
+        let origins = self.mapper.submap_origins();
         let discs = self.cfg.traversability.crater_discs;
-        if self.hollows.is_none() && discs.is_none() {
-            return states;
+        let reads_live = self.hollows.is_some() || discs.is_some();
+        let view = reads_live.then(|| self.mapper.live_map());
+        if let Some(kept) = &self.hazard_cache
+            && kept.frames == self.hazard_frames
+            && kept.origins == origins
+            && match (&view, kept.live) {
+                (None, None) => true,
+                (Some(view), Some((geometry, version))) => {
+                    view.geometry == geometry && !view.changed_anywhere_since(version)
+                }
+                _ => false,
+            }
+        {
+            return (kept.states.clone(), kept.version);
         }
-        let view = self.mapper.live_map();
-        let g = view.geometry;
-        let state_at = |p: Point2| g.world_to_cell(p).map(|c| view.states[g.index(c)]);
-        if let Some(hollows) = &mut self.hollows {
-            // The live map's cell under each hazard cell's centre, by table: the flood asks
-            // of some 28,000 cells each time.
-            let under = CentreLookup::new(&g, states.geometry());
-            hollows.fill_cells(&mut states, |c| {
-                under
-                    .index(c.x, c.y)
-                    .is_some_and(|i| view.states[i] == CellState::Free)
-            });
-        }
-        if let Some(discs) = discs {
-            // A hazard cell with what the lidar sees as an obstacle at its centre or one
-            // judged cell away (eight points round it) is a wall's or a rock's foot, not a
-            // crater's wall. (The discs' own counts, such as their fewest cells, are of the
-            // cells the layers are drawn on.)
-            let reach_m = self.cfg.traversability.resolution_m;
-            let wall = |p: Point2| {
-                (-1..=1).any(|dy| {
-                    (-1..=1).any(|dx| {
-                        state_at(Point2::new(
-                            p.x_m + dx as f64 * reach_m,
-                            p.y_m + dy as f64 * reach_m,
-                        )) == Some(CellState::Occupied)
+        let mut states = self.hazards.states(&origins);
+        let live = view.as_ref().map(|v| (v.geometry, v.version));
+        if let Some(view) = view {
+            let g = view.geometry;
+            let state_at = |p: Point2| g.world_to_cell(p).map(|c| view.states[g.index(c)]);
+            if let Some(hollows) = &mut self.hollows {
+                // The live map's cell under each hazard cell's centre, by table: the flood
+                // asks of some 28,000 cells each time.
+                let under = CentreLookup::new(&g, states.geometry());
+                hollows.fill_cells(&mut states, |c| {
+                    under
+                        .index(c.x, c.y)
+                        .is_some_and(|i| view.states[i] == CellState::Free)
+                });
+            }
+            if let Some(discs) = discs {
+                // A hazard cell with what the lidar sees as an obstacle at its centre or one
+                // judged cell away (eight points round it) is a wall's or a rock's foot, not
+                // a crater's wall. (The discs' own counts, such as their fewest cells, are of
+                // the cells the layers are drawn on.)
+                let reach_m = self.cfg.traversability.resolution_m;
+                let wall = |p: Point2| {
+                    (-1..=1).any(|dy| {
+                        (-1..=1).any(|dx| {
+                            state_at(Point2::new(
+                                p.x_m + dx as f64 * reach_m,
+                                p.y_m + dy as f64 * reach_m,
+                            )) == Some(CellState::Occupied)
+                        })
                     })
-                })
-            };
-            realms_slam::craters::fill_crater_discs(&mut states, &discs, wall);
+                };
+                realms_slam::craters::fill_crater_discs(&mut states, &discs, wall);
+            }
         }
-        states
+        self.hazard_versions += 1;
+        let version = self.hazard_versions;
+        self.hazard_cache = Some(HazardStatesFrom {
+            version,
+            frames: self.hazard_frames,
+            origins,
+            live,
+            states: states.clone(),
+        });
+        (states, version)
     }
 
     /// The map at `factor` times the SLAM resolution (a power of two up to
@@ -1052,7 +1149,7 @@ impl Mapping {
     /// [`UNJUDGED`](realms_nav::frontier::UNJUDGED) if any SLAM cell saw it free, else
     /// unknown.
     pub fn nav_map(&mut self, factor: usize) -> Grid<i8> {
-        let hazards = self.hazard_states();
+        let (hazards, version) = self.hazard_states();
         let layer = self
             .planner_layer
             .take()
@@ -1060,14 +1157,17 @@ impl Mapping {
             .unwrap_or_else(|| TiledLayer::new(factor).marking_unjudged());
         let view = self.mapper.live_map();
         let layer = self.planner_layer.insert(layer);
-        layer.refresh(&view, hazards).clone()
+        layer
+            .refresh_versioned(&view, hazards, Some(version))
+            .clone()
     }
 
     /// The map now, at the SLAM resolution: the lidar map with the hazard layer over it.
     fn published_grid(&mut self) -> &Grid<i8> {
-        let hazards = self.hazard_states();
+        let (hazards, version) = self.hazard_states();
         let view = self.mapper.live_map();
-        self.published_layer.refresh(&view, hazards)
+        self.published_layer
+            .refresh_versioned(&view, hazards, Some(version))
     }
 
     /// The map now, as a ROS occupancy grid.
@@ -1124,6 +1224,7 @@ mod tests {
                 deskew: true,
                 depth_features: false,
                 relief_odometry: None,
+                depth_motion_filter: None,
             },
         )
     }
@@ -1223,6 +1324,103 @@ mod tests {
                 "{own_stamp}: {got:?} against {expected:?}"
             );
         }
+    }
+
+    /// The wheels' reading at `t`: `x` metres along the x axis, heading `yaw`.
+    fn wheels_at(t: f64, x: f64, yaw: f64) -> Odometry {
+        let mut o = odom(Time::from_secs_f64(t));
+        o.pose.pose.position.x = x;
+        o.pose.pose.orientation = Quaternion::from_roll_pitch_yaw(0.0, 0.0, yaw);
+        o
+    }
+
+    /// A few floor points two metres ahead of the camera (z forward, y down).
+    fn floor_frame(t: f64) -> PointCloud {
+        PointCloud {
+            header: Header {
+                stamp: Time::from_secs_f64(t),
+                frame_id: "rover1/depth_optical".into(),
+            },
+            width: 2,
+            height: 1,
+            points_in_sensor: vec![[-0.1, 0.3, 2.0], [0.1, 0.3, 2.0]],
+        }
+    }
+
+    /// A round room three metres about the rover, seen at `t`.
+    fn round_room(t: f64) -> LaserScan {
+        let mut scan = scan_ahead(Time::from_secs_f64(t), 3.0);
+        scan.ranges_m.fill(3.0);
+        scan
+    }
+
+    #[test]
+    fn a_still_rover_judges_its_first_frames_and_then_none_until_its_wheels_move() {
+        let mut m = mapping();
+        m.cfg.depth_motion_filter = Some(DepthStillFilter {
+            min_travel_m: 0.02,
+            min_turn_rad: 0.5f64.to_radians(),
+            frames_while_still: 3,
+        });
+        m.on_odometry(&wheels_at(0.0, 0.0, 0.0));
+        m.on_scan(&round_room(0.05), &mut Vec::new());
+        let mut t = 0.1;
+        let mut judged = Vec::new();
+        // Standing: five frames, three judged.
+        for _ in 0..5 {
+            m.on_depth(&floor_frame(t));
+            judged.push(m.hazard_frames);
+            t += 0.5;
+        }
+        // The wheels move a centimetre: still standing.
+        m.on_odometry(&wheels_at(t, 0.01, 0.0));
+        m.on_depth(&floor_frame(t));
+        judged.push(m.hazard_frames);
+        // Three centimetres from where it stopped: moved, judged again.
+        m.on_odometry(&wheels_at(t + 0.1, 0.03, 0.0));
+        m.on_depth(&floor_frame(t + 0.2));
+        judged.push(m.hazard_frames);
+        // Turned a degree where it stands: moved.
+        m.on_odometry(&wheels_at(t + 0.3, 0.03, 1f64.to_radians()));
+        m.on_depth(&floor_frame(t + 0.4));
+        judged.push(m.hazard_frames);
+        assert_eq!(judged, [1, 2, 3, 3, 3, 3, 4, 5]);
+        // Without the filter every frame is judged.
+        let mut every = mapping();
+        every.on_odometry(&wheels_at(0.0, 0.0, 0.0));
+        every.on_scan(&round_room(0.05), &mut Vec::new());
+        for k in 0..5 {
+            every.on_depth(&floor_frame(0.1 + 0.5 * k as f64));
+        }
+        assert_eq!(every.hazard_frames, 5);
+    }
+
+    #[test]
+    fn hazard_states_are_kept_while_what_they_come_from_stays_and_redone_when_it_changes() {
+        // With the hollows, which read the live map.
+        let mut cfg = mapping().cfg;
+        cfg.traversability.hazard_hollows = Some(realms_slam::hollows::HazardHollows::default());
+        let mut m = Mapping::new(RoverId(1), cfg);
+        m.on_odometry(&wheels_at(0.0, 0.0, 0.0));
+        m.on_scan(&round_room(0.05), &mut Vec::new());
+        m.on_depth(&floor_frame(0.1));
+        let (first, v1) = m.hazard_states();
+        let (again, v2) = m.hazard_states();
+        assert_eq!((&first, v1), (&again, v2), "nothing changed: kept");
+        // A frame more: new states, the same as worked out from nothing.
+        m.on_depth(&floor_frame(0.6));
+        let (after_frame, v3) = m.hazard_states();
+        assert_ne!(v3, v1);
+        m.hazard_cache = None;
+        assert_eq!(m.hazard_states().0, after_frame);
+        // The live map changes (the rover moved on and saw the room from elsewhere).
+        let (_, v4) = m.hazard_states();
+        m.on_odometry(&wheels_at(1.0, 0.5, 0.0));
+        m.on_scan(&round_room(1.05), &mut Vec::new());
+        let (moved_on, v5) = m.hazard_states();
+        assert_ne!(v5, v4);
+        m.hazard_cache = None;
+        assert_eq!(m.hazard_states().0, moved_on);
     }
 
     #[test]

@@ -368,10 +368,15 @@ impl Navigator {
             .map(|(a, _)| a)
             .collect();
         // Peers send their areas every few seconds, mostly unchanged once the hall is mapped:
-        // the same map and the same areas mark the same cells.
+        // the same map and the same cells known (whenever they were sent) mark the same cells.
+        let same_cells = |a: &ExploredArea, b: &ExploredArea| {
+            (a.origin, a.resolution_m, a.width, a.height)
+                == (b.origin, b.resolution_m, b.width, b.height)
+                && a.known == b.known
+        };
         let same = map_same
             && self.seen_cache.as_ref().is_some_and(|(areas, _)| {
-                areas.len() == live.len() && areas.iter().zip(&live).all(|(a, b)| a == *b)
+                areas.len() == live.len() && areas.iter().zip(&live).all(|(a, b)| same_cells(a, b))
             });
         if !same {
             let seen = seen_by(&live, map);

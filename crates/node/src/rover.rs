@@ -378,6 +378,7 @@ mod tests {
                     deskew: true,
                     depth_features: false,
                     relief_odometry: None,
+                    depth_motion_filter: None,
                 },
                 navigation: NavigationConfig::new(Point2::new(0.0, 0.0)),
                 guard: GuardConfig {

@@ -119,6 +119,12 @@ impl LiveView<'_> {
             .get(ty * self.tiles_wide + tx)
             .is_none_or(|v| *v > since)
     }
+
+    /// Whether any cell may have changed state since the view of version `since` (of the
+    /// same geometry).
+    pub fn changed_anywhere_since(&self, since: u64) -> bool {
+        self.tile_version.iter().any(|v| *v > since)
+    }
 }
 
 /// An active submap's log-odds in the assembly's cells.
