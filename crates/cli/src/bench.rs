@@ -18,6 +18,7 @@ use realms_sim::World;
 use realms_sim::raycast::HeightPyramid;
 use realms_sim::rover::RoverBody;
 use realms_sim::sensors::{Frame3, camera, depth, lidar};
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 /// `realms bench`.
@@ -355,6 +356,9 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     Ok(())
 }
 
+/// How long a speed trial's rover backs away turning after it runs into something.
+const BACK_AWAY: Duration = Duration::from_millis(2000);
+
 /// How a speed trial's sensors cast their rays.
 #[derive(Clone, Copy, PartialEq)]
 enum Casting {
@@ -366,8 +370,8 @@ enum Casting {
     Plain,
 }
 
-/// Simulated seconds per wall second with the rovers driving steady arcs (stopping where
-/// they collide); adds the messages published to `msgs` and the scans and frames taken
+/// Simulated seconds per wall second with the rovers driving steady arcs (backing away
+/// from what they run into); adds the messages published to `msgs` and the scans and frames taken
 /// where the one before was to `still`.
 fn speed_trial(
     scenario: &realms_sim::Scenario,
@@ -386,11 +390,33 @@ fn speed_trial(
     let step = Duration::from_millis(250);
     let mut t = Time::ZERO;
     let end = Time::from_secs_f64(sim_s);
+    // A rover that runs into something backs away turning for a while, then drives its arc
+    // again: driven straight on it would stand against the obstacle for the rest of the
+    // trial, its sensors seeing the same thing frame after frame.
+    let mut events_seen = 0;
+    let mut backing_until: BTreeMap<String, Time> = BTreeMap::new();
     while t < end {
         t = (t + step).min(end);
+        for e in &w.events()[events_seen..] {
+            if e.kind == realms_sim::SimEventKind::Collision {
+                backing_until.insert(e.rover.clone(), w.now() + BACK_AWAY);
+            }
+        }
+        events_seen = w.events().len();
         let ids: Vec<RoverId> = w.rovers().map(|b| b.id).collect();
         for id in ids {
             let phase = t.as_secs_f64() / 10.0 + f64::from(id.0);
+            // Straight back for the first half, then a turn where it stands.
+            let left_s = backing_until
+                .get(&id.to_string())
+                .map_or(0.0, |until| (*until - w.now()).as_secs_f64());
+            let (v, turn) = if left_s > BACK_AWAY.as_secs_f64() / 2.0 {
+                (-0.2, 0.0)
+            } else if left_s > 0.0 {
+                (0.0, 1.0)
+            } else {
+                (0.3, 0.3 * phase.sin())
+            };
             w.command(
                 id,
                 TwistStamped {
@@ -399,8 +425,8 @@ fn speed_trial(
                         frame_id: format!("{id}/base_link"),
                     },
                     twist: Twist {
-                        linear: Vec3::new(0.3, 0.0, 0.0),
-                        angular: Vec3::new(0.0, 0.0, 0.3 * phase.sin()),
+                        linear: Vec3::new(v, 0.0, 0.0),
+                        angular: Vec3::new(0.0, 0.0, turn),
                     },
                 },
             );
