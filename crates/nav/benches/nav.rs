@@ -3,6 +3,8 @@
 //! lander-sized block and a few hundred rocks, the eastern half not yet seen:
 //!
 //! - `costmap_from_map/hall`: the costmap at 5 cm (distance transform and inflation);
+//! - `costmap_updated/hall`: the same costmap brought up to date after the rover has seen a
+//!   4 m x 3 m patch of the unknown half (open floor with two rocks), as between two plans;
 //! - `flood_to_frontiers/hall`: the flood from the rover to every frontier cell at 10 cm (the
 //!   rovers' planning map), stopped once it has reached them all, as exploration runs it.
 //!
@@ -72,6 +74,24 @@ fn costmap(c: &mut Criterion) {
     });
 }
 
+fn costmap_updated(c: &mut Criterion) {
+    let before = hall_map(0.05);
+    let cfg = CostmapConfig::default();
+    let kept = Costmap::from_map(&before, &cfg);
+    let mut after = before.clone();
+    let width = before.geometry().width;
+    let cell = |m: f64| (m / 0.05).round() as usize;
+    for y in cell(20.0)..cell(23.0) {
+        for x in cell(25.0)..cell(29.0) {
+            let rock = (x, y) == (cell(26.0), cell(21.0)) || (x, y) == (cell(28.0), cell(22.0));
+            after.cells_mut()[y * width + x] = if rock { 100 } else { 0 };
+        }
+    }
+    c.bench_function("costmap_updated/hall", |b| {
+        b.iter(|| kept.updated(black_box(&before), black_box(&after), &cfg))
+    });
+}
+
 fn flood(c: &mut Criterion) {
     let map = hall_map(0.1);
     let costmap = Costmap::from_map(&map, &CostmapConfig::default());
@@ -93,5 +113,5 @@ fn flood(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, costmap, flood);
+criterion_group!(benches, costmap, costmap_updated, flood);
 criterion_main!(benches);

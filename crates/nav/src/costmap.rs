@@ -60,57 +60,110 @@ impl Costmap {
     /// The costmap of an occupancy map (-1 unknown, 0..=100 percent occupied).
     pub fn from_map(map: &Grid<i8>, cfg: &CostmapConfig) -> Costmap {
         let geometry = *map.geometry();
-        let lethal: Vec<bool> = map
-            .cells()
-            .iter()
-            .map(|&v| v >= OCCUPIED_THRESHOLD)
-            .collect();
+        let lethal: Vec<bool> = map.cells().iter().map(|&v| is_lethal(v)).collect();
         let known: Vec<bool> = map.cells().iter().map(|&v| v >= 0).collect();
-        let res = geometry.resolution_m;
-        let cost_of = |d2: f32| inflation_cost((d2 as f64).sqrt() * res, cfg);
-        // Squared distances in cells are sums of two whole squares, so the cost of each is
-        // looked up, not worked out with a root and an exponential a cell. Past the table
-        // every cell lies beyond the inflation radius, where the cost is 0.
-        let reach_cells = cfg.inflation_radius_m / res + 2.0;
-        let table: Vec<u8> = if reach_cells * reach_cells < (1 << 20) as f64 {
-            (0..=(reach_cells * reach_cells).ceil() as usize)
-                .map(|k| cost_of(k as f32))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        // Distances past the table cost 0 whatever they are.
-        let reach_d2 = table
-            .len()
-            .checked_sub(1)
-            .map_or(f32::INFINITY, |k| k as f32);
-        let dist2 =
-            squared_distance_transform_within(&lethal, geometry.width, geometry.height, reach_d2);
-        let inflated_of = |d2: f32| match table.get(d2 as usize) {
-            Some(&c) => {
-                debug_assert_eq!(d2.fract(), 0.0, "whole cells' squared distances");
-                c
-            }
-            None if !table.is_empty() => 0,
-            None => cost_of(d2),
-        };
+        let inflation = Inflation::new(cfg, geometry.resolution_m);
+        let dist2 = squared_distance_transform_within(
+            &lethal,
+            geometry.width,
+            geometry.height,
+            inflation.reach_d2,
+        );
         let costs = map
             .cells()
             .iter()
             .zip(&dist2)
-            .map(|(&v, &d2)| {
-                let inflated = inflated_of(d2);
-                if v < 0 {
-                    inflated.max(cfg.unknown_cost.min(MAX_PASSABLE))
-                } else {
-                    inflated
-                }
-            })
+            .map(|(&v, &d2)| inflation.cost(v, d2))
             .collect();
         Costmap {
             costs: Grid::from_cells(geometry, costs).expect("one cost per map cell"),
             known,
         }
+    }
+
+    /// The costmap of `map`, where this one is the costmap of `before` (made with the same
+    /// `cfg`): the same costs as [`from_map`](Self::from_map) gives, worked out again only
+    /// within the inflation's reach of the cells that changed. A rover's map changes near
+    /// the rover between two plans; the rest of the hall keeps its costs.
+    pub fn updated(&self, before: &Grid<i8>, map: &Grid<i8>, cfg: &CostmapConfig) -> Costmap {
+        let geometry = *map.geometry();
+        if before.geometry() != &geometry || self.geometry() != &geometry {
+            return Costmap::from_map(map, cfg);
+        }
+        let (w, h) = (geometry.width, geometry.height);
+        // The box of changed cells.
+        let mut changed: Option<[usize; 4]> = None;
+        for (y, (old, new)) in before
+            .cells()
+            .chunks_exact(w)
+            .zip(map.cells().chunks_exact(w))
+            .enumerate()
+        {
+            if old == new {
+                continue;
+            }
+            let first = old.iter().zip(new).position(|(a, b)| a != b).unwrap_or(0);
+            let last = w
+                - 1
+                - old
+                    .iter()
+                    .rev()
+                    .zip(new.iter().rev())
+                    .position(|(a, b)| a != b)
+                    .unwrap_or(0);
+            changed = Some(match changed {
+                None => [first, y, last, y],
+                Some([x0, y0, x1, _]) => [x0.min(first), y0, x1.max(last), y],
+            });
+        }
+        let Some([x0, y0, x1, y1]) = changed else {
+            return self.clone();
+        };
+        let inflation = Inflation::new(cfg, geometry.resolution_m);
+        // A cell's cost depends on the lethal cells within the inflation's reach: the costs
+        // within that reach of a change are redone, from the lethal cells within the reach
+        // of those.
+        let reach = inflation.reach_cells();
+        let grow = |[x0, y0, x1, y1]: [usize; 4], by: usize| {
+            [
+                x0.saturating_sub(by),
+                y0.saturating_sub(by),
+                (x1 + by).min(w - 1),
+                (y1 + by).min(h - 1),
+            ]
+        };
+        let inner = grow([x0, y0, x1, y1], reach);
+        let outer = grow(inner, reach);
+        let (ow, oh) = (outer[2] - outer[0] + 1, outer[3] - outer[1] + 1);
+        // A change spread over much of the map (a loop closure moving its submaps) is as
+        // cheap to redo whole.
+        if 2 * ow * oh > w * h {
+            return Costmap::from_map(map, cfg);
+        }
+        let lethal: Vec<bool> = (outer[1]..=outer[3])
+            .flat_map(|y| {
+                map.cells()[y * w + outer[0]..=y * w + outer[2]]
+                    .iter()
+                    .map(|&v| is_lethal(v))
+            })
+            .collect();
+        let dist2 = squared_distance_transform_within(&lethal, ow, oh, inflation.reach_d2);
+        let mut costmap = self.clone();
+        let costs = costmap.costs.cells_mut();
+        for y in inner[1]..=inner[3] {
+            for x in inner[0]..=inner[2] {
+                let i = y * w + x;
+                let d2 = dist2[(y - outer[1]) * ow + (x - outer[0])];
+                costs[i] = inflation.cost(map.cells()[i], d2);
+            }
+        }
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let i = y * w + x;
+                costmap.known[i] = map.cells()[i] >= 0;
+            }
+        }
+        costmap
     }
 
     /// A costmap from costs directly (tests, benchmarks); every cell counts as known.
@@ -145,6 +198,77 @@ impl Costmap {
         match self.geometry().world_to_cell(p) {
             Some(c) => self.cost(c),
             None => MAX_PASSABLE,
+        }
+    }
+}
+
+/// Whether a map cell is an obstacle.
+fn is_lethal(v: i8) -> bool {
+    v >= OCCUPIED_THRESHOLD
+}
+
+/// The inflation law of a configuration on cells of a resolution, by table.
+struct Inflation {
+    cfg: CostmapConfig,
+    resolution_m: f64,
+    /// The cost of each whole squared distance in cells, out to past the inflation radius
+    /// (empty for an absurdly fine grid, where each cost is worked out).
+    table: Vec<u8>,
+    /// Past this squared distance a cell costs nothing.
+    reach_d2: f32,
+}
+
+impl Inflation {
+    fn new(cfg: &CostmapConfig, resolution_m: f64) -> Self {
+        // Squared distances in cells are sums of two whole squares, so the cost of each is
+        // looked up, not worked out with a root and an exponential a cell. Past the table
+        // every cell lies beyond the inflation radius, where the cost is 0.
+        let reach_cells = cfg.inflation_radius_m / resolution_m + 2.0;
+        let table: Vec<u8> = if reach_cells * reach_cells < (1 << 20) as f64 {
+            (0..=(reach_cells * reach_cells).ceil() as usize)
+                .map(|k| inflation_cost((k as f64).sqrt() * resolution_m, cfg))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        // Distances past the table cost 0 whatever they are.
+        let reach_d2 = table
+            .len()
+            .checked_sub(1)
+            .map_or(f32::INFINITY, |k| k as f32);
+        Inflation {
+            cfg: *cfg,
+            resolution_m,
+            table,
+            reach_d2,
+        }
+    }
+
+    /// Cells beyond this many along either axis from every obstacle cost nothing (the whole
+    /// map's width for a grid too fine for the table).
+    fn reach_cells(&self) -> usize {
+        if self.reach_d2.is_finite() {
+            (self.reach_d2 as f64).sqrt().ceil() as usize + 1
+        } else {
+            usize::MAX / 4
+        }
+    }
+
+    /// The cost of a map cell of value `v` at squared distance `d2` (cells) from the nearest
+    /// obstacle.
+    fn cost(&self, v: i8, d2: f32) -> u8 {
+        let inflated = match self.table.get(d2 as usize) {
+            Some(&c) => {
+                debug_assert_eq!(d2.fract(), 0.0, "whole cells' squared distances");
+                c
+            }
+            None if !self.table.is_empty() => 0,
+            None => inflation_cost((d2 as f64).sqrt() * self.resolution_m, &self.cfg),
+        };
+        if v < 0 {
+            inflated.max(self.cfg.unknown_cost.min(MAX_PASSABLE))
+        } else {
+            inflated
         }
     }
 }
@@ -288,7 +412,59 @@ mod tests {
         }
     }
 
+    /// A map cell's value from a draw of 0..40: obstacle or hazard now and then, some
+    /// unknown, free or unjudged mostly (an open floor with rocks: most cells lie far from
+    /// the nearest obstacle, so a change reaches far).
+    fn map_value(k: u8) -> i8 {
+        match k {
+            0 => 100,
+            1 => 90,
+            2..=9 => -1,
+            10..=14 => 1,
+            _ => 0,
+        }
+    }
+
     proptest! {
+        #[test]
+        fn a_costmap_updated_where_its_map_changed_is_the_costmap_made_afresh(
+            width in 60usize..200,
+            height in 60usize..200,
+            cells in proptest::collection::vec(0u8..40, 200 * 200),
+            patch in (0usize..200, 0usize..200, 1usize..12, 1usize..12, 0u8..40),
+            edits in proptest::collection::vec((0usize..20, 0usize..20, 0u8..4), 0..4),
+            spread in proptest::bool::weighted(0.1),
+        ) {
+            let cfg = CostmapConfig::default();
+            let before = Grid::from_cells(
+                geometry(width, height),
+                cells[..width * height].iter().map(|k| map_value(*k)).collect(),
+            )
+            .expect("one value a cell");
+            let mut after = before.clone();
+            // A patch of one value (ground newly seen), a few cells about it, and now and
+            // then a cell far off (a map bent by a loop closure).
+            let (px, py, pw, ph, pk) = patch;
+            let (px, py) = (px % width, py % height);
+            for y in py..(py + ph).min(height) {
+                for x in px..(px + pw).min(width) {
+                    after.cells_mut()[y * width + x] = map_value(pk);
+                }
+            }
+            for (dx, dy, k) in &edits {
+                let (x, y) = ((px + dx) % width, (py + dy) % height);
+                after.cells_mut()[y * width + x] = map_value(*k);
+            }
+            if spread {
+                let (x, y) = ((px + width / 2) % width, (py + height / 2) % height);
+                after.cells_mut()[y * width + x] = OCCUPIED_THRESHOLD;
+            }
+            let fresh = Costmap::from_map(&after, &cfg);
+            let updated = Costmap::from_map(&before, &cfg).updated(&before, &after, &cfg);
+            prop_assert_eq!(updated.costs(), fresh.costs());
+            prop_assert_eq!(updated.known(), fresh.known());
+        }
+
         #[test]
         fn the_distance_transform_is_exact(
             width in 1usize..24,

@@ -421,14 +421,19 @@ impl Navigator {
         };
         let (costmap, explored, map_same) = match (self.costmap.take(), &self.costmap_source) {
             (Some(kept), Some((source, explored))) if source == map => (kept, *explored, true),
-            _ => {
+            (kept, source) => {
                 let explored = map
                     .cells()
                     .iter()
                     .filter(|v| !still_to_explore(**v))
                     .count();
+                // Redone only around what changed since the map it was made from.
+                let costmap = match (kept, source) {
+                    (Some(kept), Some((source, _))) => kept.updated(source, map, &self.cfg.costmap),
+                    _ => Costmap::from_map(map, &self.cfg.costmap),
+                };
                 self.costmap_source = Some((map.clone(), explored));
-                (Costmap::from_map(map, &self.cfg.costmap), explored, false)
+                (costmap, explored, false)
             }
         };
         let here = pose.position();
