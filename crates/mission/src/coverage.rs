@@ -61,6 +61,17 @@ impl Coverage {
                 *cell &= !bit;
             }
         }
+        self.sample(t_s);
+    }
+
+    /// A rover published at `t_s` a map with the same cells as its last one: what it knows
+    /// is unchanged, and only the series takes the sample (a parked rover's maps).
+    pub fn same_map(&mut self, t_s: f64) {
+        self.sample(t_s);
+    }
+
+    /// The fraction now into the series at `t_s`.
+    fn sample(&mut self, t_s: f64) {
         let f = self.fraction();
         match self.series.last_mut() {
             // Maps published together count as one sample.

@@ -712,7 +712,15 @@ impl Mission {
                 });
             }
             Message::Map(map) => {
-                self.coverage.map(t.as_secs_f64(), i, map);
+                let same = record
+                    .map
+                    .as_ref()
+                    .is_some_and(|last| last.info == map.info && last.data == map.data);
+                if same {
+                    self.coverage.same_map(t.as_secs_f64());
+                } else {
+                    self.coverage.map(t.as_secs_f64(), i, map);
+                }
                 record.map = Some(map.clone());
             }
             Message::NavStatus(status) => {
