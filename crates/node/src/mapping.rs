@@ -136,7 +136,8 @@ pub struct DepthStillFilter {
     /// The rover stands still while its wheels have moved less than this (metres) ...
     pub min_travel_m: f64,
     /// ... and turned less than this (radians) since it stopped, in one submap. The wheels
-    /// alone say so: a gyro's heading wanders by its noise while the rover stands.
+    /// alone say so: a gyro's heading wanders by its noise while the rover stands. Wheels
+    /// fallen silent (a dropout) count as moving.
     pub min_turn_rad: f64,
     /// Frames judged from where it stands; the rest are dropped until it moves.
     pub frames_while_still: u32,
@@ -696,15 +697,18 @@ impl Mapping {
                 .newest_submap()
                 .map(|(i, _)| i)
                 .zip(self.last_wheel);
-            let moved = match (now, self.last_judged) {
-                (Some((submap, odom)), Some((last_submap, last_odom))) => {
-                    let step = last_odom.inverse() * odom;
-                    submap != last_submap
-                        || step.x_m.hypot(step.y_m) >= filter.min_travel_m
-                        || step.yaw_rad.abs() >= filter.min_turn_rad
-                }
-                _ => true,
-            };
+            // Wheels that have fallen silent say nothing of whether the rover moves.
+            let silent = self.wheels_silent_at(cloud.header.stamp);
+            let moved = silent
+                || match (now, self.last_judged) {
+                    (Some((submap, odom)), Some((last_submap, last_odom))) => {
+                        let step = last_odom.inverse() * odom;
+                        submap != last_submap
+                            || step.x_m.hypot(step.y_m) >= filter.min_travel_m
+                            || step.yaw_rad.abs() >= filter.min_turn_rad
+                    }
+                    _ => true,
+                };
             if moved {
                 self.last_judged = now;
                 self.still_frames = 0;
@@ -1385,6 +1389,13 @@ mod tests {
         m.on_depth(&floor_frame(t + 0.4));
         judged.push(m.hazard_frames);
         assert_eq!(judged, [1, 2, 3, 3, 3, 3, 4, 5]);
+        // The wheels fall silent (a dropout): they say nothing of the rover standing, and
+        // every frame is judged.
+        let before = m.hazard_frames;
+        for k in 0..5 {
+            m.on_depth(&floor_frame(t + 3.0 + 0.5 * k as f64));
+        }
+        assert_eq!(m.hazard_frames, before + 5);
         // Without the filter every frame is judged.
         let mut every = mapping();
         every.on_odometry(&wheels_at(0.0, 0.0, 0.0));
