@@ -1,8 +1,9 @@
 //! `realms bench sim`: how fast the simulator runs and what each sensor costs.
 //!
-//! Speed: the default arena, its rovers driving steady arcs (no autonomy), every sensor at its
-//! default rate, cameras off (nobody subscribes); simulated seconds per wall second, median of
-//! several trials. Sensors: frames taken from random free poses across the arena (each with a
+//! Speed: the default arena, its rovers driving steady arcs (no autonomy; backing away from
+//! what they run into), every sensor at its default rate, cameras off (nobody subscribes);
+//! simulated seconds per wall second, median of several trials, every frame cast, and again
+//! as a mission runs it (a still rover measured on its last cast). Sensors: frames taken from random free poses across the arena (each with a
 //! cold cache) and along a drive (consecutive frames, as a rover takes them), median
 //! microseconds each, with plain cell-by-cell ray marching timed in the same run as the
 //! baseline the max-mipmap caster is compared against.
@@ -356,7 +357,8 @@ fn sim(args: BenchSimArgs) -> Result<()> {
     Ok(())
 }
 
-/// How long a speed trial's rover backs away turning after it runs into something.
+/// How long a speed trial's rover backs away and turns after it runs into something: straight
+/// back for the first half, then a turn where it stands.
 const BACK_AWAY: Duration = Duration::from_millis(2000);
 
 /// How a speed trial's sensors cast their rays.
@@ -390,8 +392,7 @@ fn speed_trial(
     let step = Duration::from_millis(250);
     let mut t = Time::ZERO;
     let end = Time::from_secs_f64(sim_s);
-    // A rover that runs into something backs away turning for a while, then drives its arc
-    // again: driven straight on it would stand against the obstacle for the rest of the
+    // A rover that runs into something backs away and turns, then drives its arc again: driven straight on it would stand against the obstacle for the rest of the
     // trial, its sensors seeing the same thing frame after frame.
     let mut events_seen = 0;
     let mut backing_until: BTreeMap<String, Time> = BTreeMap::new();
@@ -406,7 +407,6 @@ fn speed_trial(
         let ids: Vec<RoverId> = w.rovers().map(|b| b.id).collect();
         for id in ids {
             let phase = t.as_secs_f64() / 10.0 + f64::from(id.0);
-            // Straight back for the first half, then a turn where it stands.
             let left_s = backing_until
                 .get(&id.to_string())
                 .map_or(0.0, |until| (*until - w.now()).as_secs_f64());

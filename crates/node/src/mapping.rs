@@ -424,7 +424,8 @@ pub struct Mapping {
     hazard_frames: u64,
     /// The hazard states last worked out, and what from.
     hazard_cache: Option<HazardStatesFrom>,
-    /// Hazard states worked out so far: each new one's version.
+    /// Hazard states worked out so far: the kept ones' version, which a layer drawn from
+    /// them compares instead of their cells.
     hazard_versions: u64,
 }
 
@@ -434,8 +435,6 @@ pub struct Mapping {
 /// still, its frames not judged), neither do the states.
 #[derive(Debug)]
 struct HazardStatesFrom {
-    /// Counts the states worked out anew: the same version, the same states.
-    version: u64,
     frames: u64,
     origins: Vec<Pose2>,
     live: Option<(GridGeometry, u64)>,
@@ -692,7 +691,7 @@ impl Mapping {
             return;
         }
         if let Some(filter) = self.cfg.depth_motion_filter {
-            let now = self
+            let here = self
                 .mapper
                 .newest_submap()
                 .map(|(i, _)| i)
@@ -700,7 +699,7 @@ impl Mapping {
             // Wheels that have fallen silent say nothing of whether the rover moves.
             let silent = self.wheels_silent_at(cloud.header.stamp);
             let moved = silent
-                || match (now, self.last_judged) {
+                || match (here, self.last_judged) {
                     (Some((submap, odom)), Some((last_submap, last_odom))) => {
                         let step = last_odom.inverse() * odom;
                         submap != last_submap
@@ -710,7 +709,7 @@ impl Mapping {
                     _ => true,
                 };
             if moved {
-                self.last_judged = now;
+                self.last_judged = here;
                 self.still_frames = 0;
             } else if self.still_frames >= filter.frames_while_still {
                 return;
@@ -1098,7 +1097,7 @@ impl Mapping {
                 _ => false,
             }
         {
-            return (kept.states.clone(), kept.version);
+            return (kept.states.clone(), self.hazard_versions);
         }
         let mut states = self.hazards.states(&origins);
         let live = view.as_ref().map(|v| (v.geometry, v.version));
@@ -1137,7 +1136,6 @@ impl Mapping {
         self.hazard_versions += 1;
         let version = self.hazard_versions;
         self.hazard_cache = Some(HazardStatesFrom {
-            version,
             frames: self.hazard_frames,
             origins,
             live,
