@@ -69,6 +69,15 @@ pub struct Lander {
     pub height_m: f64,
 }
 
+/// Most craters a scenario may ask for (small and large together).
+pub const MOST_CRATERS: u64 = 1_000;
+/// Most small boulders a scenario may ask for (about 55 a square metre of the default hall).
+pub const MOST_SMALL_BOULDERS: u64 = 100_000;
+/// Most large boulders a scenario may ask for.
+pub const MOST_LARGE_BOULDERS: u64 = 10_000;
+/// Most resource targets a scenario may ask for.
+pub const MOST_TARGETS: u64 = 1_000;
+
 /// Craters: bowls with raised rims, placed by the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -684,6 +693,34 @@ impl Scenario {
         positive("craters.large_depth_m", c.large_depth_m)?;
         non_negative("craters.rim_fraction", c.rim_fraction)?;
         let b = &self.boulders;
+        // Each is placed by drawing spots until one is clear of what is already placed, so
+        // counts far beyond what the arena holds would run the generation for hours.
+        for (key, count, most) in [
+            (
+                "craters.small_count + craters.large_count",
+                u64::from(c.small_count) + u64::from(c.large_count),
+                MOST_CRATERS,
+            ),
+            (
+                "boulders.small_count",
+                u64::from(b.small_count),
+                MOST_SMALL_BOULDERS,
+            ),
+            (
+                "boulders.large_count",
+                u64::from(b.large_count),
+                MOST_LARGE_BOULDERS,
+            ),
+            ("targets.count", u64::from(self.targets.count), MOST_TARGETS),
+        ] {
+            if count > most {
+                return Err(err(
+                    key,
+                    &format!("must be at most {most}"),
+                    count.to_string(),
+                ));
+            }
+        }
         positive("boulders.small_min_diameter_m", b.small_min_diameter_m)?;
         if b.small_max_diameter_m < b.small_min_diameter_m {
             return Err(err(
@@ -949,6 +986,17 @@ mod tests {
                 "rovers.depth.hfov_deg",
             ),
             ("[rovers]\nmax_slope_deg = 90.0\n", "rovers.max_slope_deg"),
+            // Counts the generation would spend hours placing.
+            ("[targets]\ncount = 1001\n", "targets.count"),
+            (
+                "[boulders]\nsmall_count = 4000000000\n",
+                "boulders.small_count",
+            ),
+            ("[boulders]\nlarge_count = 10001\n", "boulders.large_count"),
+            (
+                "[craters]\nsmall_count = 4000000000\nlarge_count = 4000000000\n",
+                "craters.small_count + craters.large_count",
+            ),
             (
                 "[rovers]\ncount = 16\n[arena]\nwidth_m = 4.0\nlength_m = 4.0\n[lander]\nx_m = 2.0\ny_m = 2.0\n",
                 "rovers.count",
@@ -957,6 +1005,11 @@ mod tests {
             let e = Scenario::parse(text, "t.toml").expect_err(key);
             assert!(e.to_string().contains(key), "{e}");
         }
+        Scenario::parse(
+            "[targets]\ncount = 1000\n[boulders]\nlarge_count = 10000\n",
+            "t.toml",
+        )
+        .expect("counts at their limits");
         let e = Scenario::parse(
             "[[faults]]\nkind = \"melt\"\nrover = \"rover1\"\nat_s = 3.0\n",
             "t.toml",

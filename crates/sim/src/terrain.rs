@@ -203,8 +203,13 @@ impl Terrain {
             (c.small_diameter_m, c.small_depth_m),
             c.small_count as usize,
         ));
+        let mut full = Full::default();
         for (diameter, depth) in crater_specs {
+            if full.is_full() {
+                break;
+            }
             let radius = diameter / 2.0;
+            let mut placed = false;
             for _ in 0..2000 {
                 let p = Point2::new(
                     rng.random_range(0.0..a.width_m),
@@ -218,66 +223,90 @@ impl Terrain {
                         rim_m: depth * c.rim_fraction,
                     });
                     keep_out.push((p, radius * 1.3));
+                    placed = true;
                     break;
                 }
             }
+            full.count(placed);
         }
 
         let b = &scenario.boulders;
         let mut boulders = Vec::new();
-        let mut place_boulder =
-            |rng: &mut SimRng, diameter: f64, keep: &mut Vec<(Point2, f64)>, blocking: bool| {
-                for _ in 0..200 {
-                    let p = Point2::new(
-                        rng.random_range(0.0..a.width_m),
-                        rng.random_range(0.0..a.length_m),
-                    );
-                    let r = diameter / 2.0;
-                    if clear_of(p, r, keep) {
-                        let height = diameter * b.height_ratio * rng.random_range(0.8..1.2);
-                        boulders.push(Boulder {
-                            center: p,
-                            radius_m: r,
-                            height_m: height,
-                        });
-                        if blocking {
-                            keep.push((p, r + 0.6));
-                        }
-                        return;
-                    }
+        // A boulder of `diameter` somewhere clear of `keep`, if one of 200 draws finds a spot.
+        let mut place_boulder = |rng: &mut SimRng, diameter: f64, keep: &[(Point2, f64)]| {
+            for _ in 0..200 {
+                let p = Point2::new(
+                    rng.random_range(0.0..a.width_m),
+                    rng.random_range(0.0..a.length_m),
+                );
+                let r = diameter / 2.0;
+                if clear_of(p, r, keep) {
+                    let height = diameter * b.height_ratio * rng.random_range(0.8..1.2);
+                    boulders.push(Boulder {
+                        center: p,
+                        radius_m: r,
+                        height_m: height,
+                    });
+                    return Some((p, r));
                 }
-            };
+            }
+            None
+        };
+        // A blocking boulder keeps the others (and the targets) 0.6 m off its edge.
+        let mut full = Full::default();
         for _ in 0..b.large_count {
+            if full.is_full() {
+                break;
+            }
             let d = rng.random_range(b.large_min_diameter_m..=b.large_max_diameter_m);
-            place_boulder(&mut rng, d, &mut keep_out, true);
+            let placed = place_boulder(&mut rng, d, &keep_out);
+            if let Some((p, r)) = placed {
+                keep_out.push((p, r + 0.6));
+            }
+            full.count(placed.is_some());
         }
         // Truncated power law by inverse CDF: N(>D) ~ D^-b between the two diameters.
         let (lo, hi) = (
             b.small_min_diameter_m.powf(-b.size_exponent),
             b.small_max_diameter_m.powf(-b.size_exponent),
         );
+        let mut full = Full::default();
         for _ in 0..b.small_count {
+            if full.is_full() {
+                break;
+            }
             let u: f64 = rng.random_range(0.0..1.0);
             let d = (lo - u * (lo - hi)).powf(-1.0 / b.size_exponent);
-            place_boulder(&mut rng, d, &mut keep_out.clone(), false);
+            full.count(place_boulder(&mut rng, d, &keep_out).is_some());
         }
 
         let mut targets = Vec::new();
+        let rocks_near = RocksNear::new(&boulders, TARGET_ROCK_CLEARANCE_M, a.width_m, a.length_m);
+        let mut full = Full::default();
         for _ in 0..scenario.targets.count {
+            if full.is_full() {
+                break;
+            }
+            let mut placed = false;
             for _ in 0..2000 {
                 let p = Point2::new(
                     rng.random_range(0.0..a.width_m),
                     rng.random_range(0.0..a.length_m),
                 );
-                let clear_of_rocks = boulders
-                    .iter()
-                    .all(|bo| bo.center.distance_m(p) > bo.radius_m + 0.5);
-                if clear_of(p, 0.5, &keep_out) && clear_of_rocks {
+                let clear_of_rocks = || {
+                    rocks_near.at(p).iter().all(|k| {
+                        let bo = &boulders[*k as usize];
+                        bo.center.distance_m(p) > bo.radius_m + TARGET_ROCK_CLEARANCE_M
+                    })
+                };
+                if clear_of(p, 0.5, &keep_out) && clear_of_rocks() {
                     targets.push(p);
                     keep_out.push((p, 1.0));
+                    placed = true;
                     break;
                 }
             }
+            full.count(placed);
         }
 
         let mut undulation = Waves::new(&mut rng, 8, a.undulation_wavelength_m);
@@ -485,6 +514,73 @@ pub fn bilinear_with(g: &GridGeometry, p: Point2, value: impl Fn(usize) -> f32) 
     )
 }
 
+/// How far a target stays from every rock's edge, metres.
+const TARGET_ROCK_CLEARANCE_M: f64 = 0.5;
+
+/// The boulders within a reach of each square cell of the arena (by index), so that asking
+/// whether a spot is clear of them looks at a few rocks, not at every one: a scenario may
+/// scatter a hundred thousand.
+struct RocksNear {
+    cell_m: f64,
+    columns: usize,
+    rows: usize,
+    lists: Vec<Vec<u32>>,
+}
+
+impl RocksNear {
+    /// Each boulder listed in every cell within `reach_m` of its edge.
+    fn new(boulders: &[Boulder], reach_m: f64, width_m: f64, length_m: f64) -> Self {
+        // Cells of a metre or more, at most about a million of them.
+        let cell_m = (width_m * length_m / 1e6).sqrt().max(1.0);
+        let columns = (width_m / cell_m).ceil() as usize + 1;
+        let rows = (length_m / cell_m).ceil() as usize + 1;
+        let mut lists = vec![Vec::new(); columns * rows];
+        let index = |v: f64, n: usize| ((v / cell_m).floor().max(0.0) as usize).min(n - 1);
+        for (k, b) in boulders.iter().enumerate() {
+            let r = b.radius_m + reach_m;
+            for y in index(b.center.y_m - r, rows)..=index(b.center.y_m + r, rows) {
+                for x in index(b.center.x_m - r, columns)..=index(b.center.x_m + r, columns) {
+                    lists[y * columns + x].push(k as u32);
+                }
+            }
+        }
+        RocksNear {
+            cell_m,
+            columns,
+            rows,
+            lists,
+        }
+    }
+
+    /// The boulders that may lie within the reach of `p` (a spot inside the arena).
+    fn at(&self, p: Point2) -> &[u32] {
+        let index = |v: f64, n: usize| ((v / self.cell_m).floor().max(0.0) as usize).min(n - 1);
+        &self.lists[index(p.y_m, self.rows) * self.columns + index(p.x_m, self.columns)]
+    }
+}
+
+/// Items of one kind (craters, boulders, targets) that found no clear spot one after
+/// another. Each such item costs its thousands of draws; after [`FULL_AFTER`] in a row the
+/// arena holds no more of that kind, and the rest are not tried, so a scenario asking for
+/// far more than fits is generated in seconds rather than hours.
+#[derive(Default)]
+struct Full {
+    failed_in_a_row: u32,
+}
+
+/// See [`Full`].
+const FULL_AFTER: u32 = 100;
+
+impl Full {
+    fn count(&mut self, placed: bool) {
+        self.failed_in_a_row = if placed { 0 } else { self.failed_in_a_row + 1 };
+    }
+
+    fn is_full(&self) -> bool {
+        self.failed_in_a_row >= FULL_AFTER
+    }
+}
+
 /// Calls `f(index, distance)` for every cell whose centre lies within `radius_m` of `center`.
 fn stamp(g: &GridGeometry, center: Point2, radius_m: f64, mut f: impl FnMut(usize, f64)) {
     let res = g.resolution_m;
@@ -591,5 +687,72 @@ mod tests {
         assert_eq!(a.heights, b.heights);
         let c = Terrain::generate(&Scenario { seed: 2, ..s });
         assert_ne!(a.heights, c.heights);
+    }
+
+    #[test]
+    fn the_rocks_listed_near_a_spot_hold_every_rock_within_reach_of_it() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = SimRng::seed_from_u64(7);
+        let (width_m, length_m, reach_m) = (30.0, 20.0, 0.5);
+        let boulders: Vec<Boulder> = (0..2000)
+            .map(|_| Boulder {
+                center: Point2::new(
+                    rng.random_range(0.0..width_m),
+                    rng.random_range(0.0..length_m),
+                ),
+                radius_m: rng.random_range(0.02..1.0),
+                height_m: 0.1,
+            })
+            .collect();
+        let near = RocksNear::new(&boulders, reach_m, width_m, length_m);
+        let mut listed = 0;
+        for _ in 0..2000 {
+            let p = Point2::new(
+                rng.random_range(0.0..width_m),
+                rng.random_range(0.0..length_m),
+            );
+            let at = near.at(p);
+            listed += at.len();
+            for (k, b) in boulders.iter().enumerate() {
+                if b.center.distance_m(p) <= b.radius_m + reach_m {
+                    assert!(at.contains(&(k as u32)), "rock {k} missing near {p:?}");
+                }
+            }
+        }
+        // A few of the 2,000 rocks a spot, not all of them.
+        assert!(listed < 2000 * 100, "{listed} listed");
+    }
+
+    #[test]
+    fn an_arena_asked_for_more_than_it_holds_gets_what_fits() {
+        // A 12 m x 10 m arena holds a few dozen targets 1.5 m apart, not a thousand: the
+        // generation places those and stops.
+        let mut s = Scenario::default();
+        s.arena.width_m = 12.0;
+        s.arena.length_m = 10.0;
+        s.lander.x_m = 6.0;
+        s.lander.y_m = 5.0;
+        s.lander.size_m = 1.0;
+        s.rovers.count = 1;
+        s.faults.clear();
+        s.targets.count = 1000;
+        s.craters.large_count = 0;
+        s.craters.small_count = 0;
+        s.boulders.small_count = 50;
+        s.validate("t.toml").expect("a valid scenario");
+        let t = Terrain::generate(&s);
+        assert!(
+            !t.targets.is_empty() && t.targets.len() < 100,
+            "{} targets",
+            t.targets.len()
+        );
+        for (i, a) in t.targets.iter().enumerate() {
+            for b in &t.targets[i + 1..] {
+                assert!(a.distance_m(*b) > 1.5, "{a:?} and {b:?}");
+            }
+            for rock in &t.boulders {
+                assert!(rock.center.distance_m(*a) > rock.radius_m + TARGET_ROCK_CLEARANCE_M);
+            }
+        }
     }
 }
