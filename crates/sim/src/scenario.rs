@@ -932,9 +932,10 @@ impl Scenario {
     }
 }
 
-/// Any scenario as TOML, in the layout `--print-default` uses.
+/// Any scenario as TOML, in the layout `--print-default` uses: tables, one key a line,
+/// arrays on their key's line.
 pub fn to_toml(s: &Scenario) -> String {
-    toml::to_string_pretty(s).expect("a scenario is plain data and always serialises")
+    toml::to_string(s).expect("a scenario is plain data and always serialises")
 }
 
 #[cfg(test)]
@@ -946,6 +947,14 @@ mod tests {
         let text = Scenario::default_toml();
         let back = Scenario::parse(&text, "default").expect("default parses");
         assert_eq!(back, Scenario::default());
+        // One key a line, the radio's rate table and the blackouts included: a reader edits
+        // the printed default, so no array is spread over a staircase of lines.
+        for line in text.lines() {
+            assert!(
+                line.is_empty() || line.starts_with('[') || line.contains(" = "),
+                "{line:?}"
+            );
+        }
     }
 
     #[test]
