@@ -534,28 +534,38 @@ impl RocksNear {
         let cell_m = (width_m * length_m / 1e6).sqrt().max(1.0);
         let columns = (width_m / cell_m).ceil() as usize + 1;
         let rows = (length_m / cell_m).ceil() as usize + 1;
-        let mut lists = vec![Vec::new(); columns * rows];
-        let index = |v: f64, n: usize| ((v / cell_m).floor().max(0.0) as usize).min(n - 1);
-        for (k, b) in boulders.iter().enumerate() {
-            let r = b.radius_m + reach_m;
-            for y in index(b.center.y_m - r, rows)..=index(b.center.y_m + r, rows) {
-                for x in index(b.center.x_m - r, columns)..=index(b.center.x_m + r, columns) {
-                    lists[y * columns + x].push(k as u32);
-                }
-            }
-        }
-        RocksNear {
+        let mut near = RocksNear {
             cell_m,
             columns,
             rows,
-            lists,
+            lists: vec![Vec::new(); columns * rows],
+        };
+        for (k, b) in boulders.iter().enumerate() {
+            let r = b.radius_m + reach_m;
+            let (x0, x1) = (near.column(b.center.x_m - r), near.column(b.center.x_m + r));
+            for y in near.row(b.center.y_m - r)..=near.row(b.center.y_m + r) {
+                for x in x0..=x1 {
+                    near.lists[y * columns + x].push(k as u32);
+                }
+            }
         }
+        near
     }
 
     /// The boulders that may lie within the reach of `p` (a spot inside the arena).
     fn at(&self, p: Point2) -> &[u32] {
-        let index = |v: f64, n: usize| ((v / self.cell_m).floor().max(0.0) as usize).min(n - 1);
-        &self.lists[index(p.y_m, self.rows) * self.columns + index(p.x_m, self.columns)]
+        &self.lists[self.row(p.y_m) * self.columns + self.column(p.x_m)]
+    }
+
+    /// The column holding `x_m`, clamped to the grid (which rises monotonically with it,
+    /// so a rock's span of cells holds every spot within its reach).
+    fn column(&self, x_m: f64) -> usize {
+        ((x_m / self.cell_m).floor().max(0.0) as usize).min(self.columns - 1)
+    }
+
+    /// The row holding `y_m`, clamped likewise.
+    fn row(&self, y_m: f64) -> usize {
+        ((y_m / self.cell_m).floor().max(0.0) as usize).min(self.rows - 1)
     }
 }
 
