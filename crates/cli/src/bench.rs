@@ -3,10 +3,11 @@
 //! Speed: the default arena, its rovers driving steady arcs (no autonomy; backing away from
 //! what they run into), every sensor at its default rate, cameras off (nobody subscribes);
 //! simulated seconds per wall second, median of several trials, every frame cast, and again
-//! as a mission runs it (a still rover measured on its last cast). Sensors: frames taken from random free poses across the arena (each with a
-//! cold cache) and along a drive (consecutive frames, as a rover takes them), median
-//! microseconds each, with plain cell-by-cell ray marching timed in the same run as the
-//! baseline the max-mipmap caster is compared against.
+//! as a mission runs it (a still rover measured on its last cast). Sensors: frames taken
+//! from random free poses across the arena (each with a cold cache) and along a drive
+//! (consecutive frames, as a rover takes them), median microseconds each, with plain
+//! cell-by-cell ray marching timed in the same run as the baseline the max-mipmap caster is
+//! compared against.
 
 use crate::cli::{BenchSensor, BenchSimArgs};
 use crate::mission::{load_scenario, parse_duration_s};
@@ -373,8 +374,8 @@ enum Casting {
 }
 
 /// Simulated seconds per wall second with the rovers driving steady arcs (backing away
-/// from what they run into); adds the messages published to `msgs` and the scans and frames taken
-/// where the one before was to `still`.
+/// from what they run into); adds the messages published to `msgs` and the scans and frames
+/// taken where the one before was to `still`.
 fn speed_trial(
     scenario: &realms_sim::Scenario,
     sim_s: f64,
@@ -392,8 +393,9 @@ fn speed_trial(
     let step = Duration::from_millis(250);
     let mut t = Time::ZERO;
     let end = Time::from_secs_f64(sim_s);
-    // A rover that runs into something backs away and turns, then drives its arc again: driven straight on it would stand against the obstacle for the rest of the
-    // trial, its sensors seeing the same thing frame after frame.
+    // A rover that runs into something backs away and turns, then drives its arc again:
+    // driven straight on it would stand against the obstacle for the rest of the trial, its
+    // sensors seeing the same thing frame after frame.
     let mut events_seen = 0;
     let mut backing_until: BTreeMap<String, Time> = BTreeMap::new();
     while t < end {

@@ -141,7 +141,14 @@ impl TiledLayer {
         });
         let (since, before, mut grid) = match self.drawn.take() {
             Some(d) if d.source == g && d.hazards.geometry() == hazards.geometry() => {
-                (Some(d.version), Some(d.hazards), d.grid)
+                // Hazards of the version last drawn are the same cells: no tile's differ.
+                let same_version =
+                    hazards_version.is_some() && d.hazards_version == hazards_version;
+                (
+                    Some(d.version),
+                    (!same_version).then_some(d.hazards),
+                    d.grid,
+                )
             }
             _ => (None, None, Grid::new(geo, OccupancyGrid::UNKNOWN)),
         };
@@ -154,11 +161,14 @@ impl TiledLayer {
                     ((tx + 1) * t).min(g.width),
                     ((ty + 1) * t).min(g.height),
                 ];
-                let stale = match (since, &before) {
-                    (Some(v), Some(old)) => {
-                        view.changed_since(tx, ty, v) || hazards_differ(old, &hazards, &g, fine)
+                let stale = match since {
+                    Some(v) => {
+                        view.changed_since(tx, ty, v)
+                            || before
+                                .as_ref()
+                                .is_some_and(|old| hazards_differ(old, &hazards, &g, fine))
                     }
-                    _ => true,
+                    None => true,
                 };
                 if stale {
                     let source = Source {

@@ -734,6 +734,23 @@ mod tests {
     }
 
     #[test]
+    fn a_kind_is_full_after_a_hundred_misses_in_a_row_and_not_before() {
+        let mut full = Full::default();
+        for _ in 0..FULL_AFTER - 1 {
+            full.count(false);
+        }
+        assert!(!full.is_full());
+        // A placement starts the count again.
+        full.count(true);
+        for _ in 0..FULL_AFTER - 1 {
+            full.count(false);
+        }
+        assert!(!full.is_full());
+        full.count(false);
+        assert!(full.is_full());
+    }
+
+    #[test]
     fn an_arena_asked_for_more_than_it_holds_gets_what_fits() {
         // A 12 m x 10 m arena holds a few dozen targets 1.5 m apart, not a thousand: the
         // generation places those and stops.
