@@ -51,6 +51,12 @@ struct MissionGrades {
     time_to_95_s: Option<f64>,
     /// The lander's merged map: share of its occupied cells right (absent without a merge).
     merged_occupied_correct: Option<f64>,
+    /// ... and with every map the lander placed at its rover's known start instead.
+    merged_at_known_starts: Option<f64>,
+    /// Maps the lander found drifted from their known starts ...
+    maps_drifted: usize,
+    /// ... and maps it placed away from them.
+    maps_moved: usize,
     rovers: Vec<RoverGrades>,
 }
 
@@ -63,6 +69,20 @@ impl MissionGrades {
             coverage: report.coverage,
             time_to_95_s: report.time_to_95_s,
             merged_occupied_correct: report.merge.as_ref().map(|m| m.occupied_correct),
+            merged_at_known_starts: report
+                .merge
+                .as_ref()
+                .map(|m| m.occupied_correct_at_known_starts),
+            maps_drifted: report
+                .merge
+                .as_ref()
+                .map_or(0, |m| m.maps.iter().filter(|l| l.drifted).count()),
+            maps_moved: report.merge.as_ref().map_or(0, |m| {
+                m.maps
+                    .iter()
+                    .filter(|l| l.pose.is_some_and(|p| p != [0.0; 3]))
+                    .count()
+            }),
             rovers: report
                 .rovers
                 .iter()
@@ -111,6 +131,12 @@ struct Summary {
     known_correct_mean: f64,
     /// Absent when no mission merged a map (a lone rover).
     merged_occupied_correct_mean: Option<f64>,
+    /// The same with every placed map at its known start.
+    merged_at_known_starts_mean: Option<f64>,
+    /// Maps found drifted from their known starts, and maps placed away from them, over
+    /// every mission.
+    maps_drifted: usize,
+    maps_moved: usize,
     sim_duration_mean_s: f64,
     /// Coverage at the end, mean over the missions.
     coverage_mean: f64,
@@ -131,6 +157,10 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         .iter()
         .filter_map(|m| m.merged_occupied_correct)
         .collect();
+    let merged_at_starts: Vec<f64> = missions
+        .iter()
+        .filter_map(|m| m.merged_at_known_starts)
+        .collect();
     let lengths: Vec<f64> = missions.iter().map(|m| m.sim_duration_s).collect();
     let reached: Vec<f64> = missions.iter().filter_map(|m| m.time_to_95_s).collect();
     Summary {
@@ -150,6 +180,10 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         hazard_correct: pooled(rovers().map(|r| (r.hazard_correct, r.hazard_cells))),
         known_correct_mean: mean(&known),
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
+        merged_at_known_starts_mean: (!merged_at_starts.is_empty())
+            .then(|| mean(&merged_at_starts)),
+        maps_drifted: missions.iter().map(|m| m.maps_drifted).sum(),
+        maps_moved: missions.iter().map(|m| m.maps_moved).sum(),
         sim_duration_mean_s: mean(&lengths),
         coverage_mean: mean(&missions.iter().map(|m| m.coverage).collect::<Vec<_>>()),
         time_to_95_mean_s: (!reached.is_empty()).then(|| mean(&reached)),
@@ -272,30 +306,33 @@ fn print_tables(
     }
     println!();
     println!(
-        "| seed | mission length | coverage at the end | 95 % covered at | lander's merged map, occupied cells right | fleet SLAM speed |"
+        "| seed | mission length | coverage at the end | 95 % covered at | lander's merged map, occupied cells right | the same with every map at its known start | maps found drifted / placed off their known start | fleet SLAM speed |"
     );
-    println!("| --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for m in missions {
         println!(
-            "| {} | {:.0} s | {:.1} % | {} | {} | {:.0}x |",
+            "| {} | {:.0} s | {:.1} % | {} | {} | {} | {} / {} | {:.0}x |",
             m.seed,
             m.sim_duration_s,
             100.0 * m.coverage,
             m.time_to_95_s
                 .map_or("-".to_string(), |t| format!("{t:.0} s")),
             pct(m.merged_occupied_correct),
+            pct(m.merged_at_known_starts),
+            m.maps_drifted,
+            m.maps_moved,
             m.slam_speedup
         );
     }
     println!();
     println!(
-        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | hazard cells truly untraversable | known cells right (free, occupied, hazard), mean | lander's merged map, mean | mission length, mean | coverage at the end, mean | 95 % covered at, mean (missions that got there) | fleet SLAM speed, median |"
+        "| missions (rovers graded) | occupied cells right, mean / median | rovers under 80 / under 90 / at least 95 % | final trajectory RMS, mean / median / worst | rovers under 0.10 m | published pose within 0.2 m, mean | crater cells near the paths marked | hazard cells truly untraversable | known cells right (free, occupied, hazard), mean | lander's merged map, mean (every map at its known start; maps found drifted / placed off their known start) | mission length, mean | coverage at the end, mean | 95 % covered at, mean (missions that got there) | fleet SLAM speed, median |"
     );
     println!(
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     println!(
-        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {:.1} % | {:.1} % | {} | {:.0} s | {:.1} % | {} | {:.0}x |",
+        "| {} ({}) | {:.1} / {:.1} % | {} / {} / {} | {:.3} / {:.3} / {:.2} m | {} | {:.1} % | {:.1} % | {:.1} % | {:.1} % | {} ({}; {} / {}) | {:.0} s | {:.1} % | {} | {:.0}x |",
         s.missions,
         s.rovers_graded,
         100.0 * s.occupied_correct_mean,
@@ -312,6 +349,9 @@ fn print_tables(
         100.0 * s.hazard_correct,
         100.0 * s.known_correct_mean,
         pct(s.merged_occupied_correct_mean),
+        pct(s.merged_at_known_starts_mean),
+        s.maps_drifted,
+        s.maps_moved,
         s.sim_duration_mean_s,
         100.0 * s.coverage_mean,
         s.time_to_95_mean_s.map_or("-".to_string(), |t| format!(

@@ -156,7 +156,13 @@ fn report_known_start(args: &MergeArgs, merged: &KnownStartMerged) -> Result<()>
                 p.yaw_rad.to_degrees(),
                 c.estimate.confidence,
                 c.drift_m,
-                if c.drifted { " (drifted)" } else { "" }
+                match (c.drifted, c.moved) {
+                    (false, _) => "",
+                    (true, false) => {
+                        " (drifted; kept at its known start, which nothing in the maps contradicts)"
+                    }
+                    (true, true) => " (drifted; the maps contradict its known start)",
+                }
             ),
             (Some(_), _) => println!(
                 "{name}: placed at its known start, unconfirmed ({})",

@@ -231,8 +231,15 @@ pub fn run(args: MissionArgs) -> Result<()> {
                     "  merge: {} confirmed at its known start (the maps agree {:.2} m from it), confidence {:.2}",
                     l.rover, l.drift_m, l.confidence,
                 ),
+                (Some(p), _) if *p == [0.0; 3] => println!(
+                    "  merge: {} drifted: the maps agree {:.2} m from its known start, confidence {:.2}; kept at the known start, which nothing in them contradicts ({:.0} % of the two maps' obstacles lie within 0.5 m of the other's there)",
+                    l.rover,
+                    l.drift_m,
+                    l.confidence,
+                    100.0 * l.agreement_at_start.unwrap_or(0.0),
+                ),
                 (Some(p), _) => println!(
-                    "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}, drifted from the known start",
+                    "  merge: {} onto {} at ({:.2} m, {:.2} m, {:.1} deg), confidence {:.2}, drifted from the known start, which the maps contradict",
                     l.rover,
                     m.reference,
                     p[0],

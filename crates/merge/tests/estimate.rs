@@ -144,6 +144,7 @@ fn a_known_start_is_confirmed_or_found_drifted() {
     assert!(!same.drifted, "{same:?}");
     // Confirmed within the drift tolerances, the map goes where the prior puts it.
     assert_eq!(same.placed, Some(pair.a_from_b));
+    assert!(!same.moved);
     // The map has drifted 1 m and 4 degrees from the prior: found, and reported.
     let prior = pair
         .a_from_b
@@ -155,7 +156,9 @@ fn a_known_start_is_confirmed_or_found_drifted() {
         .expect("the drifted pose is found");
     assert!(common::close(&found, &pair.a_from_b, &pair.b), "{found:?}");
     assert!(drifted.drifted && drifted.drift_m > 0.5, "{drifted:?}");
-    // Drifted, it goes where the maps put it.
+    // Drifted this far, its walls lie on the other map's open ground at the prior: the
+    // maps contradict the known start, and the map goes where they put it.
+    assert!(drifted.moved, "{drifted:?}");
     assert_eq!(drifted.placed, Some(found));
 }
 

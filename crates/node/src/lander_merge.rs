@@ -252,28 +252,41 @@ mod tests {
 
     #[test]
     fn maps_from_the_known_start_merge_in_place_and_a_shifted_one_is_called_drifted() {
-        let (a, same, shifted) = (hall(0.0), hall(0.0), hall(0.4));
+        let (a, same, shifted, far) = (hall(0.0), hall(0.0), hall(0.4), hall(1.2));
         let merged = merge_from_known_start(&[
             (RoverId(1), &a),
             (RoverId(2), &same),
             (RoverId(3), &shifted),
+            (RoverId(4), &far),
         ])
-        .expect("three maps");
-        assert_eq!(merged.links.len(), 2);
+        .expect("four maps");
+        assert_eq!(merged.links.len(), 3);
         let in_place = &merged.links[0];
         let pose = in_place.reference_from_map.expect("the same map merges");
         assert!(pose.x_m.abs() < 0.06 && pose.y_m.abs() < 0.06, "{pose:?}");
         assert!(!in_place.drifted);
-        let moved = &merged.links[1];
-        let pose = moved.reference_from_map.expect("the shifted map merges");
+        // 0.4 m off is drift, reported; but every wall still lies within the 0.5 m a drift
+        // may put two maps apart, so nothing contradicts the known start: the map stays.
+        let drifted = &merged.links[1];
+        assert!(drifted.drifted && drifted.confirmed, "{drifted:?}");
+        assert!((drifted.drift_m - 0.4).abs() < 0.06, "{drifted:?}");
+        assert_eq!(
+            drifted.reference_from_map,
+            Some(Pose2::IDENTITY),
+            "{drifted:?}"
+        );
+        // 1.2 m off puts the walls on the other map's open ground: the known start is
+        // contradicted, and the map goes where the two agree.
+        let moved = &merged.links[2];
+        let pose = moved.reference_from_map.expect("the far map merges");
         assert!(
-            (pose.x_m + 0.4).abs() < 0.06 && pose.y_m.abs() < 0.06,
+            (pose.x_m + 1.2).abs() < 0.06 && pose.y_m.abs() < 0.06,
             "{pose:?}"
         );
-        assert!(moved.drifted, "0.4 m off the known start is drift");
+        assert!(moved.drifted, "{moved:?}");
         // Every rover's bit is in the contribution layer.
         let all = merged.contribution.cells().iter().fold(0, |acc, b| acc | b);
-        assert_eq!(all, 0b111);
+        assert_eq!(all, 0b1111);
     }
 
     /// `map` with every cell whose centre lies outside `keep` (an x range, metres) unknown.
