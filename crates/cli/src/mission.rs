@@ -264,8 +264,9 @@ pub fn run(args: MissionArgs) -> Result<()> {
 }
 
 /// Runs `mission` as `realms mission` does: until `end`, or, unless `full_duration`, until
-/// its rovers are done exploring and the ground holds every rover's final map (after a
-/// blackout the queues must drain first); then lets the nodes publish their final products.
+/// its rovers are done exploring, have drawn their maps from their final trajectories, and
+/// the ground holds every rover's final map (after a blackout the queues must drain
+/// first); then lets the nodes publish their final products.
 /// `progress` hears the simulated seconds every 30 of them.
 pub(crate) fn run_to_end(
     mission: &mut Mission,
@@ -276,7 +277,7 @@ pub(crate) fn run_to_end(
     let chunk = realms_core::Duration::from_secs(30);
     let mut explored_at = None;
     while mission.now() < end {
-        if !full_duration && mission.exploration_over() {
+        if !full_duration && mission.exploration_over() && mission.maps_final() {
             let t = *explored_at.get_or_insert(mission.now());
             if mission.ground_current_since(t) {
                 break;

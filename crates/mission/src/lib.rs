@@ -647,6 +647,23 @@ impl Mission {
             .all(|(body, a)| matches!(a, NavActivity::Done | NavActivity::Lost) || !body.powered)
     }
 
+    /// Whether every powered rover that finished exploring has drawn its map from its final
+    /// trajectory (which it does once it has heard its peers finish too): from then on the
+    /// map updates carry the final maps to the lander and the ground.
+    pub fn maps_final(&self) -> bool {
+        self.world
+            .rovers()
+            .zip(&self.activity)
+            .filter(|(body, a)| body.powered && **a == NavActivity::Done)
+            .all(|(body, _)| {
+                self.nodes
+                    .iter()
+                    .filter_map(|n| n.as_rover())
+                    .find(|r| r.id() == body.id)
+                    .is_none_or(|r| r.map_finished())
+            })
+    }
+
     /// What each rover's SLAM reported, in rover order.
     pub fn slam_records(&self) -> &[RoverSlamRecord] {
         &self.slam

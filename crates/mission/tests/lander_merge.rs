@@ -62,3 +62,53 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
     let check = check_with(&Params::for_rover_maps());
     assert!(check.estimate.accepted().is_some(), "{:?}", check.estimate);
 }
+
+/// A rover that has finished exploring, and heard its peers finish, draws its map again from
+/// its final trajectory while parked, and its map updates carry that to the lander: the lander merges the rovers' final
+/// maps, not the maps as they were drawn while driving. Before, the lander's copy of each
+/// map stayed as drawn on the way, and only the rover's last message (at shutdown, which
+/// the network never carries) held the final map: 324 and 518 cells of the two rovers'
+/// maps differed here.
+#[test]
+fn the_lander_holds_each_rovers_final_map_once_it_is_home() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
+    let mut scenario = Scenario::load(&path).expect("small scenario loads");
+    scenario.faults.clear();
+    // Large enough for the graph to bend finished submaps: in the small scenario's own
+    // 14 x 10 m nothing bends, and the final redraw changes no cell.
+    (scenario.arena.width_m, scenario.arena.length_m) = (24.0, 18.0);
+    let mut mission = Mission::new(&scenario);
+    while mission.now().as_secs_f64() < 1800.0 && !mission.exploration_over() {
+        let next = mission.now() + realms_core::Duration::from_secs(10);
+        mission.run_until(next);
+    }
+    assert!(mission.exploration_over(), "still exploring");
+    // Each rover draws its final map once it has heard the other finish too.
+    while mission.now().as_secs_f64() < 1800.0 && !mission.maps_final() {
+        let next = mission.now() + realms_core::Duration::from_secs(1);
+        mission.run_until(next);
+    }
+    assert!(mission.maps_final(), "the maps were never drawn final");
+    // A map update or two more (every 2 s), as `realms mission` waits for the ground.
+    let next = mission.now() + realms_core::Duration::from_secs(5);
+    mission.run_until(next);
+    let copies: Vec<Vec<i8>> = (1..=2)
+        .map(|r| {
+            let lander = mission.station(NodeAddr::Lander).expect("a lander");
+            let map = lander
+                .map(RoverId(r))
+                .expect("the rover's map reached the lander");
+            map.cells().to_vec()
+        })
+        .collect();
+    mission.finish();
+    for (k, copy) in copies.iter().enumerate() {
+        let last = mission.slam_records()[k]
+            .map
+            .as_ref()
+            .expect("the rover published its map");
+        let differ = last.data.iter().zip(copy).filter(|(a, b)| a != b).count();
+        assert_eq!(last.data.len(), copy.len(), "rover{}: grid sizes", k + 1);
+        assert_eq!(differ, 0, "rover{}: {differ} cells differ", k + 1);
+    }
+}

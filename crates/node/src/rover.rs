@@ -34,6 +34,9 @@ const LOST_TURN_RAD_S: f64 = 0.3;
 /// from where it stands are all it can show the relocaliser, and driving blind could end
 /// in a crater.
 const LOST_SEARCH: Duration = Duration::from_secs(90);
+/// A peer not heard for this long (six of its status repeats) is taken to be gone, powered
+/// off or out of reach, when a rover asks whether the fleet has finished exploring.
+const PEER_GONE: Duration = Duration::from_secs(60);
 
 /// Everything a rover node needs to know.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,6 +71,11 @@ pub struct RoverNode {
     next_explored: Time,
     /// Since when it has been lost, if it is.
     lost_since: Option<Time>,
+    /// Whether its map has been drawn from the final trajectory since exploring ended (see
+    /// [`RoverNode::finish_when_done`]).
+    finished_map: bool,
+    /// Each peer's last reported activity, and when it was heard.
+    peers_heard: Vec<(RoverId, NavActivity, Time)>,
     outbox: Vec<Outgoing>,
     cost_clock: CostClock,
     /// Wall time spent in SLAM, to report what it costs (see [`CostClock`]).
@@ -91,6 +99,8 @@ impl RoverNode {
             reason: String::new(),
             next_explored: Time::ZERO,
             lost_since: None,
+            finished_map: false,
+            peers_heard: Vec::new(),
             outbox: Vec::new(),
             cost_clock: cfg.cost_clock,
             slam_wall: std::time::Duration::ZERO,
@@ -214,6 +224,46 @@ impl RoverNode {
             .is_some_and(|since| now - since >= LOST_SEARCH)
     }
 
+    /// Once the fleet's exploring is over and this rover is home, draws its map again from
+    /// the final trajectory (as at shutdown), so the map updates the lander and the ground
+    /// already receive carry the rover's best map while it is parked. Before, they only
+    /// ever held the map as drawn while driving, and the lander merged that: on seed 5's
+    /// default mission the lander's copy of rover3 was 90.5 % right where its final map was
+    /// 97.5 % (BENCHMARKS.md, "The lander merges the rovers' final maps").
+    ///
+    /// It waits for its peers: a map redrawn while they still explore changes the ground
+    /// it reports explored to them, and with it where they go. A peer counts as done once
+    /// it reported `Done` or `Lost`, or when nothing was heard of it for [`PEER_GONE`] (a
+    /// rover powered off). Done again each time the rover comes home anew.
+    fn finish_when_done(&mut self, now: Time) {
+        let done = matches!(self.navigator.activity(), Activity::Done)
+            && self
+                .fleet
+                .iter()
+                .filter(|peer| **peer != self.id)
+                .all(
+                    |peer| match self.peers_heard.iter().find(|(r, _, _)| r == peer) {
+                        Some((_, activity, at)) => {
+                            matches!(activity, NavActivity::Done | NavActivity::Lost)
+                                || now - *at >= PEER_GONE
+                        }
+                        None => now - Time::ZERO >= PEER_GONE,
+                    },
+                );
+        if done && !self.finished_map {
+            let mapping = &mut self.mapping;
+            self.cost_clock
+                .time(&mut self.slam_wall, || mapping.finish_map());
+        }
+        self.finished_map = done;
+    }
+
+    /// Whether its map is drawn from its final trajectory: exploring is over for the
+    /// fleet as far as it heard, and it is home (see [`RoverNode::finish_when_done`]).
+    pub fn map_finished(&self) -> bool {
+        self.finished_map
+    }
+
     /// Decides the velocity after a scan.
     fn drive(&mut self, now: Time, scan: &realms_core::msgs::LaserScan) -> (f64, f64) {
         if self.mapping.calibrating(now) {
@@ -279,6 +329,10 @@ impl Node for RoverNode {
                         _ => None,
                     };
                     self.navigator.hear_peer(now, from, target);
+                    match self.peers_heard.iter_mut().find(|(r, _, _)| *r == from) {
+                        Some(heard) => *heard = (from, status.activity, now),
+                        None => self.peers_heard.push((from, status.activity, now)),
+                    }
                 }
                 Message::Explored(area) => self.navigator.hear_explored(now, from, area.clone()),
                 _ => {}
@@ -294,6 +348,7 @@ impl Node for RoverNode {
                 clock.time(spent, || mapping.on_scan(scan, outbox));
                 let (v, w) = self.drive(now, scan);
                 self.send_cmd(now, v, w);
+                self.finish_when_done(now);
                 self.publish_status(now);
             }
             Message::Odometry(odom) => clock.time(spent, || mapping.on_odometry(odom)),
