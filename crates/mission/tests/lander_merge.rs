@@ -64,11 +64,11 @@ fn the_lander_confirms_a_rover_whose_map_overlaps_the_reference() {
 }
 
 /// A rover that has finished exploring, and heard its peers finish, draws its map again from
-/// its final trajectory while parked, and its map updates carry that to the lander: the lander merges the rovers' final
-/// maps, not the maps as they were drawn while driving. Before, the lander's copy of each
-/// map stayed as drawn on the way, and only the rover's last message (at shutdown, which
-/// the network never carries) held the final map: 324 and 518 cells of the two rovers'
-/// maps differed here.
+/// its final trajectory while parked, and its map updates carry that to the lander: the
+/// lander merges the rovers' final maps, not the maps as they were drawn while driving.
+/// Before, the lander's copy of each map stayed as drawn on the way, and only the rover's
+/// last message (at shutdown, which the network never carries) held the final map: 324 and
+/// 518 cells of the two rovers' maps differed here.
 #[test]
 fn the_lander_holds_each_rovers_final_map_once_it_is_home() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/small.toml");
