@@ -78,10 +78,7 @@ impl MissionGrades {
                 .as_ref()
                 .map_or(0, |m| m.maps.iter().filter(|l| l.drifted).count()),
             maps_moved: report.merge.as_ref().map_or(0, |m| {
-                m.maps
-                    .iter()
-                    .filter(|l| l.pose.is_some_and(|p| p != [0.0; 3]))
-                    .count()
+                m.maps.iter().filter(|l| l.placed_off_known_start()).count()
             }),
             rovers: report
                 .rovers

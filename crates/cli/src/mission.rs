@@ -231,7 +231,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
                     "  merge: {} confirmed at its known start (the maps agree {:.2} m from it), confidence {:.2}",
                     l.rover, l.drift_m, l.confidence,
                 ),
-                (Some(p), _) if *p == [0.0; 3] => println!(
+                (Some(_), _) if !l.placed_off_known_start() => println!(
                     "  merge: {} drifted: the maps agree {:.2} m from its known start, confidence {:.2}; kept at the known start, which nothing in them contradicts ({:.0} % of the two maps' obstacles lie within 0.5 m of the other's there)",
                     l.rover,
                     l.drift_m,

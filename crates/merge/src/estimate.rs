@@ -307,7 +307,8 @@ pub fn estimate_with_prior(
         far >= window.contradiction_points && share < window.contradiction_agreement
     });
     let drifted = drift_m > window.drift_tolerance_m || drift_rad > window.drift_tolerance_rad;
-    let moved = found.is_some() && drifted && contradicted;
+    // Drift is measured on a pose found, so a drifted map always has one to go to.
+    let moved = drifted && contradicted;
     let (placed, confirmed, refusal) = match found {
         Some(found) if moved => (Some(found), true, None),
         Some(_) => (Some(prior), true, None),

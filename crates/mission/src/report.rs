@@ -296,6 +296,15 @@ pub struct MergeLinkSummary {
     pub drift_m: f64,
 }
 
+impl MergeLinkSummary {
+    /// Whether the map was placed away from its known start (the reference's frame: every
+    /// rover's map frame is the arena's). A drifted map stays there unless the maps
+    /// contradict it.
+    pub fn placed_off_known_start(&self) -> bool {
+        self.pose.is_some_and(|p| p != [0.0; 3])
+    }
+}
+
 fn merge_summary(mission: &Mission) -> Option<MergeSummary> {
     let m = merged(mission)?;
     let truth = mission.world().truth();

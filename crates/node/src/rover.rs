@@ -236,26 +236,29 @@ impl RoverNode {
     /// it reported `Done` or `Lost`, or when nothing was heard of it for [`PEER_GONE`] (a
     /// rover powered off). Done again each time the rover comes home anew.
     fn finish_when_done(&mut self, now: Time) {
-        let done = matches!(self.navigator.activity(), Activity::Done)
-            && self
-                .fleet
-                .iter()
-                .filter(|peer| **peer != self.id)
-                .all(
-                    |peer| match self.peers_heard.iter().find(|(r, _, _)| r == peer) {
-                        Some((_, activity, at)) => {
-                            matches!(activity, NavActivity::Done | NavActivity::Lost)
-                                || now - *at >= PEER_GONE
-                        }
-                        None => now - Time::ZERO >= PEER_GONE,
-                    },
-                );
+        let done = matches!(self.navigator.activity(), Activity::Done) && self.peers_done(now);
         if done && !self.finished_map {
             let mapping = &mut self.mapping;
             self.cost_clock
                 .time(&mut self.slam_wall, || mapping.finish_map());
         }
         self.finished_map = done;
+    }
+
+    /// Whether every peer reported `Done` or `Lost` last, or has not been heard for
+    /// [`PEER_GONE`] (never heard: since the mission began).
+    fn peers_done(&self, now: Time) -> bool {
+        let mut peers = self.fleet.iter().filter(|peer| **peer != self.id);
+        peers.all(|peer| {
+            let last = self.peers_heard.iter().find(|(r, _, _)| r == peer);
+            match last {
+                Some((_, activity, at)) => {
+                    matches!(activity, NavActivity::Done | NavActivity::Lost)
+                        || now - *at >= PEER_GONE
+                }
+                None => now - Time::ZERO >= PEER_GONE,
+            }
+        })
     }
 
     /// Whether its map is drawn from its final trajectory: exploring is over for the

@@ -203,13 +203,8 @@ impl Terrain {
             (c.small_diameter_m, c.small_depth_m),
             c.small_count as usize,
         ));
-        let mut full = Full::default();
-        for (diameter, depth) in crater_specs {
-            if full.is_full() {
-                break;
-            }
+        until_full(crater_specs, |(diameter, depth)| {
             let radius = diameter / 2.0;
-            let mut placed = false;
             for _ in 0..2000 {
                 let p = Point2::new(
                     rng.random_range(0.0..a.width_m),
@@ -223,12 +218,11 @@ impl Terrain {
                         rim_m: depth * c.rim_fraction,
                     });
                     keep_out.push((p, radius * 1.3));
-                    placed = true;
-                    break;
+                    return true;
                 }
             }
-            full.count(placed);
-        }
+            false
+        });
 
         let b = &scenario.boulders;
         let mut boulders = Vec::new();
@@ -253,41 +247,28 @@ impl Terrain {
             None
         };
         // A blocking boulder keeps the others (and the targets) 0.6 m off its edge.
-        let mut full = Full::default();
-        for _ in 0..b.large_count {
-            if full.is_full() {
-                break;
-            }
+        until_full(0..b.large_count, |_| {
             let d = rng.random_range(b.large_min_diameter_m..=b.large_max_diameter_m);
             let placed = place_boulder(&mut rng, d, &keep_out);
             if let Some((p, r)) = placed {
                 keep_out.push((p, r + 0.6));
             }
-            full.count(placed.is_some());
-        }
+            placed.is_some()
+        });
         // Truncated power law by inverse CDF: N(>D) ~ D^-b between the two diameters.
         let (lo, hi) = (
             b.small_min_diameter_m.powf(-b.size_exponent),
             b.small_max_diameter_m.powf(-b.size_exponent),
         );
-        let mut full = Full::default();
-        for _ in 0..b.small_count {
-            if full.is_full() {
-                break;
-            }
+        until_full(0..b.small_count, |_| {
             let u: f64 = rng.random_range(0.0..1.0);
             let d = (lo - u * (lo - hi)).powf(-1.0 / b.size_exponent);
-            full.count(place_boulder(&mut rng, d, &keep_out).is_some());
-        }
+            place_boulder(&mut rng, d, &keep_out).is_some()
+        });
 
         let mut targets = Vec::new();
         let rocks_near = RocksNear::new(&boulders, TARGET_ROCK_CLEARANCE_M, a.width_m, a.length_m);
-        let mut full = Full::default();
-        for _ in 0..scenario.targets.count {
-            if full.is_full() {
-                break;
-            }
-            let mut placed = false;
+        until_full(0..scenario.targets.count, |_| {
             for _ in 0..2000 {
                 let p = Point2::new(
                     rng.random_range(0.0..a.width_m),
@@ -302,12 +283,11 @@ impl Terrain {
                 if clear_of(p, 0.5, &keep_out) && clear_of_rocks() {
                     targets.push(p);
                     keep_out.push((p, 1.0));
-                    placed = true;
-                    break;
+                    return true;
                 }
             }
-            full.count(placed);
-        }
+            false
+        });
 
         let mut undulation = Waves::new(&mut rng, 8, a.undulation_wavelength_m);
         let mut loose = Waves::new(&mut rng, 5, a.undulation_wavelength_m * 2.0);
@@ -588,6 +568,18 @@ impl Full {
 
     fn is_full(&self) -> bool {
         self.failed_in_a_row >= FULL_AFTER
+    }
+}
+
+/// Calls `place` (which says whether it found a spot) for each item of one kind, in order,
+/// until the arena is [`Full`] of that kind.
+fn until_full<T>(items: impl IntoIterator<Item = T>, mut place: impl FnMut(T) -> bool) {
+    let mut full = Full::default();
+    for item in items {
+        if full.is_full() {
+            break;
+        }
+        full.count(place(item));
     }
 }
 
