@@ -12,6 +12,7 @@ use crate::mission::{load_scenario, parse_duration_s, run_to_end};
 use anyhow::{Result, bail};
 use realms_core::Time;
 use realms_mission::report::MissionReport;
+use realms_mission::slam_record::CovarianceCheck;
 use realms_mission::{Mission, MissionOptions};
 use realms_sim::World;
 use serde::Serialize;
@@ -27,6 +28,8 @@ struct RoverGrades {
     trajectory_rmse_m: Option<f64>,
     /// Share of the 1 Hz checks with the pose as published then within 0.2 m of the truth.
     pose_within_0_2_m: f64,
+    /// Whether the covariance published with the pose said how far off it was.
+    pose_covariance: CovarianceCheck,
     /// Crater cells within reach of the rover's path ...
     path_hazards: usize,
     /// ... and the share of them its map marks.
@@ -91,6 +94,7 @@ impl MissionGrades {
                         occupied_correct: map.map(|m| m.occupied_correct),
                         trajectory_rmse_m: r.slam.trajectory_error.as_ref().map(|e| e.rmse_m),
                         pose_within_0_2_m: r.slam.pose_error.share_within_0_2_m,
+                        pose_covariance: r.slam.pose_covariance,
                         path_hazards: map.map_or(0, |m| m.path_hazards),
                         path_hazards_flagged: map.map_or(0.0, |m| m.path_hazards_flagged),
                         hazard_cells: map.map_or(0, |m| m.hazard_cells),
@@ -120,6 +124,15 @@ struct Summary {
     /// The published pose within 0.2 m of the truth, mean over the rovers of their share of
     /// checks.
     pose_within_0_2_m_mean: f64,
+    /// Published poses graded against their covariance, pooled over every rover ...
+    covariance_instants: usize,
+    /// ... the share inside their 95 % circle (position) ...
+    position_inside_95: f64,
+    /// ... and 95 % interval (heading) ...
+    heading_inside_95: f64,
+    /// ... and the median over the rovers of their median published position standard
+    /// deviation, metres.
+    median_sigma_m: f64,
     /// Crater cells near the paths marked, pooled over every rover.
     path_hazards_flagged: f64,
     /// Hazard cells marked truly untraversable, pooled over every rover.
@@ -173,6 +186,25 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         trajectory_rmse_worst_m: errors.iter().copied().fold(f64::NAN, f64::max),
         rovers_under_10cm: errors.iter().filter(|e| **e < 0.10).count(),
         pose_within_0_2_m_mean: mean(&rovers().map(|r| r.pose_within_0_2_m).collect::<Vec<_>>()),
+        covariance_instants: rovers().map(|r| r.pose_covariance.instants).sum(),
+        position_inside_95: pooled(rovers().map(|r| {
+            (
+                r.pose_covariance.position_inside_95,
+                r.pose_covariance.instants,
+            )
+        })),
+        heading_inside_95: pooled(rovers().map(|r| {
+            (
+                r.pose_covariance.heading_inside_95,
+                r.pose_covariance.instants,
+            )
+        })),
+        median_sigma_m: median(
+            rovers()
+                .filter(|r| r.pose_covariance.instants > 0)
+                .map(|r| r.pose_covariance.median_sigma_m)
+                .collect(),
+        ),
         path_hazards_flagged: pooled(rovers().map(|r| (r.path_hazards_flagged, r.path_hazards))),
         hazard_correct: pooled(rovers().map(|r| (r.hazard_correct, r.hazard_cells))),
         known_correct_mean: mean(&known),
@@ -282,19 +314,21 @@ fn print_tables(
     );
     println!();
     println!(
-        "| seed | rover | occupied cells right | final trajectory RMS | published pose within 0.2 m | crater cells near the path marked (cells) | powered at the end |"
+        "| seed | rover | occupied cells right | final trajectory RMS | published pose within 0.2 m | published pose inside its 95 % circle (median standard deviation) | crater cells near the path marked (cells) | powered at the end |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for m in missions {
         for r in &m.rovers {
             println!(
-                "| {} | {} | {} | {} | {:.1} % | {:.1} % ({}) | {} |",
+                "| {} | {} | {} | {} | {:.1} % | {:.1} % ({:.3} m) | {:.1} % ({}) | {} |",
                 m.seed,
                 r.name,
                 pct(r.occupied_correct),
                 r.trajectory_rmse_m
                     .map_or("-".to_string(), |e| format!("{e:.3} m")),
                 100.0 * r.pose_within_0_2_m,
+                100.0 * r.pose_covariance.position_inside_95,
+                r.pose_covariance.median_sigma_m,
                 100.0 * r.path_hazards_flagged,
                 r.path_hazards,
                 if r.powered { "yes" } else { "no" }
@@ -356,5 +390,17 @@ fn print_tables(
             s.reached_95, s.missions
         )),
         s.slam_speedup_median
+    );
+    println!();
+    println!(
+        "| published poses graded | position inside its 95 % circle | heading inside its 95 % interval | median published position standard deviation, median rover |"
+    );
+    println!("| --- | --- | --- | --- |");
+    println!(
+        "| {} | {:.1} % | {:.1} % | {:.3} m |",
+        s.covariance_instants,
+        100.0 * s.position_inside_95,
+        100.0 * s.heading_inside_95,
+        s.median_sigma_m
     );
 }

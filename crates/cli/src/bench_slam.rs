@@ -130,6 +130,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.loop_candidates = 0,
     },
     Variant {
+        name: "match-covariance",
+        what: "the pose published with the covariance of the last match alone, as before the drift along the graph was counted (nothing else changes)",
+        apply: |c| c.mapper.pose_uncertainty = None,
+    },
+    Variant {
         name: "no-densify",
         what: "scans not filled in between beams",
         apply: |c| c.mapper.frontend.densify = None,

@@ -130,10 +130,11 @@ pub fn run(args: MissionArgs) -> Result<()> {
         );
         let e = &r.slam;
         println!(
-            "    SLAM pose error {:.2} m RMS ({:.2} m max, within 0.2 m {:.0} % of the time), odometry {:.2} m RMS; {} localisation changes{}",
+            "    SLAM pose error {:.2} m RMS ({:.2} m max, within 0.2 m {:.0} % of the time, inside its published 95 % circle {:.0} %), odometry {:.2} m RMS; {} localisation changes{}",
             e.pose_error.rmse_m,
             e.pose_error.max_m,
             100.0 * e.pose_error.share_within_0_2_m,
+            100.0 * e.pose_covariance.position_inside_95,
             e.odometry_error.rmse_m,
             e.localisation.len(),
             e.map.map_or(String::new(), |m| format!(

@@ -719,7 +719,9 @@ impl Mission {
                 let q = &p.pose.pose;
                 let estimate =
                     realms_core::Pose2::new(q.position.x, q.position.y, q.orientation.yaw_rad());
-                record.pose(t, estimate, body.odom_pose, body.pose);
+                let c = &p.pose.covariance;
+                let sigma = (c[0][0].max(c[1][1]).sqrt(), c[5][5].sqrt());
+                record.pose(t, estimate, Some(sigma), body.odom_pose, body.pose);
             }
             Message::Localisation(change) => {
                 record.changes.push(slam_record::StateChange {

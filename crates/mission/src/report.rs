@@ -525,7 +525,7 @@ pub fn write_results(
     std::fs::write(&csv_path, csv).map_err(io(&csv_path))?;
 
     let mut csv = String::from(
-        "t_s,rover,slam_x_m,slam_y_m,slam_yaw_rad,odom_x_m,odom_y_m,odom_yaw_rad,true_x_m,true_y_m,true_yaw_rad,final_x_m,final_y_m,final_yaw_rad\n",
+        "t_s,rover,slam_x_m,slam_y_m,slam_yaw_rad,odom_x_m,odom_y_m,odom_yaw_rad,true_x_m,true_y_m,true_yaw_rad,final_x_m,final_y_m,final_yaw_rad,sigma_xy_m,sigma_yaw_rad\n",
     );
     for (body, record) in world.rovers().zip(mission.slam_records()) {
         for c in &record.checks {
@@ -543,6 +543,10 @@ pub fn write_results(
                     }
                     None => csv.push_str(",,,"),
                 }
+            }
+            match c.sigma {
+                Some((m, rad)) => csv.push_str(&format!(",{m:.4},{rad:.5}")),
+                None => csv.push_str(",,"),
             }
             csv.push('\n');
         }

@@ -22,6 +22,9 @@ pub struct PoseCheck {
     pub odometry: Pose2,
     /// The truth.
     pub truth: Pose2,
+    /// The standard deviations SLAM published with its estimate: position (metres, the
+    /// larger of x and y) and heading (radians).
+    pub sigma: Option<(f64, f64)>,
     /// SLAM's estimate of the same instant at the end of the mission, after every loop
     /// closure (what an absolute trajectory error grades), once attached.
     pub optimised: Option<Pose2>,
@@ -53,8 +56,16 @@ pub struct RoverSlamRecord {
 }
 
 impl RoverSlamRecord {
-    /// Keeps a pose estimate if a check is due.
-    pub fn pose(&mut self, t: Time, estimate: Pose2, odometry: Pose2, truth: Pose2) {
+    /// Keeps a pose estimate, with the standard deviations published with it, if a check is
+    /// due.
+    pub fn pose(
+        &mut self,
+        t: Time,
+        estimate: Pose2,
+        sigma: Option<(f64, f64)>,
+        odometry: Pose2,
+        truth: Pose2,
+    ) {
         if t >= self.next_check {
             self.next_check = t + ESTIMATE_PERIOD;
             self.checks.push(PoseCheck {
@@ -62,6 +73,7 @@ impl RoverSlamRecord {
                 estimate,
                 odometry,
                 truth,
+                sigma,
                 optimised: None,
             });
         }
@@ -156,6 +168,55 @@ pub fn pose_errors(pairs: impl Iterator<Item = (Pose2, Pose2)>) -> PoseErrors {
         final_m: last,
         heading_rmse_deg: (sq_yaw / n).sqrt(),
         share_within_0_2_m: within as f64 / n,
+    }
+}
+
+/// Whether the covariance a pose is published with says how far it may be off: the share of
+/// the instants whose error lies inside the published 95 % region, for position (a circle of
+/// the published standard deviation, the chi-square bound of two degrees of freedom) and for
+/// heading (one degree of freedom). A consistent estimate reads 95 % for both; a covariance
+/// that only says how well the last scan fitted the map reads far less.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct CovarianceCheck {
+    /// Instants published with a covariance.
+    pub instants: usize,
+    /// Share of them whose position error lies inside the 95 % circle.
+    pub position_inside_95: f64,
+    /// Share whose heading error lies inside the 95 % interval.
+    pub heading_inside_95: f64,
+    /// The median published position standard deviation, metres.
+    pub median_sigma_m: f64,
+}
+
+/// The 95 % quantile of the chi-square distribution with two degrees of freedom.
+const CHI2_2_95: f64 = 5.991;
+/// ... and with one.
+const CHI2_1_95: f64 = 3.841;
+
+/// Grades the published standard deviations of `checks` against their errors.
+pub fn covariance_check(checks: &[PoseCheck]) -> CovarianceCheck {
+    let mut sigmas = Vec::new();
+    let (mut position, mut heading) = (0usize, 0usize);
+    for c in checks {
+        let Some((sigma_m, sigma_rad)) = c.sigma else {
+            continue;
+        };
+        let e = c.estimate.position().distance_m(c.truth.position());
+        let yaw = c.estimate.relative_to(&c.truth).yaw_rad;
+        position += usize::from(e * e <= CHI2_2_95 * sigma_m * sigma_m);
+        heading += usize::from(yaw * yaw <= CHI2_1_95 * sigma_rad * sigma_rad);
+        sigmas.push(sigma_m);
+    }
+    if sigmas.is_empty() {
+        return CovarianceCheck::default();
+    }
+    let n = sigmas.len();
+    sigmas.sort_by(f64::total_cmp);
+    CovarianceCheck {
+        instants: n,
+        position_inside_95: position as f64 / n as f64,
+        heading_inside_95: heading as f64 / n as f64,
+        median_sigma_m: sigmas[n / 2],
     }
 }
 
@@ -522,6 +583,8 @@ fn near_path(geo: &GridGeometry, path: &[Point2], reach_m: f64) -> Vec<bool> {
 pub struct RoverSlamSummary {
     /// SLAM's pose estimate against the truth, as published at the time.
     pub pose_error: PoseErrors,
+    /// Whether the covariance published with each pose says how far it may be off.
+    pub pose_covariance: CovarianceCheck,
     /// The absolute trajectory error: SLAM's final trajectory (loop closures applied to
     /// past poses) against the truth at the same instants; `None` if none was attached.
     pub trajectory_error: Option<PoseErrors>,
@@ -547,6 +610,7 @@ impl RoverSlamRecord {
     pub fn summary(&self, truth: &GroundTruth, map_png: Option<String>) -> RoverSlamSummary {
         RoverSlamSummary {
             pose_error: pose_errors(self.checks.iter().map(|c| (c.estimate, c.truth))),
+            pose_covariance: covariance_check(&self.checks),
             trajectory_error: self.trajectory_error(),
             trajectory_error_aligned_m: self.trajectory_error_aligned_m(),
             odometry_error: pose_errors(self.checks.iter().map(|c| (c.odometry, c.truth))),
@@ -826,6 +890,35 @@ mod tests {
         assert!((e.max_m - 0.3).abs() < 1e-12 && e.final_m == 0.0);
         assert!((e.rmse_m - (0.14f64 / 4.0).sqrt()).abs() < 1e-12);
         assert_eq!(pose_errors(std::iter::empty()).share_within_0_2_m, 0.0);
+    }
+
+    #[test]
+    fn a_covariance_is_graded_by_the_errors_inside_its_95_percent_region() {
+        let truth = Pose2::new(1.0, 2.0, 0.5);
+        let check = |dx: f64, dyaw: f64, sigma: Option<(f64, f64)>| PoseCheck {
+            t: Time::ZERO,
+            estimate: Pose2::new(1.0 + dx, 2.0, 0.5 + dyaw),
+            odometry: truth,
+            truth,
+            sigma,
+            optimised: None,
+        };
+        // 0.1 m standard deviation: the 95 % circle's radius is 0.245 m. Headings at 0.01
+        // rad: the interval is 0.0196 rad.
+        let checks = [
+            check(0.24, 0.019, Some((0.1, 0.01))),
+            check(0.25, 0.0, Some((0.1, 0.01))),
+            check(-0.1, -0.02, Some((0.1, 0.01))),
+            check(0.0, 0.0, Some((0.3, 0.01))),
+            // Published without a covariance: not graded.
+            check(5.0, 1.0, None),
+        ];
+        let c = covariance_check(&checks);
+        assert_eq!(c.instants, 4);
+        assert!((c.position_inside_95 - 0.75).abs() < 1e-12, "{c:?}");
+        assert!((c.heading_inside_95 - 0.75).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.median_sigma_m, 0.1);
+        assert_eq!(covariance_check(&[]), CovarianceCheck::default());
     }
 
     #[test]

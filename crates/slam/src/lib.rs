@@ -27,6 +27,7 @@ pub mod assembly;
 pub mod bnb;
 pub mod carmen;
 pub mod craters;
+pub mod drift;
 mod elimination;
 pub mod eval;
 pub mod frontend;

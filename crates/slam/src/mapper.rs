@@ -22,6 +22,7 @@
 use crate::assembly::Assembly;
 use crate::bnb::{self, PrecomputedMap, SearchWindow};
 use crate::carmen::LaserReading;
+use crate::drift::{PathsFromStart, PoseUncertainty, Travel};
 use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
@@ -466,6 +467,10 @@ pub struct MapperConfig {
     /// Scale the wheels' translation by the share the scan matches found real (`None`: take
     /// the wheels at their word, as for a recorded log's calibrated odometry).
     pub slip_calibration: Option<SlipCalibration>,
+    /// How far the pose may be from the truth, for the covariance a rover publishes, from
+    /// the path through the graph that ties it to the start ([`crate::drift`]; `None`: not
+    /// worked out).
+    pub pose_uncertainty: Option<PoseUncertainty>,
     /// The odometry's heading is a gyro's: the graph edge between consecutive keyframes
     /// takes its turn from the odometry, weighted by this model of the gyro's error (`None`:
     /// the turn as matched, weighted like a closure; right for wheel-only headings).
@@ -842,6 +847,7 @@ impl Default for MapperConfig {
             weak_travel: None,
             weak_hop_share: None,
             slip_calibration: None,
+            pose_uncertainty: None,
             gyro_heading: None,
             blind_travel_uncertain: true,
             graph_solver: GraphSolver::BlockJacobi,
@@ -1074,6 +1080,8 @@ pub struct Mapper {
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
     wheel_scale: Option<WheelScale>,
+    /// The newest keyframe's uncertainty from the start, kept up to date as asked.
+    paths_from_start: PathsFromStart,
     /// The wall directions the first keyframe saw (with `wall_headings`); the headings they
     /// measured are the graph's heading priors.
     walls: Option<WallHeadings>,
@@ -1130,6 +1138,7 @@ impl Mapper {
                 .with_miss_rule(cfg.frontend.miss_rule)
                 .with_occupied_above(cfg.map_occupied_above),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
+            paths_from_start: PathsFromStart::default(),
             walls: cfg.wall_headings.map(WallHeadings::new),
         }
     }
@@ -1822,6 +1831,34 @@ impl Mapper {
     /// The last tracking match's information matrix (x, y, theta), for the covariance.
     pub fn last_information(&self) -> [[f64; 3]; 3] {
         self.last_information
+    }
+
+    /// How far the pose may be from the truth: standard deviations of its position (metres)
+    /// and heading (radians), by the path through the graph from the start to the newest
+    /// keyframe and the travel since ([`crate::drift`]). `None` without
+    /// [`MapperConfig::pose_uncertainty`] or before the first keyframe.
+    pub fn pose_uncertainty(&mut self) -> Option<(f64, f64)> {
+        let model = self.cfg.pose_uncertainty?;
+        let weak_total = &self.keyframe_weak_total_m;
+        let unmatched = &self.keyframe_unmatched_m;
+        let (position_m, heading_rad) = self.paths_from_start.newest(&model, &self.graph, |e| {
+            let weak_upto = |k: usize| weak_total.get(k).copied().unwrap_or(0.0);
+            Travel {
+                driven_m: e.measurement.x_m.hypot(e.measurement.y_m),
+                weak_m: weak_upto(e.to) - weak_upto(e.from),
+                unmatched_m: unmatched.get(e.to).copied().unwrap_or(0.0),
+            }
+        })?;
+        let newest = self.graph.nodes.last()?;
+        let since = Travel {
+            driven_m: newest.position().distance_m(self.pose.position()),
+            weak_m: self.weak_m,
+            unmatched_m: self.unmatched_m,
+        };
+        Some((
+            position_m + model.position_m(since),
+            heading_rad + model.heading_rad(since),
+        ))
     }
 
     fn add_keyframe(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>, dense: &[Point2]) {
@@ -3204,6 +3241,57 @@ mod tests {
             "the laps search {most_unbounded} submaps"
         );
         assert!(bounded == unbounded, "the same poses either way");
+    }
+
+    #[test]
+    fn the_pose_uncertainty_grows_with_the_path_and_closures_cut_it_back() {
+        let model = crate::drift::PoseUncertainty {
+            floor_m: 0.02,
+            per_m: 0.01,
+            weak_per_m: 0.0,
+            unmatched_per_m: 0.0,
+            closure_m: 2.0,
+            heading_floor_rad: 0.001,
+            heading_per_m_rad: 0.001,
+        };
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.submap_keyframes = 4;
+        cfg.loop_every_keyframes = 1;
+        cfg.pose_uncertainty = Some(model);
+        let mut mapper = Mapper::new(cfg);
+        // (sigma, closures so far, arc driven) after each step.
+        let mut steps = Vec::new();
+        // Four laps round a 2 m circle (60 steps of 0.21 m a lap), exact odometry.
+        let step_m = 2.0 * 6f64.to_radians();
+        for k in 0..240 {
+            let a = (6.0 * k as f64).to_radians();
+            let truth = Pose2::new(
+                2.0 * a.cos(),
+                -1.0 + 2.0 * a.sin(),
+                a + std::f64::consts::FRAC_PI_2,
+            );
+            mapper.add_points(0.5 * k as f64, truth, sparse_hall_scan(truth));
+            let sigma = mapper.pose_uncertainty().expect("a keyframe by now").0;
+            let closures = mapper.graph.edges.iter().filter(|e| e.robust).count();
+            steps.push((sigma, closures, step_m * k as f64));
+        }
+        let path_only = |arc_m: f64| 0.02 + 0.01 * arc_m;
+        // Until the first closure the uncertainty is the path driven (its chords between
+        // keyframes, a little shorter than the arc).
+        let first = steps.iter().position(|s| s.1 > 0).expect("the laps close");
+        assert!(first > 10, "closed at step {first}");
+        for &(sigma, _, arc_m) in &steps[..first] {
+            // (The matches put the keyframes within millimetres of the truth.)
+            assert!(sigma <= path_only(arc_m) + 0.002, "{sigma} after {arc_m} m");
+            assert!(
+                sigma >= path_only(0.95 * arc_m) - 0.01,
+                "{sigma} after {arc_m} m"
+            );
+        }
+        // After four laps the closures tie the pose back to the start.
+        let (last, _, arc_m) = steps[239];
+        assert!(last < 0.5 * path_only(arc_m), "{last} after {arc_m:.0} m");
     }
 
     #[test]

@@ -140,12 +140,45 @@ impl PoseGraph {
         limit_m: f64,
         edge_length_m: impl Fn(&Edge) -> f64,
     ) -> Option<f64> {
-        use std::cmp::Reverse;
-        use std::collections::BinaryHeap;
         let n = self.nodes.len();
         if a >= n || b >= n {
             return None;
         }
+        let mut reached = None;
+        self.shortest_paths(&[a], limit_m, edge_length_m, |node, d| {
+            if node == b {
+                reached = Some(d);
+                return true;
+            }
+            false
+        });
+        reached
+    }
+
+    /// The length of the shortest path through the graph from the nearest of `sources` to
+    /// every node (infinite where none leads), each edge counting `edge_length_m(edge)`:
+    /// Dijkstra's search from all of them at once.
+    pub fn path_lengths_from(
+        &self,
+        sources: &[usize],
+        edge_length_m: impl Fn(&Edge) -> f64,
+    ) -> Vec<f64> {
+        self.shortest_paths(sources, f64::INFINITY, edge_length_m, |_, _| false)
+    }
+
+    /// Dijkstra's search from `sources` over paths of at most `limit_m`, calling `settled`
+    /// with each node as its length becomes final, and stopping when it returns true;
+    /// returns the lengths found (infinite where not reached).
+    fn shortest_paths(
+        &self,
+        sources: &[usize],
+        limit_m: f64,
+        edge_length_m: impl Fn(&Edge) -> f64,
+        mut settled: impl FnMut(usize, f64) -> bool,
+    ) -> Vec<f64> {
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        let n = self.nodes.len();
         // The adjacency in two flat arrays (node `k`'s neighbours are
         // `neighbours[start[k]..start[k + 1]]`, in the order of the edges): a list per node
         // cost more in allocations than the search itself. Each neighbour keeps its edge, and
@@ -171,16 +204,18 @@ impl PoseGraph {
         }
         let mut best = vec![f64::INFINITY; n];
         let mut frontier = BinaryHeap::new();
-        best[a] = 0.0;
-        // Lengths are non-negative, so their bit patterns order like the numbers.
-        frontier.push(Reverse((0f64.to_bits(), a)));
+        for &a in sources.iter().filter(|a| **a < n) {
+            best[a] = 0.0;
+            // Lengths are non-negative, so their bit patterns order like the numbers.
+            frontier.push(Reverse((0f64.to_bits(), a)));
+        }
         while let Some(Reverse((bits, node))) = frontier.pop() {
             let d = f64::from_bits(bits);
             if d > best[node] {
                 continue;
             }
-            if node == b {
-                return Some(d);
+            if settled(node, d) {
+                break;
             }
             for &(next, edge) in &neighbours[start[node]..start[node + 1]] {
                 let via = d + edge_length_m(&self.edges[edge]);
@@ -190,7 +225,7 @@ impl PoseGraph {
                 }
             }
         }
-        None
+        best
     }
 }
 
