@@ -71,7 +71,8 @@ impl PoseUncertainty {
 
 /// The uncertainty of every keyframe from the start, kept as the graph grows: keyframes
 /// appended with their sequential edges extend it, and a closure (which can shorten any
-/// path) has it worked out again.
+/// path) has it worked out again. The mapper only ever appends to its graph's edges and
+/// heading priors; anything else is searched again from scratch.
 #[derive(Clone, Debug, Default)]
 pub struct PathsFromStart {
     edges: usize,

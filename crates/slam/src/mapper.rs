@@ -3198,17 +3198,20 @@ mod tests {
         sum / 40.0
     }
 
-    /// The poses of a mapper driving laps round a 2 m circle in the sparse hall with exact
-    /// odometry, small submaps searched for closures at every keyframe, keeping at most
-    /// `kept` closure-search precomputations; and the most it held at once.
-    fn laps_keeping(kept: usize) -> (Vec<Pose2>, usize) {
+    /// A mapper (set up by `customise` after small submaps searched for closures at every
+    /// keyframe) driving four laps round a 2 m circle in the sparse hall with exact odometry,
+    /// 60 steps of 6 degrees a lap; `after` is called after each step with its index, the
+    /// tracked pose and the mapper.
+    fn drive_laps(
+        customise: impl FnOnce(&mut MapperConfig),
+        mut after: impl FnMut(usize, Pose2, &mut Mapper),
+    ) {
         let mut cfg = MapperConfig::default();
         cfg.frontend.max_range_m = 12.0;
         cfg.submap_keyframes = 4;
         cfg.loop_every_keyframes = 1;
-        cfg.precomputed_kept = kept;
+        customise(&mut cfg);
         let mut mapper = Mapper::new(cfg);
-        let (mut poses, mut most) = (Vec::new(), 0);
         for k in 0..240 {
             let a = (6.0 * k as f64).to_radians();
             let truth = Pose2::new(
@@ -3216,18 +3219,27 @@ mod tests {
                 -1.0 + 2.0 * a.sin(),
                 a + std::f64::consts::FRAC_PI_2,
             );
-            poses.push(
-                mapper
-                    .add_points(0.5 * k as f64, truth, sparse_hall_scan(truth))
-                    .pose,
-            );
-            let held = mapper
-                .submaps
-                .iter()
-                .filter(|s| s.precomputed.is_some())
-                .count();
-            most = most.max(held);
+            let tracked = mapper.add_points(0.5 * k as f64, truth, sparse_hall_scan(truth));
+            after(k, tracked.pose, &mut mapper);
         }
+    }
+
+    /// The poses of a mapper driving the laps keeping at most `kept` closure-search
+    /// precomputations, and the most it held at once.
+    fn laps_keeping(kept: usize) -> (Vec<Pose2>, usize) {
+        let (mut poses, mut most) = (Vec::new(), 0);
+        drive_laps(
+            |c| c.precomputed_kept = kept,
+            |_, pose, mapper| {
+                poses.push(pose);
+                let held = mapper
+                    .submaps
+                    .iter()
+                    .filter(|s| s.precomputed.is_some())
+                    .count();
+                most = most.max(held);
+            },
+        );
         (poses, most)
     }
 
@@ -3254,28 +3266,17 @@ mod tests {
             heading_floor_rad: 0.001,
             heading_per_m_rad: 0.001,
         };
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.submap_keyframes = 4;
-        cfg.loop_every_keyframes = 1;
-        cfg.pose_uncertainty = Some(model);
-        let mut mapper = Mapper::new(cfg);
         // (sigma, closures so far, arc driven) after each step.
         let mut steps = Vec::new();
-        // Four laps round a 2 m circle (60 steps of 0.21 m a lap), exact odometry.
         let step_m = 2.0 * 6f64.to_radians();
-        for k in 0..240 {
-            let a = (6.0 * k as f64).to_radians();
-            let truth = Pose2::new(
-                2.0 * a.cos(),
-                -1.0 + 2.0 * a.sin(),
-                a + std::f64::consts::FRAC_PI_2,
-            );
-            mapper.add_points(0.5 * k as f64, truth, sparse_hall_scan(truth));
-            let sigma = mapper.pose_uncertainty().expect("a keyframe by now").0;
-            let closures = mapper.graph.edges.iter().filter(|e| e.robust).count();
-            steps.push((sigma, closures, step_m * k as f64));
-        }
+        drive_laps(
+            |c| c.pose_uncertainty = Some(model),
+            |k, _, mapper| {
+                let sigma = mapper.pose_uncertainty().expect("a keyframe by now").0;
+                let closures = mapper.graph.edges.iter().filter(|e| e.robust).count();
+                steps.push((sigma, closures, step_m * k as f64));
+            },
+        );
         let path_only = |arc_m: f64| 0.02 + 0.01 * arc_m;
         // Until the first closure the uncertainty is the path driven (its chords between
         // keyframes, a little shorter than the arc).
