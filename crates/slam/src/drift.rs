@@ -83,8 +83,8 @@ pub struct PathsFromStart {
 
 impl PathsFromStart {
     /// The position and heading standard deviations of the newest keyframe of `graph`
-    /// (`None` without one), brought up to date; `travel` says what each sequential edge
-    /// drove. The graph's heading priors anchor the heading.
+    /// (`None` without one, or if no path reaches it), brought up to date; `travel` says
+    /// what each sequential edge drove. The graph's heading priors anchor the heading.
     pub fn newest(
         &mut self,
         model: &PoseUncertainty,
@@ -136,9 +136,12 @@ impl PathsFromStart {
         }
         self.edges = graph.edges.len();
         self.heading_anchors = anchored.len();
-        Some((
-            model.floor_m + self.position_m[newest],
-            model.heading_floor_rad + self.heading_rad[newest],
+        // Every keyframe is joined to the one before, so the start reaches it; a graph
+        // built otherwise gets no answer rather than an infinite one.
+        let (position_m, heading_rad) = (self.position_m[newest], self.heading_rad[newest]);
+        (position_m.is_finite() && heading_rad.is_finite()).then_some((
+            model.floor_m + position_m,
+            model.heading_floor_rad + heading_rad,
         ))
     }
 }
@@ -243,9 +246,12 @@ mod tests {
     }
 
     #[test]
-    fn no_keyframe_no_uncertainty() {
-        let graph = PoseGraph::default();
+    fn no_keyframe_or_no_path_no_uncertainty() {
+        let mut graph = PoseGraph::default();
         let mut paths = PathsFromStart::default();
+        assert_eq!(paths.newest(&model(), &graph, travel(0)), None);
+        // A keyframe nothing joins to the start.
+        graph.nodes = vec![Pose2::default(); 2];
         assert_eq!(paths.newest(&model(), &graph, travel(0)), None);
     }
 }
