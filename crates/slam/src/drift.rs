@@ -99,7 +99,7 @@ impl PathsFromStart {
             && known <= n
             && graph.edges[self.edges..]
                 .iter()
-                .all(|e| !e.robust && e.to == e.from + 1 && e.from < n && e.to >= known)
+                .all(|e| !e.robust && e.to == e.from + 1 && e.to < n && e.to >= known)
             && anchored
                 .get(self.heading_anchors..)
                 .is_some_and(|new| new.iter().all(|p| p.node >= known));
