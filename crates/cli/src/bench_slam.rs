@@ -849,6 +849,31 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.tilt_gate = false,
     },
     Variant {
+        name: "miss-margin-2cm",
+        what: "each beam stops clearing cells 2 cm plus 0.4 % of its range short of its hit, so a surface's cells are left to the hits around it (the lidar's noise no longer pushes surfaces out)",
+        apply: |c| {
+            c.mapper.frontend.miss_margin = Some(realms_slam::occupancy::MissMargin {
+                base_m: 0.02,
+                per_m: 0.004,
+            })
+        },
+    },
+    Variant {
+        name: "miss-margin-3cm",
+        what: "each beam stops clearing cells 3 cm plus 0.6 % of its range short of its hit",
+        apply: |c| {
+            c.mapper.frontend.miss_margin = Some(realms_slam::occupancy::MissMargin {
+                base_m: 0.03,
+                per_m: 0.006,
+            })
+        },
+    },
+    Variant {
+        name: "levelled-points",
+        what: "each lidar return placed where it lies on the level by the rover's pitch and roll, not in the tilted plane of the sweep",
+        apply: |c| c.levelled_points = true,
+    },
+    Variant {
         name: "silent-rays",
         what: "a depth pixel without a return above one with a return ends hidden ground where its ray reaches the camera's 6 m, when that lies below the floor before the gap",
         apply: |c| c.silent_pixels = true,

@@ -105,6 +105,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // the maps over sixteen missions came out 95.5 % right instead of 93.7 % (BENCHMARKS.md,
         // "Floor hits of a tilt the levelling has not caught up with").
         tilt_gate: true,
+        levelled_points: false,
         depth_at_own_stamp: false,
         // The hazard layer judges 10 cm cells; drawn on the map's 5 cm cells by their centres,
         // a crater's marked edge fell a cell short of its crest. Rounded out to the half cell,

@@ -421,6 +421,7 @@ mod tests {
                     ground_clearance_m: 0.12,
                     tilt_smoothing: 0.2,
                     tilt_gate: false,
+                    levelled_points: false,
                     depth_at_own_stamp: false,
                     hazards_rounded_out: false,
                     mapper: rover_mapper_config(),

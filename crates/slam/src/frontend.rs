@@ -4,7 +4,7 @@
 
 use crate::carmen::LaserReading;
 use crate::matcher::{Match, MatcherConfig, MultiResMap, match_scan};
-use crate::occupancy::MissRule;
+use crate::occupancy::{MissMargin, MissRule};
 use crate::odometry::{OdomPredictor, OdomSample};
 use crate::trajectory::StampedPose;
 use realms_core::{Point2, Pose2};
@@ -34,6 +34,9 @@ pub struct FrontendConfig {
     pub trace_filled: bool,
     /// How each scan clears the cells its beams cross.
     pub miss_rule: MissRule,
+    /// How far short of its hit each beam stops clearing cells (`None`: up to the hit's
+    /// cell). See [`MissMargin`].
+    pub miss_margin: Option<MissMargin>,
     /// Matcher tuning.
     pub matcher: MatcherConfig,
 }
@@ -50,6 +53,7 @@ impl Default for FrontendConfig {
             densify: None,
             trace_filled: true,
             miss_rule: MissRule::EveryBeam,
+            miss_margin: None,
             matcher: MatcherConfig::default(),
         }
     }
@@ -125,7 +129,9 @@ impl Frontend {
     /// A frontend with an empty map.
     pub fn new(cfg: FrontendConfig) -> Self {
         Frontend {
-            map: MultiResMap::new(cfg.resolution_m, cfg.levels).with_miss_rule(cfg.miss_rule),
+            map: MultiResMap::new(cfg.resolution_m, cfg.levels)
+                .with_miss_rule(cfg.miss_rule)
+                .with_miss_margin(cfg.miss_margin),
             cfg,
             pose: Pose2::IDENTITY,
             odometry: OdomPredictor::default(),

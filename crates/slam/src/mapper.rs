@@ -1136,6 +1136,7 @@ impl Mapper {
             last_matched_delta: None,
             assembly: Assembly::new(cfg.frontend.resolution_m)
                 .with_miss_rule(cfg.frontend.miss_rule)
+                .with_miss_margin(cfg.frontend.miss_margin)
                 .with_occupied_above(cfg.map_occupied_above),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
             paths_from_start: PathsFromStart::default(),
@@ -1922,7 +1923,9 @@ impl Mapper {
             let f = &self.cfg.frontend;
             self.submaps.push(Submap {
                 origin_node: node,
-                map: MultiResMap::new(f.resolution_m, f.levels).with_miss_rule(f.miss_rule),
+                map: MultiResMap::new(f.resolution_m, f.levels)
+                    .with_miss_rule(f.miss_rule)
+                    .with_miss_margin(f.miss_margin),
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
@@ -2545,7 +2548,9 @@ impl Mapper {
                 continue;
             }
             redrawn = true;
-            let fresh = MultiResMap::new(f.resolution_m, f.levels).with_miss_rule(f.miss_rule);
+            let fresh = MultiResMap::new(f.resolution_m, f.levels)
+                .with_miss_rule(f.miss_rule)
+                .with_miss_margin(f.miss_margin);
             let old = std::mem::replace(&mut self.submaps[s].map, fresh);
             self.assembly.remove(s, old.finest());
             self.submaps[s].keyframes = 0;

@@ -33,6 +33,17 @@ impl MultiResMap {
         self
     }
 
+    /// The maps' beams stopping short of their hits by `margin` from now on (see
+    /// [`crate::occupancy::MissMargin`]).
+    pub fn with_miss_margin(mut self, margin: Option<crate::occupancy::MissMargin>) -> Self {
+        self.levels = self
+            .levels
+            .into_iter()
+            .map(|l| l.with_miss_margin(margin))
+            .collect();
+        self
+    }
+
     /// Inserts a scan into every level.
     pub fn insert(&mut self, sensor: Point2, endpoints: &[(Point2, bool)]) {
         self.insert_with_rays(sensor, endpoints, None);

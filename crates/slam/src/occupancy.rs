@@ -27,6 +27,37 @@ pub enum MissRule {
     OncePerScan,
 }
 
+/// How far short of its hit a beam stops clearing cells: `base_m + per_m * range`, metres.
+///
+/// A beam whose noise carries its hit past a wall crosses the wall's own cells and clears
+/// them; one whose noise falls short adds its hit in front of the wall, where beams
+/// carried past clear it again. So the wall's occupied cells settle behind the wall, away
+/// from the sensor, by about the noise, and a lidar's noise grows with range: every
+/// surface drawn the farther out the farther it was seen from, which stretches the map and
+/// the path matched against it. Stopping each beam's misses short of its hit by about the
+/// noise leaves the cells around the surface to the hits alone (the same reasoning as the
+/// truncation band of a truncated signed distance field: Curless & Levoy, SIGGRAPH 1996).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MissMargin {
+    /// At zero range, metres.
+    pub base_m: f64,
+    /// Per metre of range.
+    pub per_m: f64,
+}
+
+impl MissMargin {
+    /// Where a beam from `sensor` to its hit `end` stops clearing cells.
+    fn short_of(&self, sensor: Point2, end: Point2) -> Point2 {
+        let (dx, dy) = (end.x_m - sensor.x_m, end.y_m - sensor.y_m);
+        let range = dx.hypot(dy);
+        if range <= 0.0 {
+            return end;
+        }
+        let keep = (1.0 - (self.base_m + self.per_m * range) / range).max(0.0);
+        Point2::new(sensor.x_m + dx * keep, sensor.y_m + dy * keep)
+    }
+}
+
 /// What a map cell is, for export.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CellState {
@@ -75,6 +106,7 @@ pub struct OccupancyGrid {
     /// The world box holding every cell ever updated (none yet: `None`).
     content: Option<(Point2, Point2)>,
     miss_rule: MissRule,
+    miss_margin: Option<MissMargin>,
 }
 
 /// A rectangle of a grid's cells: columns `x0..x0 + width`, rows `y0..y0 + height`.
@@ -119,12 +151,20 @@ impl OccupancyGrid {
             lookup_limits: lookup_limits(side, side, true),
             content: None,
             miss_rule: MissRule::default(),
+            miss_margin: None,
         }
     }
 
     /// The grid clearing cells by `rule` from now on.
     pub fn with_miss_rule(mut self, rule: MissRule) -> Self {
         self.miss_rule = rule;
+        self
+    }
+
+    /// The grid's beams stopping short of their hits by `margin` from now on (`None`: each
+    /// clears every cell up to its hit's).
+    pub fn with_miss_margin(mut self, margin: Option<MissMargin>) -> Self {
+        self.miss_margin = margin;
         self
     }
 
@@ -150,6 +190,7 @@ impl OccupancyGrid {
             lookup_limits: lookup_limits(geometry.width, geometry.height, true),
             content: Some((geometry.origin, max)),
             miss_rule: MissRule::default(),
+            miss_margin: None,
         })
     }
 
@@ -378,7 +419,7 @@ impl OccupancyGrid {
             sensor,
             endpoints,
             rays,
-            self.miss_rule,
+            (self.miss_rule, self.miss_margin),
             |i, delta| self.update(i, delta, &mut probabilities),
         );
     }
@@ -678,12 +719,14 @@ pub(crate) struct Lattice {
 /// marked `hit`, and misses for the cells the beams cross (and the ends of clipped
 /// max-range readings) as `rule` says. With `rays`, beams run to those points only (which
 /// must lie in the endpoints' box), and every endpoint is only a hit or a miss at its cell.
+/// With a `margin`, a beam to a hit (and each of the `rays`) clears cells only up to where
+/// the margin stops it.
 pub(crate) fn trace_beams(
     lattice: &Lattice,
     sensor: Point2,
     endpoints: &[(Point2, bool)],
     rays: Option<&[Point2]>,
-    rule: MissRule,
+    (rule, margin): (MissRule, Option<MissMargin>),
     mut update: impl FnMut(usize, f32),
 ) {
     let r = lattice.resolution_m;
@@ -696,11 +739,16 @@ pub(crate) fn trace_beams(
     };
     let start = to_cell(sensor);
     let w = lattice.width as i64;
+    // Where a beam to `p` stops clearing cells (`hit`: `p` is a hit).
+    let stop = |p: Point2, hit: bool| match margin {
+        Some(m) if hit => m.short_of(sensor, p),
+        _ => p,
+    };
     match rule {
         MissRule::EveryBeam => {
             if let Some(rays) = rays {
                 for p in rays {
-                    walk(start, to_cell(*p), |x, y| {
+                    walk(start, to_cell(stop(*p, true)), |x, y| {
                         update((y * w + x) as usize, MISS)
                     });
                 }
@@ -708,7 +756,9 @@ pub(crate) fn trace_beams(
             for (p, hit) in endpoints {
                 let end = to_cell(*p);
                 if rays.is_none() {
-                    walk(start, end, |x, y| update((y * w + x) as usize, MISS));
+                    walk(start, to_cell(stop(*p, *hit)), |x, y| {
+                        update((y * w + x) as usize, MISS)
+                    });
                 }
                 update((end.1 * w + end.0) as usize, if *hit { HIT } else { MISS });
             }
@@ -735,10 +785,17 @@ pub(crate) fn trace_beams(
                 let marks = &mut marks[..box_w * rows];
                 let from = mark_of(start);
                 let ray_ends: Vec<(i64, i64)>;
-                let traced = match rays {
-                    None => &ends,
-                    Some(rays) => {
-                        ray_ends = rays.iter().map(|p| to_cell(*p)).collect();
+                let traced = match (rays, margin) {
+                    (None, None) => &ends,
+                    (None, Some(_)) => {
+                        ray_ends = endpoints
+                            .iter()
+                            .map(|(p, hit)| to_cell(stop(*p, *hit)))
+                            .collect();
+                        &ray_ends
+                    }
+                    (Some(rays), _) => {
+                        ray_ends = rays.iter().map(|p| to_cell(stop(*p, true))).collect();
                         &ray_ends
                     }
                 };
@@ -992,6 +1049,62 @@ mod tests {
         assert_eq!(at(1.05), HIT + 2.0 * MISS);
     }
 
+    /// The summed log-odds of the column of cells just in front of a wall and of the column
+    /// just behind it, after 10 scans of 41 beams a degree apart from (0, 0) with noise of
+    /// 2 cm: the wall is the line `x = 5` (a cell boundary), and the grid clears cells by
+    /// `rule` and `margin`.
+    fn wall_columns(rule: MissRule, margin: Option<MissMargin>) -> (f32, f32) {
+        let mut g = OccupancyGrid::new(0.05)
+            .with_miss_rule(rule)
+            .with_miss_margin(margin);
+        let mut state = 7u64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        for _ in 0..10 {
+            let beams: Vec<(Point2, bool)> = (-20..=20)
+                .map(|k| {
+                    let angle = (k as f64).to_radians();
+                    let (u, v) = (uniform(), uniform());
+                    let noise = 0.02 * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+                    let r = 5.0 / angle.cos() + noise;
+                    (Point2::new(r * angle.cos(), r * angle.sin()), true)
+                })
+                .collect();
+            g.insert(Point2::new(0.0, 0.0), &beams);
+        }
+        let column = |x: f64| -> f32 {
+            (-40..40)
+                .map(|row| g.log_odds_at(Point2::new(x, 0.025 + 0.05 * row as f64)))
+                .sum()
+        };
+        (column(4.975), column(5.025))
+    }
+
+    #[test]
+    fn beams_stopped_short_of_their_hits_draw_a_noisy_wall_where_it_is() {
+        for rule in [MissRule::OncePerScan, MissRule::EveryBeam] {
+            // A beam carried past the wall into the cell behind it crosses the cell in front
+            // and clears it: the wall's evidence lies behind it.
+            let (front, behind) = wall_columns(rule, None);
+            assert!(front < 0.7 * behind, "{rule:?}: {front} / {behind}");
+            // Stopped three standard deviations short, the cells on both sides are left to
+            // the hits, which fall on either side alike.
+            let margin = MissMargin {
+                base_m: 0.06,
+                per_m: 0.0,
+            };
+            let (front, behind) = wall_columns(rule, Some(margin));
+            assert!(
+                (front - behind).abs() < 0.05 * behind,
+                "{rule:?}: {front} / {behind}"
+            );
+        }
+    }
+
     #[test]
     fn points_filled_in_between_beams_are_hits_without_beams_of_their_own() {
         let sensor = Point2::new(0.05, 0.05);
@@ -1095,7 +1208,7 @@ mod tests {
             let rays: Vec<Point2> = endpoints.iter().step_by(2).map(|(p, _)| *p).collect();
             let rays = with_rays.then_some(rays.as_slice());
             let mut got = std::collections::BTreeMap::new();
-            trace_beams(&lattice, sensor, &endpoints, rays, MissRule::OncePerScan, |i, d| {
+            trace_beams(&lattice, sensor, &endpoints, rays, (MissRule::OncePerScan, None), |i, d| {
                 *got.entry(i).or_insert(0.0f32) += d;
             });
             let cell = |p: Point2| {
