@@ -27,7 +27,7 @@ use crate::frontend::FrontendConfig;
 use crate::health::{HealthConfig, HealthMonitor, LocalisationState, TrackedScan, Transition};
 use crate::matcher::{MatcherConfig, MultiResMap, best_heading, match_scan};
 use crate::ndt::{NdtConfig, NdtMap};
-use crate::occupancy::CellState;
+use crate::occupancy::{CellState, OccupancyGrid};
 use crate::odometry::{OdomPredictor, OdomSample};
 use crate::posegraph::{Edge, GraphSolver, HeadingPrior, PoseGraph, RobustLoss};
 use crate::slip::{SlipCalibration, WheelScale};
@@ -888,6 +888,12 @@ impl Default for MapperConfig {
 struct Submap {
     origin_node: usize,
     map: MultiResMap,
+    /// The same keyframes drawn with every beam clearing cells up to its hit, for the
+    /// published map, when the matching `map` stops its beams short of their hits
+    /// ([`FrontendConfig::miss_margin`]): a margin unbiases the surfaces matched against,
+    /// and leaves the few hits the noise throws in front of a surface uncleared, which
+    /// thickens the surfaces a map shows.
+    published: Option<OccupancyGrid>,
     keyframes: usize,
     finished: bool,
     /// The closure search's precomputation, made when searched (the map is final) and kept
@@ -1087,6 +1093,20 @@ pub struct Mapper {
     walls: Option<WallHeadings>,
 }
 
+impl Submap {
+    /// The grid the published map is drawn from.
+    fn published(&self) -> &OccupancyGrid {
+        self.published.as_ref().unwrap_or(self.map.finest())
+    }
+}
+
+/// A submap's grid for the published map, when its matching grid's beams stop short of
+/// their hits (see [`Submap::published`]).
+fn published_grid(f: &FrontendConfig) -> Option<OccupancyGrid> {
+    f.miss_margin
+        .map(|_| OccupancyGrid::new(f.resolution_m).with_miss_rule(f.miss_rule))
+}
+
 impl Mapper {
     /// An empty mapper.
     pub fn new(cfg: MapperConfig) -> Self {
@@ -1136,7 +1156,6 @@ impl Mapper {
             last_matched_delta: None,
             assembly: Assembly::new(cfg.frontend.resolution_m)
                 .with_miss_rule(cfg.frontend.miss_rule)
-                .with_miss_margin(cfg.frontend.miss_margin)
                 .with_occupied_above(cfg.map_occupied_above),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
             paths_from_start: PathsFromStart::default(),
@@ -1190,6 +1209,9 @@ impl Mapper {
         let s = &mut self.submaps[submap];
         s.map
             .insert_with_rays(local.position(), &world, rays.as_deref());
+        if let Some(published) = &mut s.published {
+            published.insert_with_rays(local.position(), &world, rays.as_deref());
+        }
         s.keyframes += 1;
         s.drawn.push(local);
         if let Some(hits) = &mut s.hits {
@@ -1926,6 +1948,7 @@ impl Mapper {
                 map: MultiResMap::new(f.resolution_m, f.levels)
                     .with_miss_rule(f.miss_rule)
                     .with_miss_margin(f.miss_margin),
+                published: published_grid(f),
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
@@ -1945,6 +1968,10 @@ impl Mapper {
             if self.submaps[s].keyframes >= self.cfg.submap_keyframes {
                 self.submaps[s].finished = true;
                 self.submaps[s].hits = None;
+                // Never searched: final, only its content is kept.
+                if let Some(published) = &mut self.submaps[s].published {
+                    published.cut_to_content();
+                }
                 self.cut_unsearched(s);
                 self.trim_submaps(s);
             }
@@ -2394,7 +2421,7 @@ impl Mapper {
         let active = self.sync_assembly();
         let active: Vec<_> = active
             .into_iter()
-            .map(|(s, pose)| (self.submaps[s].map.finest(), pose))
+            .map(|(s, pose)| (self.submaps[s].published(), pose))
             .collect();
         self.assembly.render(&active)
     }
@@ -2414,7 +2441,7 @@ impl Mapper {
         let active = self.sync_assembly();
         let active: Vec<_> = active
             .into_iter()
-            .map(|(s, pose)| (s, self.submaps[s].map.finest(), pose))
+            .map(|(s, pose)| (s, self.submaps[s].published(), pose))
             .collect();
         self.assembly.live_states(&active)
     }
@@ -2444,7 +2471,7 @@ impl Mapper {
             }
             let pose = self.graph.nodes[sub.origin_node];
             if sub.finished {
-                self.assembly.place(s, sub.map.finest(), pose);
+                self.assembly.place(s, sub.published(), pose);
             } else {
                 active.push((s, pose));
             }
@@ -2471,8 +2498,11 @@ impl Mapper {
                 && self.known_share(s, newest) >= TRIM_MIN_COVERED
             {
                 let sub = &mut self.submaps[s];
-                self.assembly.remove(s, sub.map.finest());
+                self.assembly.remove(s, sub.published());
                 sub.map.release();
+                if let Some(published) = &mut sub.published {
+                    published.release();
+                }
                 sub.precomputed = None;
                 sub.trimmed = true;
             }
@@ -2552,7 +2582,10 @@ impl Mapper {
                 .with_miss_rule(f.miss_rule)
                 .with_miss_margin(f.miss_margin);
             let old = std::mem::replace(&mut self.submaps[s].map, fresh);
-            self.assembly.remove(s, old.finest());
+            let old_published =
+                std::mem::replace(&mut self.submaps[s].published, published_grid(&f));
+            self.assembly
+                .remove(s, old_published.as_ref().unwrap_or(old.finest()));
             self.submaps[s].keyframes = 0;
             self.submaps[s].precomputed = None;
             self.submaps[s].drawn.clear();
@@ -2565,6 +2598,9 @@ impl Mapper {
             }
             // Only finished submaps are redrawn: final again, only their content is kept.
             self.submaps[s].map.cut_to_content();
+            if let Some(published) = &mut self.submaps[s].published {
+                published.cut_to_content();
+            }
         }
         if redrawn {
             self.sync_assembly();
@@ -2594,6 +2630,7 @@ mod tests {
     use super::*;
     use crate::frontend::Densify;
     use crate::health::TurnCheck;
+    use crate::occupancy::MissMargin;
 
     #[test]
     fn a_closure_on_a_ridge_is_held_along_it_as_the_score_falls() {
@@ -2805,6 +2842,7 @@ mod tests {
             mapper.submaps.push(Submap {
                 origin_node: node,
                 map,
+                published: None,
                 keyframes: 1,
                 finished: true,
                 precomputed: None,
@@ -2854,6 +2892,7 @@ mod tests {
         mapper.submaps.push(Submap {
             origin_node: 0,
             map: MultiResMap::new(f.resolution_m, f.levels),
+            published: None,
             keyframes: 30,
             finished: true,
             precomputed: None,
@@ -3128,6 +3167,39 @@ mod tests {
             .map(|p| pose.inverse().transform_point(p))
             .filter(|p| p.x_m.hypot(p.y_m) < 12.0)
             .collect()
+    }
+
+    #[test]
+    fn a_miss_margin_shortens_the_beams_matched_against_not_those_of_the_published_map() {
+        let scan = sparse_hall_scan(Pose2::IDENTITY);
+        let first_scan = |margin: Option<MissMargin>| {
+            let mut cfg = MapperConfig::default();
+            cfg.frontend.max_range_m = 12.0;
+            cfg.frontend.miss_margin = margin;
+            let mut mapper = Mapper::new(cfg);
+            mapper.add_points(0.0, Pose2::IDENTITY, scan.clone());
+            mapper
+        };
+        let mut plain = first_scan(None);
+        let mut margined = first_scan(Some(MissMargin {
+            base_m: 0.1,
+            per_m: 0.0,
+        }));
+        assert_eq!(
+            margined.render_map().log_odds(),
+            plain.render_map().log_odds(),
+            "the published map is drawn as without a margin"
+        );
+        // The grid matched against leaves the cells just short of each hit uncleared.
+        let cleared = |m: &Mapper| {
+            let grid = m.submaps[0].map.finest();
+            grid.log_odds().iter().filter(|l| **l < 0.0).count()
+        };
+        let (kept, all) = (cleared(&margined), cleared(&plain));
+        assert!(
+            kept + 200 < all,
+            "{kept} cleared with the margin, {all} without"
+        );
     }
 
     /// A noise-free 1-degree, 12 m scan from `pose` in a sparse hall like the simulated
