@@ -849,6 +849,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.tilt_gate = false,
     },
     Variant {
+        name: "smooth-points",
+        what: "each lidar endpoint averaged with its neighbours' where the three lie on one surface, not each range with theirs (averaged ranges lie beyond an oblique wall)",
+        apply: |c| c.smooth_points = true,
+    },
+    Variant {
         name: "miss-margin-2cm",
         what: "each beam stops clearing cells 2 cm plus 0.4 % of its range short of its hit, so a surface's cells are left to the hits around it (the lidar's noise no longer pushes surfaces out)",
         apply: |c| {

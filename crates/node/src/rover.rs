@@ -434,6 +434,7 @@ mod tests {
                     depth_camera: None,
                     silent_pixels: false,
                     smooth_ranges: false,
+                    smooth_points: false,
                     deskew: true,
                     depth_features: false,
                     relief_odometry: None,
