@@ -82,8 +82,9 @@ pub struct MappingConfig {
     /// Each lidar return is placed where it lies on the level, by the rover's pitch and
     /// roll (the smoothed gravity), rather than in the tilted plane of the lidar's sweep. A
     /// beam tilted by an angle `e` meets a wall `1 / cos(e)` farther than the wall lies
-    /// across the floor: on the hall's undulating floor the unlevelled returns stretched
-    /// every rover's map by about 0.2 % (`false`: in the sweep's plane).
+    /// across the floor. Off for the rovers: they tilt too little for it to show in their
+    /// maps' scale (BENCHMARKS.md, "Every rover's map stretched by 0.2 %") (`false`: in the
+    /// sweep's plane).
     pub levelled_points: bool,
     /// A depth frame's verdicts are placed at the rover's pose at the frame's own stamp:
     /// the pose of the latest scan moved on by the odometry since (wheels' travel, gyro's
@@ -995,11 +996,10 @@ impl Mapping {
             }
             let a = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad) as f64;
             let r = *r as f64;
-            let (x, y) = match by_points {
-                true => smoothed_point(&ranges, scan.angle_min_rad, scan.angle_increment_rad, i)
-                    .map_or((lx + r * a.cos(), r * a.sin()), |(x, y)| (lx + x, y)),
-                false => (lx + r * a.cos(), r * a.sin()),
-            };
+            let averaged = by_points
+                .then(|| smoothed_point(&ranges, scan.angle_min_rad, scan.angle_increment_rad, i))
+                .flatten();
+            let (x, y) = averaged.map_or((lx + r * a.cos(), r * a.sin()), |(x, y)| (lx + x, y));
             // Height of the return above the ground under the rover, levelled.
             let height = up[0] * x + up[1] * y + up[2] * lh;
             if height < self.cfg.ground_clearance_m + r * unsettled_per_m {

@@ -719,8 +719,9 @@ pub(crate) struct Lattice {
 /// marked `hit`, and misses for the cells the beams cross (and the ends of clipped
 /// max-range readings) as `rule` says. With `rays`, beams run to those points only (which
 /// must lie in the endpoints' box), and every endpoint is only a hit or a miss at its cell.
-/// With a `margin`, a beam to a hit (and each of the `rays`) clears cells only up to where
-/// the margin stops it.
+/// With a `margin`, a beam to a hit clears cells only up to where the margin stops it, and
+/// so does each of the `rays` (taken for hits: a ray clipped at a hit range is stopped
+/// short too).
 pub(crate) fn trace_beams(
     lattice: &Lattice,
     sensor: Point2,
