@@ -17,8 +17,8 @@
 //! replaced by the exact drawing when the submap is finished.
 
 use crate::occupancy::{
-    CellState, Lattice, MissMargin, MissRule, OccupancyGrid, beams_box, growth, regrow,
-    trace_beams, updated_log_odds,
+    CellState, Lattice, MissRule, OccupancyGrid, beams_box, growth, regrow, trace_beams,
+    updated_log_odds,
 };
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
@@ -53,7 +53,6 @@ pub struct Assembly {
     weigh: Weigh,
     /// How traced scans clear cells: as the submaps do.
     miss_rule: MissRule,
-    miss_margin: Option<MissMargin>,
     /// Summed log-odds above which a cell counts as occupied.
     occupied_above: f32,
     /// The live map, once asked for.
@@ -216,12 +215,6 @@ impl Assembly {
         self
     }
 
-    /// The assembly's beams stopping short of their hits by `margin` (the submaps' own).
-    pub fn with_miss_margin(mut self, margin: Option<MissMargin>) -> Self {
-        self.miss_margin = margin;
-        self
-    }
-
     /// The assembly counting a cell occupied only once its summed log-odds exceed
     /// `occupied_above` (by default [`OCCUPIED_ABOVE`]); cells between that and 0.5 are
     /// unknown. A stray hit drawn where no later beam passes stays otherwise. Set before
@@ -243,7 +236,6 @@ impl Assembly {
             placed: Vec::new(),
             weigh,
             miss_rule: MissRule::default(),
-            miss_margin: None,
             occupied_above: OCCUPIED_ABOVE,
             live: None,
             summed: None,
@@ -537,7 +529,9 @@ impl Assembly {
             sensor,
             endpoints,
             None,
-            (self.miss_rule, self.miss_margin),
+            // The live map is the published one: every beam clears up to its hit, whatever
+            // margin the submaps match on.
+            (self.miss_rule, None),
             |i, delta| {
                 let mut change = 0.0;
                 for shadow in targets.iter_mut() {

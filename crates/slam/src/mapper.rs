@@ -2581,11 +2581,9 @@ impl Mapper {
             let fresh = MultiResMap::new(f.resolution_m, f.levels)
                 .with_miss_rule(f.miss_rule)
                 .with_miss_margin(f.miss_margin);
-            let old = std::mem::replace(&mut self.submaps[s].map, fresh);
-            let old_published =
-                std::mem::replace(&mut self.submaps[s].published, published_grid(&f));
-            self.assembly
-                .remove(s, old_published.as_ref().unwrap_or(old.finest()));
+            self.assembly.remove(s, self.submaps[s].published());
+            self.submaps[s].map = fresh;
+            self.submaps[s].published = published_grid(&f);
             self.submaps[s].keyframes = 0;
             self.submaps[s].precomputed = None;
             self.submaps[s].drawn.clear();
