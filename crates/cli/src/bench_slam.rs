@@ -851,7 +851,17 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "smooth-points",
         what: "each lidar endpoint averaged with its neighbours' where the three lie on one surface, not each range with theirs (averaged ranges lie beyond an oblique wall)",
-        apply: |c| c.smooth_points = true,
+        apply: |c| c.smoothing = realms_node::mapping::ScanSmoothing::Points,
+    },
+    Variant {
+        name: "smooth-inverse",
+        what: "each lidar range averaged with its neighbours' in inverse range (scaled so a straight wall's average lies on it), not in range (averaged ranges lie beyond an oblique wall)",
+        apply: |c| c.smoothing = realms_node::mapping::ScanSmoothing::InverseRanges,
+    },
+    Variant {
+        name: "smooth-quadratic",
+        what: "each lidar range read from a parabola fitted to it and its two neighbours either side (Savitzky-Golay), where all five lie on one surface, not averaged with one either side: an average of three lies inside a boulder's round outline",
+        apply: |c| c.smoothing = realms_node::mapping::ScanSmoothing::Quadratic,
     },
     Variant {
         name: "miss-margin-2cm",

@@ -149,7 +149,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // The rovers' lidar is noisy at a centimetre or more; smoothed, the median rover's
         // trajectory error fell by a sixth (BENCHMARKS.md, "Ranges smoothed along the scan").
         smooth_ranges: true,
-        smooth_points: false,
+        smoothing: realms_node::mapping::ScanSmoothing::Ranges,
         deskew: true,
         depth_features: false,
         relief_odometry: None,

@@ -434,7 +434,7 @@ mod tests {
                     depth_camera: None,
                     silent_pixels: false,
                     smooth_ranges: false,
-                    smooth_points: false,
+                    smoothing: crate::mapping::ScanSmoothing::Ranges,
                     deskew: true,
                     depth_features: false,
                     relief_odometry: None,
