@@ -864,6 +864,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.smoothing = realms_node::mapping::ScanSmoothing::Quadratic,
     },
     Variant {
+        name: "smooth-quadratic-else-average",
+        what: "smooth-quadratic, and where only three ranges lie on one surface (an outline's ends) their average, as the rovers' smoothing takes it",
+        apply: |c| c.smoothing = realms_node::mapping::ScanSmoothing::QuadraticElseAverage,
+    },
+    Variant {
         name: "miss-margin-2cm",
         what: "each beam stops clearing cells 2 cm plus 0.4 % of its range short of its hit, so a surface's cells are left to the hits around it (the lidar's noise no longer pushes surfaces out)",
         apply: |c| {

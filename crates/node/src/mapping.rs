@@ -375,6 +375,10 @@ pub enum ScanSmoothing {
     /// the beams' spacing squared over its radius, 4 mm at 5 m from a 0.5 m rock); the
     /// parabola follows the curve, and leaves 0.70 of the noise where the average leaves 0.61.
     Quadratic,
+    /// [`Quadratic`](Self::Quadratic) where five lie on one surface, and the average of
+    /// [`Ranges`](Self::Ranges) where only three do (an outline's ends keep less noise,
+    /// and the average's bias there).
+    QuadraticElseAverage,
 }
 
 /// `ranges` with each one smoothed with its neighbours as `how` says where it and its two
@@ -399,7 +403,9 @@ fn smoothed(ranges: &[f32], how: ScanSmoothing, increment_rad: f32) -> Vec<f32> 
                     && on_one_surface(ranges, (i + 1) % n)
             };
             match how {
-                ScanSmoothing::Quadratic if five_on_one_surface() => {
+                ScanSmoothing::Quadratic | ScanSmoothing::QuadraticElseAverage
+                    if five_on_one_surface() =>
+                {
                     let (aa, bb) = (ranges[(i + n - 2) % n], ranges[(i + 2) % n]);
                     (-3.0 * aa + 12.0 * a + 17.0 * r + 12.0 * b - 3.0 * bb) / 35.0
                 }
@@ -408,7 +414,9 @@ fn smoothed(ranges: &[f32], how: ScanSmoothing, increment_rad: f32) -> Vec<f32> 
                     let sum = 1.0 / f64::from(a) + 2.0 / f64::from(r) + 1.0 / f64::from(b);
                     (inverse_sum_on_a_line / sum) as f32
                 }
-                ScanSmoothing::Ranges | ScanSmoothing::Points => (a + 2.0 * r + b) / 4.0,
+                ScanSmoothing::Ranges
+                | ScanSmoothing::Points
+                | ScanSmoothing::QuadraticElseAverage => (a + 2.0 * r + b) / 4.0,
             }
         })
         .collect()
@@ -1801,6 +1809,7 @@ mod tests {
             .collect();
         let by = |how| smoothed(&ranges, how, increment);
         let (averaged, fitted) = (by(ScanSmoothing::Ranges), by(ScanSmoothing::Quadratic));
+        let fitted_else_averaged = by(ScanSmoothing::QuadraticElseAverage);
         // Straight ahead the average of three lies 3.4 mm inside the rock (4.5034 m).
         let ahead = 180;
         let inside = f64::from(averaged[ahead]) - 4.5;
@@ -1813,8 +1822,15 @@ mod tests {
             let off = f64::from(fitted[i]) - truth;
             if i.abs_diff(ahead) > 3 {
                 assert_eq!(fitted[i].to_bits(), ranges[i].to_bits(), "beam {i}");
+                let at_the_ends = fitted_else_averaged[i].to_bits();
+                assert_eq!(at_the_ends, averaged[i].to_bits(), "beam {i}");
                 continue;
             }
+            assert_eq!(
+                fitted_else_averaged[i].to_bits(),
+                fitted[i].to_bits(),
+                "beam {i}"
+            );
             let averaged_off = f64::from(averaged[i]) - truth;
             assert!(off.abs() < 1.5e-3, "beam {i}: {off}");
             assert!(
