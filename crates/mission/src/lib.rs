@@ -149,6 +149,10 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // The rovers' lidar is noisy at a centimetre or more; smoothed, the median rover's
         // trajectory error fell by a sixth (BENCHMARKS.md, "Ranges smoothed along the scan").
         smooth_ranges: true,
+        // Ranges read from a parabola over five beams follow the boulders' round outlines,
+        // where an average of three lies inside them: on the replays the maps' stretch
+        // halved, but whole missions came out 3-4 points worse (BENCHMARKS.md, "The stretch
+        // without the lidar's noise").
         smoothing: realms_node::mapping::ScanSmoothing::Ranges,
         deskew: true,
         depth_features: false,

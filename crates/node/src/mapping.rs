@@ -120,11 +120,12 @@ pub struct MappingConfig {
     /// whole missions' maps came out worse with it (BENCHMARKS.md, "Pixels that returned
     /// nothing").
     pub silent_pixels: bool,
-    /// Each beam is averaged with its two neighbours (weights 1, 2, 1) where all three lie
-    /// on one surface, before the scan is matched and mapped: the lidar's noise shrinks to
-    /// 0.6 of itself. How, [`smoothing`](Self::smoothing) says.
+    /// Each range is smoothed with its neighbours where they lie on one surface, before the
+    /// scan is matched and mapped, as [`smoothing`](Self::smoothing) says (the rovers':
+    /// averaged with its two neighbours, weights 1, 2, 1, which shrinks the lidar's noise to
+    /// 0.6 of itself).
     pub smooth_ranges: bool,
-    /// What [`smooth_ranges`](Self::smooth_ranges) averages.
+    /// How [`smooth_ranges`](Self::smooth_ranges) smooths.
     pub smoothing: ScanSmoothing,
     /// A sweeping lidar's beams (a scan whose `time_increment_s` says when each was measured)
     /// are brought to where the rover was at the scan's last beam, by the wheels' and the
@@ -353,8 +354,8 @@ pub fn rover_mapper_config() -> MapperConfig {
     cfg
 }
 
-/// What a scan's smoothing ([`MappingConfig::smooth_ranges`]) averages, beam by beam with
-/// its two neighbours.
+/// How a scan's smoothing ([`MappingConfig::smooth_ranges`]) takes each beam with its
+/// neighbours.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ScanSmoothing {
     /// Their ranges. A straight wall's range is a convex function of the beam's angle
@@ -1816,7 +1817,8 @@ mod tests {
         assert!(inside > 0.003, "{inside}");
         // The parabola's reading is within a millimetre of the outline wherever five beams
         // meet the rock (0.13 mm ahead, 1.2 mm 3 degrees off, where the outline turns
-        // fastest), the average's 3.5-6 mm inside; and the range as it is at the rock's ends.
+        // fastest), the average's 3.5-6 mm inside; at the rock's ends the range as it is, or
+        // with `QuadraticElseAverage` the average.
         for i in ahead - 5..=ahead + 5 {
             let truth = on_the_rock(angle(i)).expect("on the rock");
             let off = f64::from(fitted[i]) - truth;

@@ -38,8 +38,7 @@ pub enum MissRule {
 /// noise leaves the cells around the surface to the hits alone (the same reasoning as the
 /// truncation band of a truncated signed distance field: Curless & Levoy, SIGGRAPH 1996).
 /// Shown on a drive of exactly cast lines and circles; the rovers' replays stretch about as
-/// much with a noise-free lidar, mostly from their smoothing (BENCHMARKS.md, "The stretch
-/// without the lidar's noise").
+/// much with a noise-free lidar (BENCHMARKS.md, "The stretch without the lidar's noise").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MissMargin {
     /// At zero range, metres.
