@@ -153,9 +153,12 @@ pub struct Navigator {
     /// rather than worked out anew (a rover parked at home is sent the same map every few
     /// seconds for hours).
     costmap_source: Option<(Grid<i8>, usize)>,
-    /// The peers' areas the last map's cells were checked against, and which cells they had
-    /// mapped.
-    seen_cache: Option<(Vec<ExploredArea>, Option<Vec<bool>>)>,
+    /// Counts the maps that differed from the one before (`costmap_source` changed), so a
+    /// result worked out on a map can tell whether it is still that map's.
+    map_generation: u64,
+    /// The map (its `map_generation`) and the peers' areas its cells were checked against,
+    /// and which cells the peers had mapped.
+    seen_cache: Option<(u64, Vec<ExploredArea>, Option<Vec<bool>>)>,
     /// Frontiers carried from one map to the next.
     frontiers: FrontierTracker,
     goal: Option<Goal>,
@@ -231,6 +234,7 @@ impl Navigator {
             cfg,
             costmap: None,
             costmap_source: None,
+            map_generation: 0,
             seen_cache: None,
             frontiers: FrontierTracker::new(),
             goal: None,
@@ -358,9 +362,9 @@ impl Navigator {
         }
     }
 
-    /// Works out in `seen_cache`, per cell of `map`, whether a peer (heard from recently) has
-    /// mapped it; `map_same`: `map` is the one the last call saw.
-    fn update_seen_by_peers(&mut self, now: Time, map: &Grid<i8>, map_same: bool) {
+    /// Works out in `seen_cache`, per cell of `map` (the map of `map_generation`), whether a
+    /// peer (heard from recently) has mapped it.
+    fn update_seen_by_peers(&mut self, now: Time, map: &Grid<i8>) {
         let live: Vec<&ExploredArea> = self
             .peer_areas
             .values()
@@ -374,13 +378,22 @@ impl Navigator {
                 == (b.origin, b.resolution_m, b.width, b.height)
                 && a.known == b.known
         };
-        let same = map_same
-            && self.seen_cache.as_ref().is_some_and(|(areas, _)| {
-                areas.len() == live.len() && areas.iter().zip(&live).all(|(a, b)| same_cells(a, b))
+        // Checked against the map the cache was worked out on, not the last map seen: a map
+        // that grew while the rover drove to an operator's goal (no frontiers looked for) is
+        // the last map seen by the time exploring resumes, and a cache sized for the map
+        // before it sent the frontier tracker past its end.
+        let same = self
+            .seen_cache
+            .as_ref()
+            .is_some_and(|(generation, areas, _)| {
+                *generation == self.map_generation
+                    && areas.len() == live.len()
+                    && areas.iter().zip(&live).all(|(a, b)| same_cells(a, b))
             });
         if !same {
             let seen = seen_by(&live, map);
-            self.seen_cache = Some((live.into_iter().cloned().collect(), seen));
+            let areas = live.into_iter().cloned().collect();
+            self.seen_cache = Some((self.map_generation, areas, seen));
         }
     }
 
@@ -419,8 +432,8 @@ impl Navigator {
             bumped = self.with_bumps(map);
             &bumped
         };
-        let (costmap, explored, map_same) = match (self.costmap.take(), &self.costmap_source) {
-            (Some(kept), Some((source, explored))) if source == map => (kept, *explored, true),
+        let (costmap, explored) = match (self.costmap.take(), &self.costmap_source) {
+            (Some(kept), Some((source, explored))) if source == map => (kept, *explored),
             (kept, source) => {
                 let explored = map
                     .cells()
@@ -433,7 +446,8 @@ impl Navigator {
                     _ => Costmap::from_map(map, &self.cfg.costmap),
                 };
                 self.costmap_source = Some((map.clone(), explored));
-                (costmap, explored, false)
+                self.map_generation += 1;
+                (costmap, explored)
             }
         };
         let here = pose.position();
@@ -453,11 +467,11 @@ impl Navigator {
         let exploring =
             self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous;
         let frontiers = if exploring {
-            self.update_seen_by_peers(now, map, map_same);
+            self.update_seen_by_peers(now, map);
             let seen = self
                 .seen_cache
                 .as_ref()
-                .and_then(|(_, seen)| seen.as_deref());
+                .and_then(|(_, _, seen)| seen.as_deref());
             self.frontiers
                 .update(map, &costmap, self.cfg.explore.min_frontier_cells, seen)
         } else {
@@ -882,6 +896,49 @@ mod tests {
                 .iter()
                 .all(|e| !e.what.contains("Operator")),
         );
+    }
+
+    #[test]
+    fn a_map_grown_while_driving_to_an_operators_goal_is_explored_with_the_peers_coverage_redone() {
+        let mut nav = navigator();
+        let pose = Pose2::new(2.0, 2.0, 0.0);
+        // A peer knows the room's west half, as this rover does.
+        let mut known = vec![0u8; 100 * 100 / 8];
+        for i in (0..100 * 100).filter(|i| i % 100 < 50) {
+            known[i / 8] |= 1 << (i % 8);
+        }
+        let area = ExploredArea {
+            header: realms_core::msgs::Header::default(),
+            origin: Point2::new(0.0, 0.0),
+            resolution_m: 0.1,
+            width: 100,
+            height: 100,
+            known,
+        };
+        let at = Time::from_secs_f64;
+        nav.hear_explored(at(0.0), RoverId(2), area);
+        nav.on_map(at(0.0), &room(false), pose);
+        // Off to the operator's goal, the map grows by a strip along its north side: no
+        // frontiers are looked for on it.
+        nav.set_operator_goal(at(1.0), Some(Point2::new(4.0, 4.0)));
+        let small = room(false);
+        let mut grown = Grid::new(
+            GridGeometry {
+                height: 110,
+                ..*small.geometry()
+            },
+            -1i8,
+        );
+        for (i, v) in small.cells().iter().enumerate() {
+            *grown.get_mut(i % 100, i / 100).expect("inside") = *v;
+        }
+        nav.on_map(at(2.0), &grown, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Operator));
+        // Exploring again on the same grown map: the peers' coverage is worked out on it.
+        nav.set_operator_goal(at(3.0), None);
+        nav.on_map(at(4.0), &grown, pose);
+        nav.on_map(at(5.0), &grown, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
     }
 
     #[test]
