@@ -379,9 +379,9 @@ impl Navigator {
                 && a.known == b.known
         };
         // Checked against the map the cache was worked out on, not the last map seen: a map
-        // that grew while the rover drove to an operator's goal (no frontiers looked for) is
-        // the last map seen by the time exploring resumes, and a cache sized for the map
-        // before it sent the frontier tracker past its end.
+        // that grew while the rover drove to a goal other than a frontier (an operator's,
+        // home; no frontiers looked for) is the last map seen by the time exploring resumes,
+        // and a cache sized for the map before it sent the frontier tracker past its end.
         let same = self
             .seen_cache
             .as_ref()
