@@ -367,7 +367,7 @@ pub enum ScanSmoothing {
     /// angle (`cos(angle - normal) / d`), and the sum of a sinusoid's two neighbours a step
     /// `s` away is `2 cos s` times its own, so the average, scaled by that, lies on the wall.
     InverseRanges,
-    /// Their endpoints ([`smoothed_point`]), which lie on a straight wall too.
+    /// Their endpoints (each neighbour's at its own angle), which lie on a straight wall too.
     Points,
     /// Five ranges fitted by a parabola in the beam's angle, read at the middle one
     /// (Savitzky and Golay's weights -3, 12, 17, 12, -3 over 35; Analytical Chemistry, 1964),
@@ -438,10 +438,8 @@ fn on_one_surface(ranges: &[f32], i: usize) -> bool {
 
 /// Beam `i`'s endpoint in the lidar's frame, averaged with its two neighbours' (weights 1,
 /// 2, 1) where [`on_one_surface`] says the three lie on one surface; `None` without a
-/// return. Three points of a straight wall average to a point on it. Their ranges do not: a
-/// wall's range is a convex function of the beam's angle, so the average of three lies
-/// beyond the wall, by 0.05 % of the range at 60 degrees of incidence and 0.2 % at 75
-/// (beyond about 80 degrees neighbouring ranges differ too much to be averaged).
+/// return. Three points of a straight wall average to a point on it, where their ranges'
+/// average does not ([`ScanSmoothing::Ranges`]).
 fn smoothed_point(
     ranges: &[f32],
     angle_min_rad: f32,
