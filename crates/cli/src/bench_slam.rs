@@ -712,6 +712,36 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.heading_anchor_rad = Some(1f64.to_radians()),
     },
     Variant {
+        name: "heading-window-2s-0.5deg",
+        what: "a match whose heading turns more than 0.5 deg away from the gyro's turn within 2 s redone with the heading held at that bound",
+        apply: |c| {
+            c.mapper.heading_window = Some(realms_slam::mapper::HeadingWindow {
+                span_s: 2.0,
+                max_rad: 0.5f64.to_radians(),
+            })
+        },
+    },
+    Variant {
+        name: "heading-window-5s-0.5deg",
+        what: "heading-window-2s-0.5deg over 5 s",
+        apply: |c| {
+            c.mapper.heading_window = Some(realms_slam::mapper::HeadingWindow {
+                span_s: 5.0,
+                max_rad: 0.5f64.to_radians(),
+            })
+        },
+    },
+    Variant {
+        name: "heading-window-2s-1deg",
+        what: "heading-window-2s-0.5deg with 1 deg",
+        apply: |c| {
+            c.mapper.heading_window = Some(realms_slam::mapper::HeadingWindow {
+                span_s: 2.0,
+                max_rad: 1f64.to_radians(),
+            })
+        },
+    },
+    Variant {
         name: "gap-drop-5cm",
         what: "gaps-to-6m, and hidden ground a hazard when the ground beyond resumes 5 cm lower than before it (not 8 cm)",
         apply: |c| {

@@ -383,6 +383,12 @@ pub struct MapperConfig {
     /// drift is redone with the heading held to the gyro's. Small steps that each pass
     /// `max_heading_step_rad` can add up to degrees (`None`: no such check), radians.
     pub heading_anchor_rad: Option<f64>,
+    /// With a gyro: a match whose heading has turned, within the window's span, more than
+    /// its bound away from the gyro's turn is redone with the heading held at that bound
+    /// (`None`: no such check). Each step under `max_heading_step_rad` passes, but steps
+    /// of half a degree to a degree, six in a row, are a match walking off on a few rocks,
+    /// not the gyro's error, which over a second is a few hundredths of a degree.
+    pub heading_window: Option<HeadingWindow>,
     /// With a gyro: each matched scan's heading is the gyro's turn from the last pose, moved
     /// this share of the way towards the match's own heading, and the match is redone with
     /// the heading held there (a complementary filter: the gyro carries the turns, the map
@@ -725,6 +731,34 @@ struct HeadingAnchor {
     offset_rad: f64,
 }
 
+/// How far the tracked heading may turn away from the gyro's over a short span
+/// ([`MapperConfig::heading_window`]). Unlike an anchor held since the pose was set, a
+/// window forgets: the gyro's bias and the map's own slow corrections add up over minutes,
+/// not over a few seconds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeadingWindow {
+    /// The span over which the tracked heading less the gyro's is compared, seconds.
+    pub span_s: f64,
+    /// The most it may change within the span, radians.
+    pub max_rad: f64,
+}
+
+impl HeadingWindow {
+    /// The heading offset (tracked less the gyro's) nearest `offset_rad` that stays within
+    /// `max_rad` of every offset in `recent`; `None` if `offset_rad` already does, or if
+    /// no offset can (the recent ones spread wider than the bound, as after a reset).
+    fn clamp(&self, recent: impl Iterator<Item = f64>, offset_rad: f64) -> Option<f64> {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for o in recent {
+            // Relative to the new offset, so that headings across +-pi compare.
+            let d = normalize_angle_rad(o - offset_rad);
+            lo = lo.max(d - self.max_rad);
+            hi = hi.min(d + self.max_rad);
+        }
+        (lo <= hi && (lo > 0.0 || hi < 0.0)).then(|| offset_rad + 0.0f64.clamp(lo, hi))
+    }
+}
+
 /// How far a loop closure may move a keyframe: `base_m + per_m * d`, where `d` is the length
 /// of the shortest path between the two ends through the pose graph (travel along its
 /// odometry edges, [`hop_m`](Self::hop_m) for each accepted closure).
@@ -819,6 +853,7 @@ impl Default for MapperConfig {
             min_scan_points: 10,
             max_heading_step_rad: None,
             heading_anchor_rad: None,
+            heading_window: None,
             heading_map_share: None,
             heading_map_share_without_walls: false,
             still_hold: None,
@@ -1048,6 +1083,9 @@ pub struct Mapper {
     last_headings: Option<(f64, f64)>,
     /// The tracked heading less the odometry's when the pose was last set, and when.
     heading_anchor: Option<HeadingAnchor>,
+    /// The tracked heading less the odometry's at each scan within the heading window's
+    /// span, oldest first, since the pose was last set ([`MapperConfig::heading_window`]).
+    heading_offsets: std::collections::VecDeque<(f64, f64)>,
     /// The odometry's heading at the last scan, while not lost: where a new anchor starts
     /// from. Whatever sets the pose other than tracking (an optimisation, a relocalisation
     /// after being lost) drops the anchor.
@@ -1067,6 +1105,9 @@ pub struct Mapper {
     /// Matches redone with the heading held to the gyro's because it had strayed from it
     /// since the pose was set ([`MapperConfig::heading_anchor_rad`]).
     pub heading_anchor_holds: usize,
+    /// Matches redone with the heading held because it turned too far from the gyro's
+    /// within the heading window ([`MapperConfig::heading_window`]).
+    pub heading_window_holds: usize,
     /// Relocalisation searches made while lost.
     pub relocalise_searches: usize,
     /// Searches of a submap for a closure or a relocalisation so far (a clock for which
@@ -1139,6 +1180,7 @@ impl Mapper {
             wheel_heading: None,
             last_headings: None,
             heading_anchor: None,
+            heading_offsets: std::collections::VecDeque::new(),
             last_odom_yaw: None,
             searches_since_lost: 0,
             last_information: [[0.0; 3]; 3],
@@ -1147,6 +1189,7 @@ impl Mapper {
             closure_records: Vec::new(),
             heading_holds: 0,
             heading_anchor_holds: 0,
+            heading_window_holds: 0,
             relocalise_searches: 0,
             searches: 0,
             fast_turn_searches: 0,
@@ -1451,6 +1494,29 @@ impl Mapper {
                     }
                     // A refinement must not turn a heading the gyro holds.
                     let mut refine_rotation_weight = matcher.prior_rotation_weight;
+                    if let Some(window) = self.cfg.heading_window {
+                        let offset = normalize_angle_rad((origin * m.pose).yaw_rad - odom.yaw_rad);
+                        let recent = self
+                            .heading_offsets
+                            .iter()
+                            .filter(|(t, _)| *t >= time_s - window.span_s)
+                            .map(|(_, o)| *o);
+                        if let Some(bounded) = window.clamp(recent, offset) {
+                            let held = MatcherConfig {
+                                prior_rotation_weight: HELD_HEADING_WEIGHT,
+                                ..matcher
+                            };
+                            let yaw = m.pose.yaw_rad + normalize_angle_rad(bounded - offset);
+                            m = match_scan(
+                                map,
+                                &dense,
+                                Pose2::new(m.pose.x_m, m.pose.y_m, yaw),
+                                &held,
+                            );
+                            refine_rotation_weight = HELD_HEADING_WEIGHT;
+                            self.heading_window_holds += 1;
+                        }
+                    }
                     let share = self.cfg.heading_map_share.filter(|_| {
                         !self.cfg.heading_map_share_without_walls
                             || self
@@ -1672,9 +1738,23 @@ impl Mapper {
             .settle(odom, self.pose, &prediction, relocalised);
         if lost {
             self.heading_anchor = None;
+            self.heading_offsets.clear();
             self.last_odom_yaw = None;
         } else {
             self.last_odom_yaw = Some(odom.yaw_rad);
+            if let Some(window) = self.cfg.heading_window {
+                while self
+                    .heading_offsets
+                    .front()
+                    .is_some_and(|(t, _)| *t < time_s - window.span_s)
+                {
+                    self.heading_offsets.pop_front();
+                }
+                self.heading_offsets.push_back((
+                    time_s,
+                    normalize_angle_rad(self.pose.yaw_rad - odom.yaw_rad),
+                ));
+            }
         }
         // They were seen for this scan, and are stale at the next.
         self.features.clear();
@@ -2028,6 +2108,7 @@ impl Mapper {
             self.pose = self.graph.nodes[node];
             // The optimisation may turn the pose: the gyro's heading is anchored anew.
             self.heading_anchor = None;
+            self.heading_offsets.clear();
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();
             }
@@ -3399,11 +3480,20 @@ mod tests {
         heading_map_share: Option<f64>,
         walls: Option<bool>,
     ) -> f64 {
+        heading_error_with_matches_straying_under(|cfg| {
+            if let Some(share_without_walls) = walls {
+                cfg.wall_headings = Some(WallHeadingConfig::default());
+                cfg.heading_map_share_without_walls = share_without_walls;
+            }
+            cfg.heading_anchor_rad = anchor_rad;
+            cfg.heading_map_share = heading_map_share;
+        })
+    }
+
+    /// The heading error after 40 scans whose matches each stray 0.3 degrees from the
+    /// gyro's, the rovers' gyro and gate set, then `configure` applied, degrees.
+    fn heading_error_with_matches_straying_under(configure: impl FnOnce(&mut MapperConfig)) -> f64 {
         let mut cfg = MapperConfig::default();
-        if let Some(share_without_walls) = walls {
-            cfg.wall_headings = Some(WallHeadingConfig::default());
-            cfg.heading_map_share_without_walls = share_without_walls;
-        }
         cfg.frontend.max_range_m = 12.0;
         cfg.frontend.levels = 1;
         cfg.keyframe_translation_m = 0.3;
@@ -3412,8 +3502,7 @@ mod tests {
             bias_rad_s: 2e-4,
         });
         cfg.max_heading_step_rad = Some(1f64.to_radians());
-        cfg.heading_anchor_rad = anchor_rad;
-        cfg.heading_map_share = heading_map_share;
+        configure(&mut cfg);
         let mut mapper = Mapper::new(cfg);
         let mut last = 0.0;
         for k in 0..40 {
@@ -3423,6 +3512,60 @@ mod tests {
             last = normalize_angle_rad(tracked.pose.yaw_rad - truth.yaw_rad).to_degrees();
         }
         last.abs()
+    }
+
+    #[test]
+    fn a_heading_turning_from_the_gyros_faster_than_the_window_allows_is_held_at_its_bound() {
+        // Matches straying 0.3 degrees a scan (3 degrees a second), 11.9 degrees off in four
+        // seconds unchecked. Bounded to half a degree within any two seconds, the heading may
+        // stray a quarter of a degree a second: 1.0 degree in the four seconds.
+        let unchecked = heading_error_with_matches_straying(None, None);
+        let windowed = heading_error_with_matches_straying_under(|cfg| {
+            cfg.heading_window = Some(HeadingWindow {
+                span_s: 2.0,
+                max_rad: 0.5f64.to_radians(),
+            });
+        });
+        assert!(unchecked > 8.0, "{unchecked:.2} deg");
+        assert!(windowed < 1.5, "{windowed:.2} deg");
+    }
+
+    #[test]
+    fn the_heading_window_bounds_an_offset_by_every_recent_one_across_the_half_turn() {
+        let window = HeadingWindow {
+            span_s: 2.0,
+            max_rad: 0.5f64.to_radians(),
+        };
+        let deg = |d: f64| d.to_radians();
+        // Within half a degree of both: passes.
+        assert_eq!(
+            window.clamp([deg(0.1), deg(0.4)].into_iter(), deg(0.3)),
+            None
+        );
+        // Beyond the lower one's bound: held at it.
+        let held = window
+            .clamp([deg(0.1), deg(0.4)].into_iter(), deg(1.0))
+            .expect("held");
+        assert!((held - deg(0.6)).abs() < 1e-12, "{}", held.to_degrees());
+        let held = window
+            .clamp([deg(0.1), deg(0.4)].into_iter(), deg(-1.0))
+            .expect("held");
+        assert!((held - deg(-0.1)).abs() < 1e-12, "{}", held.to_degrees());
+        // Offsets either side of the half turn are 0.4 degrees apart, not 359.6.
+        assert_eq!(window.clamp([deg(179.9)].into_iter(), deg(-179.7)), None);
+        let held = window
+            .clamp([deg(179.9)].into_iter(), deg(-179.0))
+            .expect("held");
+        assert!(
+            (normalize_angle_rad(held - deg(-179.6))).abs() < 1e-9,
+            "{}",
+            held.to_degrees()
+        );
+        // Recent offsets spread wider than the bound: nothing can satisfy them all.
+        assert_eq!(
+            window.clamp([deg(0.0), deg(2.0)].into_iter(), deg(5.0)),
+            None
+        );
     }
 
     #[test]
