@@ -464,8 +464,14 @@ impl Navigator {
             self.start_goal(now, op, GoalKind::Operator);
         }
         let current = self.goal.map(|g| g.point);
-        let exploring =
-            self.goal.is_none_or(|g| g.kind == GoalKind::Frontier) && self.cfg.autonomous;
+        // A rover on its way home because no frontier was left keeps looking: ground that
+        // turns up on the way (a peer's claim lapsing, a corner its map redrew) is taken
+        // from there, not after the drive home and back. One sent home by a stall is not
+        // (its frontiers are the ones driving up to does not map).
+        let exploring = self.cfg.autonomous
+            && self.goal.is_none_or(|g| {
+                g.kind == GoalKind::Frontier || (g.kind == GoalKind::Home && !stalled)
+            });
         let frontiers = if exploring {
             self.update_seen_by_peers(now, map);
             let seen = self
@@ -537,7 +543,7 @@ impl Navigator {
                     self.start_goal(now, self.cfg.home, GoalKind::Home);
                 }
             } else {
-                self.choose_frontier(now, &free);
+                self.choose_frontier(now, &free, !options.is_empty());
                 if options.is_empty() && !self.done && self.goal.is_none() {
                     self.event(now, "no reachable frontier left: returning home".into());
                     self.start_goal(now, self.cfg.home, GoalKind::Home);
@@ -637,16 +643,22 @@ impl Navigator {
     }
 
     /// Keeps the current frontier while it is still among the options and not much worse
-    /// than the best; otherwise takes the best.
-    fn choose_frontier(&mut self, now: Time, options: &[Candidate]) {
+    /// than the best; otherwise takes the best. `peers_have_some`: frontiers within reach
+    /// are left that peers are mapping (what the event for a dropped goal says).
+    fn choose_frontier(&mut self, now: Time, options: &[Candidate], peers_have_some: bool) {
         let Some(best) = options.first() else {
             if let Some(g) = self.goal
                 && g.kind == GoalKind::Frontier
             {
+                let why = if peers_have_some {
+                    "none left that no peer is mapping"
+                } else {
+                    "no frontier left within reach"
+                };
                 self.event(
                     now,
                     format!(
-                        "dropped frontier ({:.1}, {:.1}): none left that no peer is mapping",
+                        "dropped frontier ({:.1}, {:.1}): {why}",
                         g.point.x_m, g.point.y_m
                     ),
                 );
@@ -939,6 +951,38 @@ mod tests {
         nav.on_map(at(4.0), &grown, pose);
         nav.on_map(at(5.0), &grown, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+    }
+
+    #[test]
+    fn a_rover_going_home_for_want_of_frontiers_takes_one_that_turns_up_on_the_way() {
+        let mut nav = navigator();
+        let pose = Pose2::new(2.0, 5.0, 0.0);
+        // The whole room known: nothing left to explore.
+        let mut whole = room(false);
+        for v in whole.cells_mut() {
+            if *v < 0 {
+                *v = 0;
+            }
+        }
+        let at = Time::from_secs_f64;
+        nav.on_map(at(0.0), &room(false), pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        nav.take_events();
+        nav.on_map(at(3.0), &whole, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Home));
+        // No peer took the frontier: the event says it is gone.
+        let events = nav.take_events();
+        assert!(
+            events.iter().any(|e| e.what.starts_with("dropped frontier")
+                && e.what.ends_with("no frontier left within reach")),
+            "{events:?}"
+        );
+        // On the way, the east half is unknown again (a peer's coverage lapsed, the map
+        // was redrawn): its frontier is taken from where the rover is.
+        nav.on_map(at(6.0), &room(false), pose);
+        let (goal, kind) = nav.goal().expect("a goal");
+        assert_eq!(kind, GoalKind::Frontier);
+        assert!((goal.x_m - 5.0).abs() < 0.3, "{goal:?}");
     }
 
     #[test]
