@@ -175,6 +175,9 @@ pub struct Navigator {
     next_map: Time,
     replan_now: bool,
     done: bool,
+    /// The rover was last sent home because its map stopped growing, not for want of
+    /// frontiers: it looks for none on the way.
+    home_for_stall: bool,
     /// Times the way home was given up.
     home_failures: u32,
     /// When the guard last forced a replan.
@@ -248,6 +251,7 @@ impl Navigator {
             next_map: Time::ZERO,
             replan_now: true,
             done: false,
+            home_for_stall: false,
             home_failures: 0,
             last_forced_replan: None,
             grown: None,
@@ -466,11 +470,13 @@ impl Navigator {
         let current = self.goal.map(|g| g.point);
         // A rover on its way home because no frontier was left keeps looking: ground that
         // turns up on the way (a peer's claim lapsing, a corner its map redrew) is taken
-        // from there, not after the drive home and back. One sent home by a stall is not
-        // (its frontiers are the ones driving up to does not map).
+        // from there, not after the drive home and back. One sent home because its map
+        // stopped growing does not, even where the drive home maps a little (its frontiers
+        // are the ones driving up to does not map).
         let exploring = self.cfg.autonomous
             && self.goal.is_none_or(|g| {
-                g.kind == GoalKind::Frontier || (g.kind == GoalKind::Home && !stalled)
+                g.kind == GoalKind::Frontier
+                    || (g.kind == GoalKind::Home && !self.home_for_stall && !stalled)
             });
         let frontiers = if exploring {
             self.update_seen_by_peers(now, map);
@@ -541,12 +547,14 @@ impl Navigator {
                         format!("no new ground mapped in {minutes:.0} min: returning home"),
                     );
                     self.start_goal(now, self.cfg.home, GoalKind::Home);
+                    self.home_for_stall = true;
                 }
             } else {
                 self.choose_frontier(now, &free, !options.is_empty());
                 if options.is_empty() && !self.done && self.goal.is_none() {
                     self.event(now, "no reachable frontier left: returning home".into());
                     self.start_goal(now, self.cfg.home, GoalKind::Home);
+                    self.home_for_stall = false;
                 }
             }
         }
@@ -1021,6 +1029,31 @@ mod tests {
         assert!((300.0..303.0).contains(&t), "at {t} s");
         // Home by the end, and it stays there.
         assert_eq!(nav.activity(), Activity::Done);
+    }
+
+    #[test]
+    fn a_rover_sent_home_by_a_stalled_map_looks_for_no_frontier_on_the_way() {
+        let mut nav = navigator();
+        // The east half stays unknown whatever the rover does, until it has given up.
+        let map = room(false);
+        let pose = Pose2::new(2.0, 5.0, 0.0);
+        let mut k = 0;
+        while nav.goal().map(|g| g.1) != Some(GoalKind::Home) {
+            let now = Time::from_secs_f64(k as f64);
+            nav.on_map(now, &map, pose);
+            k += 3;
+            assert!(k < 400, "never sent home");
+        }
+        // On the way home the map grows by a strip of 3 m² beside the frontier: no longer
+        // stalled, but the frontier is one driving up to does not map.
+        let mut grown = map.clone();
+        for y in 10..90 {
+            for x in 50..54 {
+                *grown.get_mut(x, y).expect("inside") = 0;
+            }
+        }
+        nav.on_map(Time::from_secs_f64(k as f64), &grown, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Home));
     }
 
     #[test]

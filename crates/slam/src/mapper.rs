@@ -746,7 +746,8 @@ pub struct HeadingWindow {
 impl HeadingWindow {
     /// The heading offset (tracked less the gyro's) nearest `offset_rad` that stays within
     /// `max_rad` of every offset in `recent`; `None` if `offset_rad` already does, or if
-    /// no offset can (the recent ones spread wider than the bound, as after a reset).
+    /// no offset can (the recent ones already spread wider than the bound: a refinement
+    /// after a hold turns the heading a little past it).
     fn clamp(&self, recent: impl Iterator<Item = f64>, offset_rad: f64) -> Option<f64> {
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for o in recent {
