@@ -386,7 +386,7 @@ pub struct MapperConfig {
     /// With a gyro: a match whose heading has turned, within the window's span, more than
     /// its bound away from the gyro's turn is redone with the heading held at that bound
     /// (`None`: no such check). Each step under `max_heading_step_rad` passes, but steps
-    /// of half a degree to a degree, six in a row, are a match walking off on a few rocks,
+    /// of half a degree to a degree, four in a row, are a match walking off on a few rocks,
     /// not the gyro's error, which over a second is a few hundredths of a degree.
     pub heading_window: Option<HeadingWindow>,
     /// With a gyro: each matched scan's heading is the gyro's turn from the last pose, moved
