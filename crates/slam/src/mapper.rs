@@ -1738,8 +1738,7 @@ impl Mapper {
         self.odometry
             .settle(odom, self.pose, &prediction, relocalised);
         if lost {
-            self.heading_anchor = None;
-            self.heading_offsets.clear();
+            self.forget_heading_references();
             self.last_odom_yaw = None;
         } else {
             self.last_odom_yaw = Some(odom.yaw_rad);
@@ -2108,13 +2107,19 @@ impl Mapper {
                 .shift(self.graph.nodes[node] * self.pose.inverse());
             self.pose = self.graph.nodes[node];
             // The optimisation may turn the pose: the gyro's heading is anchored anew.
-            self.heading_anchor = None;
-            self.heading_offsets.clear();
+            self.forget_heading_references();
             if let Some(w) = &mut self.wheel_scale {
                 w.restart();
             }
             self.pending_closures = false;
         }
+    }
+
+    /// Drops what the tracked heading was compared with the gyro's against (the anchor, the
+    /// window's offsets): the pose was set by something other than tracking.
+    fn forget_heading_references(&mut self) {
+        self.heading_anchor = None;
+        self.heading_offsets.clear();
     }
 
     /// Searches finished submaps near `node` for a closure; returns whether one was added.
