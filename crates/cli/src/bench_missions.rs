@@ -14,6 +14,7 @@ use realms_core::Time;
 use realms_mission::report::MissionReport;
 use realms_mission::slam_record::CovarianceCheck;
 use realms_mission::{Mission, MissionOptions};
+use realms_node::navigation::RevisitConfig;
 use realms_sim::World;
 use serde::Serialize;
 
@@ -225,7 +226,16 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
 fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::NavigationConfig)> {
     match name {
         "unjudged-must-pay" => Ok(|n| n.explore.unjudged_must_pay = true),
-        _ => bail!("unknown navigation variant `{name}`; known: unjudged-must-pay"),
+        "revisit" => Ok(|n| n.revisit = Some(RevisitConfig::default())),
+        "revisit-0.4m" => Ok(|n| {
+            n.revisit = Some(RevisitConfig {
+                above_m: 0.4,
+                ..RevisitConfig::default()
+            })
+        }),
+        _ => bail!(
+            "unknown navigation variant `{name}`; known: unjudged-must-pay, revisit, revisit-0.4m"
+        ),
     }
 }
 

@@ -229,7 +229,9 @@ pub struct BenchMissionsArgs {
     #[arg(long)]
     pub variant: Option<String>,
     /// Run the rovers with this change to their navigation: `unjudged-must-pay` (a frontier
-    /// beside ground only the lidar saw is driven to only where it is worth the drive).
+    /// beside ground only the lidar saw is driven to only where it is worth the drive),
+    /// `revisit` (a rover whose position grew uncertain past 0.25 m drives back to ground it
+    /// mapped while it knew where it was, to close the loop), `revisit-0.4m` (past 0.4 m).
     #[arg(long)]
     pub nav_variant: Option<String>,
 }

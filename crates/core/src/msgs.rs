@@ -250,6 +250,9 @@ pub enum NavActivity {
     /// Lost, and no view it turned through matched its map: stopped, waiting for the
     /// operator (its map is kept as it was when it got lost).
     Lost,
+    /// Its pose grew too uncertain: driving back to ground it mapped while it knew where it
+    /// was, to tie the pose back to it by a loop closure, before exploring on.
+    Revisiting,
 }
 
 /// A rover's navigation state and target (`nav/status`; no ROS counterpart). Sent when

@@ -650,6 +650,18 @@ impl Mapping {
         self.mapper.pose()
     }
 
+    /// How far the position may be off, by the path that ties it to the start (the
+    /// standard deviation the published covariance holds at least), metres; `None` while
+    /// lost or without the model (see [`Mapper::pose_uncertainty`]).
+    pub fn position_uncertainty_m(&mut self) -> Option<f64> {
+        if self.mapper.state() == LocalisationState::Lost {
+            return None;
+        }
+        self.mapper
+            .pose_uncertainty()
+            .map(|(position_m, _)| position_m)
+    }
+
     /// Every scan's pose as the SLAM now has it (loop closures move past poses too), for
     /// grading the trajectory afterwards.
     pub fn trajectory(&self) -> Vec<realms_slam::trajectory::StampedPose> {

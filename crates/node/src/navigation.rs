@@ -12,6 +12,13 @@
 //! gives the goal up and blacklists it. Operator goals pre-empt exploration until reached
 //! or cancelled. When no reachable frontier is left the rover drives home (its start,
 //! beside the lander) and stops there.
+//!
+//! With [`NavigationConfig::revisit`] set, a rover whose pose grew too uncertain (the
+//! position's standard deviation by the path that ties it to the start, see
+//! `realms_slam::drift`) breaks off exploring and drives back to the nearest ground it
+//! mapped while it knew where it was, until a loop closure there ties its pose back:
+//! active loop closing, after Stachniss, Hähnel and Burgard, "Exploration with Active
+//! Loop-Closing for FastSLAM" (IROS 2004).
 
 use realms_core::msgs::ExploredArea;
 use realms_core::{Cell, CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
@@ -62,6 +69,40 @@ pub struct NavigationConfig {
     pub stall_window: Duration,
     /// ... square metres.
     pub stall_growth_m2: f64,
+    /// Driving back to re-anchor an uncertain pose (off: `None`).
+    pub revisit: Option<RevisitConfig>,
+}
+
+/// When a rover breaks off exploring to tie its pose back to ground it mapped while it knew
+/// where it was (see the module's documentation). Uncertainties are the position's standard
+/// deviation by the path that ties it to the start, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RevisitConfig {
+    /// A revisit starts when the uncertainty grows past this ...
+    pub above_m: f64,
+    /// ... towards the nearest place the rover mapped while its own was within this, and
+    /// where its scan kept at least `anchor_points` returns ...
+    pub anchored_m: f64,
+    /// See `anchored_m`.
+    pub anchor_points: usize,
+    /// ... and ends once a closure has brought it back within this.
+    pub resume_m: f64,
+    /// A revisit that ended without that (the place reached, or given up) is not started
+    /// again until the uncertainty has grown by this much more: the place did not close the
+    /// loop, and another revisit at once would only drive there again.
+    pub retry_growth_m: f64,
+}
+
+impl Default for RevisitConfig {
+    fn default() -> Self {
+        RevisitConfig {
+            above_m: 0.25,
+            anchored_m: 0.1,
+            anchor_points: 100,
+            resume_m: 0.15,
+            retry_growth_m: 0.25,
+        }
+    }
 }
 
 impl NavigationConfig {
@@ -85,6 +126,7 @@ impl NavigationConfig {
             autonomous: true,
             stall_window: Duration::from_secs(300),
             stall_growth_m2: 2.0,
+            revisit: None,
         }
     }
 }
@@ -98,6 +140,8 @@ pub enum GoalKind {
     Operator,
     /// Home, exploration being over.
     Home,
+    /// Ground mapped while the pose was known, to tie an uncertain pose back to it.
+    Revisit,
 }
 
 /// What the navigator is doing, for status messages.
@@ -184,6 +228,12 @@ pub struct Navigator {
     last_forced_replan: Option<Time>,
     /// Known cells of the map when it last grew by the stall threshold, and when.
     grown: Option<(usize, Time)>,
+    /// The position's uncertainty (metres) and the nearest place mapped while it was
+    /// small, as the rover last said ([`Navigator::set_localisation`]).
+    localisation: Option<(f64, Option<Point2>)>,
+    /// The uncertainty past which a revisit starts now ([`RevisitConfig::above_m`], raised
+    /// after a revisit that closed no loop).
+    revisit_above_m: f64,
     events: Vec<NavEvent>,
 }
 
@@ -198,6 +248,10 @@ const BUMP_AHEAD_M: f64 = 0.275;
 /// A rover keeps its frontier while it is worth no less than the best by more than this
 /// (in the planner's cost, metres of easy ground), so it does not dither between two.
 const KEEP_GOAL_MARGIN: f64 = 2.0;
+
+/// A revisit is not started towards a place nearer than this, metres: the rover is there
+/// already, and what it sees has not closed the loop.
+const REVISIT_MIN_DISTANCE_M: f64 = 1.0;
 
 /// The guard forces a replan at most this often.
 const FORCED_REPLAN_PERIOD: Duration = Duration::from_secs(1);
@@ -230,6 +284,7 @@ fn same_target(a: Point2, b: Point2) -> bool {
 impl Navigator {
     /// A navigator for rover `id`.
     pub fn new(id: RoverId, cfg: NavigationConfig) -> Self {
+        let revisit_above_m = cfg.revisit.map_or(f64::INFINITY, |r| r.above_m);
         Navigator {
             id,
             planner: Planner::new(cfg.planner),
@@ -255,6 +310,8 @@ impl Navigator {
             home_failures: 0,
             last_forced_replan: None,
             grown: None,
+            localisation: None,
+            revisit_above_m,
             events: Vec::new(),
         }
     }
@@ -289,6 +346,73 @@ impl Navigator {
 
     fn event(&mut self, t: Time, what: String) {
         self.events.push(NavEvent { t, what });
+    }
+
+    /// How far the position may be off (standard deviation, metres) and the nearest place
+    /// mapped while it was within [`RevisitConfig::anchored_m`], for deciding on revisits at
+    /// the next map. `None`: not known (lost, or no model of it).
+    pub fn set_localisation(&mut self, uncertainty: Option<(f64, Option<Point2>)>) {
+        self.localisation = uncertainty;
+    }
+
+    /// Uncertainty within which the places the rover mapped count as anchored, and the
+    /// returns a scan must have kept there, if it revisits them
+    /// ([`NavigationConfig::revisit`]).
+    pub fn anchored(&self) -> Option<(f64, usize)> {
+        self.cfg.revisit.map(|r| (r.anchored_m, r.anchor_points))
+    }
+
+    /// Starts or ends a revisit by the uncertainty last heard (see
+    /// [`NavigationConfig::revisit`]), for the rover at `here`.
+    fn revise_revisit(&mut self, now: Time, here: Point2) {
+        let (Some(rv), Some((sigma, anchor))) = (self.cfg.revisit, self.localisation) else {
+            return;
+        };
+        if sigma <= rv.resume_m {
+            self.revisit_above_m = rv.above_m;
+        }
+        match self.goal {
+            Some(g) if g.kind == GoalKind::Revisit && sigma <= rv.resume_m => {
+                self.event(
+                    now,
+                    format!("pose tied back (within {sigma:.2} m): exploring again"),
+                );
+                self.goal = None;
+                self.follower.set_path(Vec::new());
+            }
+            Some(g) if g.kind == GoalKind::Revisit => {}
+            goal if self.cfg.autonomous
+                && !self.done
+                && self.operator_goal.is_none()
+                && goal.is_none_or(|g| g.kind == GoalKind::Frontier)
+                && sigma > self.revisit_above_m =>
+            {
+                match anchor.filter(|p| p.distance_m(here) >= REVISIT_MIN_DISTANCE_M) {
+                    Some(place) => {
+                        self.event(
+                            now,
+                            format!(
+                                "position uncertain to {sigma:.2} m: driving back to ({:.1}, \
+                                 {:.1}), mapped within {:.2} m, to close the loop",
+                                place.x_m, place.y_m, rv.anchored_m
+                            ),
+                        );
+                        self.start_goal(now, place, GoalKind::Revisit);
+                    }
+                    // Nowhere to go back to: asked again only once it has grown further.
+                    None => self.revisit_closed_nothing(),
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A revisit ended (or could not start) without a closure bringing the uncertainty
+    /// down: the next waits until it has grown by [`RevisitConfig::retry_growth_m`] more.
+    fn revisit_closed_nothing(&mut self) {
+        if let (Some(rv), Some((sigma, _))) = (self.cfg.revisit, self.localisation) {
+            self.revisit_above_m = sigma.max(rv.above_m) + rv.retry_growth_m;
+        }
     }
 
     /// Whether it wants a fresh map now.
@@ -345,6 +469,9 @@ impl Navigator {
             );
             if g.kind == GoalKind::Operator && blacklist {
                 self.operator_goal = None;
+            }
+            if g.kind == GoalKind::Revisit {
+                self.revisit_closed_nothing();
             }
             if g.kind == GoalKind::Home && blacklist {
                 self.home_failures += 1;
@@ -467,6 +594,7 @@ impl Navigator {
         {
             self.start_goal(now, op, GoalKind::Operator);
         }
+        self.revise_revisit(now, here);
         let current = self.goal.map(|g| g.point);
         // A rover on its way home because no frontier was left keeps looking: ground that
         // turns up on the way (a peer's claim lapsing, a corner its map redrew) is taken
@@ -753,6 +881,7 @@ impl Navigator {
                 match goal.kind {
                     GoalKind::Home => self.done = true,
                     GoalKind::Operator => self.operator_goal = None,
+                    GoalKind::Revisit => self.revisit_closed_nothing(),
                     GoalKind::Frontier => {}
                 }
                 self.replan_now = true;
@@ -959,6 +1088,100 @@ mod tests {
         nav.on_map(at(4.0), &grown, pose);
         nav.on_map(at(5.0), &grown, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+    }
+
+    fn revisiting_navigator() -> Navigator {
+        let mut cfg = NavigationConfig::new(Point2::new(1.0, 1.0));
+        cfg.revisit = Some(RevisitConfig::default());
+        Navigator::new(RoverId(1), cfg)
+    }
+
+    #[test]
+    fn a_rover_whose_pose_grew_uncertain_drives_back_to_anchored_ground_until_a_closure_ties_it_back()
+     {
+        let mut nav = revisiting_navigator();
+        let map = room(false);
+        let pose = Pose2::new(4.0, 5.0, 0.0);
+        let anchored = Point2::new(2.0, 2.0);
+        let at = Time::from_secs_f64;
+        nav.set_localisation(Some((0.08, Some(anchored))));
+        nav.on_map(at(0.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        // Under the bound, however it grows: exploring on.
+        nav.set_localisation(Some((0.24, Some(anchored))));
+        nav.on_map(at(3.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        nav.take_events();
+        // Past it: back to the anchored place, the frontier left.
+        nav.set_localisation(Some((0.3, Some(anchored))));
+        nav.on_map(at(6.0), &map, pose);
+        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
+        let events = nav.take_events();
+        assert!(
+            events
+                .iter()
+                .any(|e| e.what.starts_with("position uncertain to 0.30 m")),
+            "{events:?}"
+        );
+        // Still uncertain on the way (the closure not yet made): it keeps going.
+        nav.set_localisation(Some((0.2, Some(anchored))));
+        nav.on_map(at(9.0), &map, pose);
+        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
+        // A closure brought it back within 0.15 m: exploring again, from where it is.
+        nav.set_localisation(Some((0.1, Some(anchored))));
+        nav.on_map(at(12.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        assert!(
+            nav.take_events()
+                .iter()
+                .any(|e| e.what.starts_with("pose tied back")),
+        );
+    }
+
+    #[test]
+    fn a_revisit_that_closed_no_loop_waits_until_the_pose_grows_more_uncertain() {
+        let mut nav = revisiting_navigator();
+        let map = room(false);
+        let anchored = Point2::new(2.0, 2.0);
+        let at = Time::from_secs_f64;
+        let pose = Pose2::new(4.0, 5.0, 0.0);
+        nav.set_localisation(Some((0.3, Some(anchored))));
+        nav.on_map(at(0.0), &map, pose);
+        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
+        // It gets there and no closure comes: the revisit ends, and exploring resumes.
+        let there = Pose2::new(anchored.x_m, anchored.y_m, 0.0);
+        let guard = Guarded::default();
+        let mut arrived = false;
+        for k in 0..10 {
+            nav.steer(at(1.0 + 0.1 * f64::from(k)), there, 0.0, guard);
+            arrived |= nav.goal().is_none();
+        }
+        assert!(arrived, "{:?}", nav.take_events());
+        nav.on_map(at(3.0), &map, there);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        // Not again at the same uncertainty, nor a little more ...
+        nav.set_localisation(Some((0.5, Some(anchored))));
+        nav.on_map(at(6.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        // ... but once it has grown by another 0.25 m.
+        nav.set_localisation(Some((0.56, Some(anchored))));
+        nav.on_map(at(9.0), &map, pose);
+        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
+        // Without a place to go back to, none starts.
+        let mut nav = revisiting_navigator();
+        nav.set_localisation(Some((0.3, None)));
+        nav.on_map(at(0.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+    }
+
+    #[test]
+    fn a_rover_without_revisits_explores_on_however_uncertain_its_pose() {
+        let mut nav = navigator();
+        let map = room(false);
+        nav.set_localisation(Some((2.0, Some(Point2::new(2.0, 2.0)))));
+        nav.on_map(Time::ZERO, &map, Pose2::new(4.0, 5.0, 0.0));
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        assert_eq!(nav.anchored(), None);
     }
 
     #[test]

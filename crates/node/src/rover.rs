@@ -157,6 +157,7 @@ impl RoverNode {
             Activity::Driving(GoalKind::Frontier) => NavActivity::Exploring,
             Activity::Driving(GoalKind::Operator) => NavActivity::OperatorGoal,
             Activity::Driving(GoalKind::Home) => NavActivity::ReturningHome,
+            Activity::Driving(GoalKind::Revisit) => NavActivity::Revisiting,
             Activity::Recovering => NavActivity::Recovering,
             Activity::Done => NavActivity::Done,
         };
@@ -288,6 +289,14 @@ impl RoverNode {
             let map = self
                 .cost_clock
                 .time(&mut self.slam_wall, || mapping.nav_map(NAV_MAP_FACTOR));
+            if let Some((within_m, points)) = self.navigator.anchored() {
+                let sigma = self.mapping.position_uncertainty_m();
+                let place = sigma.and_then(|_| {
+                    let mapper = self.mapping.mapper();
+                    mapper.anchored_place_near(pose.position(), within_m, points)
+                });
+                self.navigator.set_localisation(sigma.map(|s| (s, place)));
+            }
             self.navigator.on_map(now, &map, pose);
             if now >= self.next_explored {
                 self.next_explored = now + EXPLORED_PERIOD;

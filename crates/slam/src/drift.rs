@@ -144,6 +144,13 @@ impl PathsFromStart {
             model.heading_floor_rad + heading_rad,
         ))
     }
+
+    /// Each keyframe's position standard deviation from the start, less the model's floor,
+    /// as the last call to [`newest`](Self::newest) left them (infinite where no path
+    /// reached).
+    pub fn position_m(&self) -> &[f64] {
+        &self.position_m
+    }
 }
 
 #[cfg(test)]

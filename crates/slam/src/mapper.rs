@@ -1964,6 +1964,38 @@ impl Mapper {
         ))
     }
 
+    /// Where the rover could drive to tie its pose back to ground mapped while it knew where
+    /// it was: the keyframe nearest to `from` (in the map, as the graph places it now) whose
+    /// position the path from the start held to within `within_m` (standard deviation, as
+    /// [`pose_uncertainty`](Self::pose_uncertainty) last worked it out), among those of
+    /// finished submaps still searched for closures. Only a closure can cut the path from
+    /// the start short: a keyframe of a submap still being built is matched by tracking,
+    /// which ties the pose to that submap and not to the start. `None` without such a
+    /// keyframe, or without the uncertainty's model. Only keyframes whose scans kept at least
+    /// `min_points` returns count: a closure needs something to match, and the ground
+    /// where the uncertainty began to grow is often where the scans saw little.
+    pub fn anchored_place_near(
+        &self,
+        from: Point2,
+        within_m: f64,
+        min_points: usize,
+    ) -> Option<Point2> {
+        let model = self.cfg.pose_uncertainty?;
+        let sigma = self.paths_from_start.position_m();
+        self.submaps
+            .iter()
+            .filter(|s| s.finished && !s.trimmed)
+            .flat_map(|s| s.origin_node..s.origin_node + s.keyframes)
+            .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m))
+            .filter(|&k| {
+                self.keyframe_points
+                    .get(k)
+                    .is_some_and(|p| p.len() >= min_points)
+            })
+            .filter_map(|k| self.graph.nodes.get(k).map(Pose2::position))
+            .min_by(|a, b| a.distance_m(from).total_cmp(&b.distance_m(from)))
+    }
+
     fn add_keyframe(&mut self, time_s: f64, odom: Pose2, points: Vec<Point2>, dense: &[Point2]) {
         let node = self.graph.nodes.len();
         self.graph.nodes.push(self.pose);
@@ -3455,6 +3487,45 @@ mod tests {
         // After four laps the closures tie the pose back to the start.
         let (last, _, arc_m) = steps[239];
         assert!(last < 0.5 * path_only(arc_m), "{last} after {arc_m:.0} m");
+    }
+
+    #[test]
+    fn the_place_to_revisit_is_the_nearest_keyframe_of_a_finished_submap_the_start_held_close() {
+        let model = crate::drift::PoseUncertainty {
+            floor_m: 0.02,
+            per_m: 0.01,
+            weak_per_m: 0.0,
+            unmatched_per_m: 0.0,
+            closure_m: 2.0,
+            heading_floor_rad: 0.001,
+            heading_per_m_rad: 0.001,
+        };
+        let mut asked = Vec::new();
+        drive_laps(
+            |c| c.pose_uncertainty = Some(model),
+            |k, pose, mapper| {
+                if [1, 50].contains(&k) {
+                    mapper.pose_uncertainty();
+                    let here = pose.position();
+                    asked.push((
+                        mapper.anchored_place_near(here, 0.05, 10),
+                        mapper.anchored_place_near(here, 0.01, 10),
+                        mapper.anchored_place_near(here, 0.05, 1000),
+                    ));
+                }
+            },
+        );
+        // At the first steps only the first submap holds keyframes, and it is still built.
+        assert_eq!(asked[0], (None, None, None));
+        // 300 degrees round the first lap (10.5 m driven, nothing closed yet), at (1.0,
+        // -2.73): the keyframes within 0.05 m are those of the first 3 m (the first 86
+        // degrees of the lap), and the nearest of them the start, at (2, -1). Under the
+        // model's floor none is, nor where no scan kept 1,000 returns (a scan has 360 beams).
+        let (place, none, sparse) = asked[1];
+        let place = place.expect("the start's ground is anchored");
+        assert!(place.distance_m(Point2::new(2.0, -1.0)) < 0.02, "{place:?}");
+        assert_eq!(none, None);
+        assert_eq!(sparse, None);
     }
 
     #[test]
