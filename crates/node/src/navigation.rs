@@ -16,9 +16,10 @@
 //! With [`NavigationConfig::revisit`] set, a rover whose pose grew too uncertain (the
 //! position's standard deviation by the path that ties it to the start, see
 //! `realms_slam::drift`) breaks off exploring and drives back to the nearest ground it
-//! mapped while it knew where it was, until a loop closure there ties its pose back:
-//! active loop closing, after Stachniss, Hähnel and Burgard, "Exploration with Active
-//! Loop-Closing for FastSLAM" (IROS 2004).
+//! mapped while it knew where it was, until a loop closure there ties its pose back (or it
+//! gets there, or gives up, without one: that place is then not taken again): active loop
+//! closing, after Stachniss, Hähnel and Burgard, "Exploration with Active Loop-Closing for
+//! FastSLAM" (IROS 2004).
 
 use realms_core::msgs::ExploredArea;
 use realms_core::{Cell, CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
@@ -234,6 +235,8 @@ pub struct Navigator {
     /// The uncertainty past which a revisit starts now ([`RevisitConfig::above_m`], raised
     /// after a revisit that closed no loop).
     revisit_above_m: f64,
+    /// Places revisits reached, or gave up on, without a closure: not taken again.
+    revisits_closed_nothing: Vec<Point2>,
     events: Vec<NavEvent>,
 }
 
@@ -312,6 +315,7 @@ impl Navigator {
             grown: None,
             localisation: None,
             revisit_above_m,
+            revisits_closed_nothing: Vec::new(),
             events: Vec::new(),
         }
     }
@@ -362,13 +366,23 @@ impl Navigator {
         self.cfg.revisit.map(|r| (r.anchored_m, r.anchor_points))
     }
 
+    /// Whether `place` may be revisited: it is not within [`REVISIT_MIN_DISTANCE_M`] of a
+    /// place a revisit reached, or gave up on, without a closure.
+    pub fn may_revisit(&self, place: Point2) -> bool {
+        self.revisits_closed_nothing
+            .iter()
+            .all(|p| p.distance_m(place) >= REVISIT_MIN_DISTANCE_M)
+    }
+
     /// Starts or ends a revisit by the uncertainty last heard (see
-    /// [`NavigationConfig::revisit`]), for the rover at `here`.
-    fn revise_revisit(&mut self, now: Time, here: Point2) {
+    /// [`NavigationConfig::revisit`]), for the rover at `here`; none starts on a map that
+    /// stopped growing (exploring is over).
+    fn revise_revisit(&mut self, now: Time, here: Point2, stalled: bool) {
         let (Some(rv), Some((sigma, anchor))) = (self.cfg.revisit, self.localisation) else {
             return;
         };
-        if sigma <= rv.resume_m {
+        // A closure cut it back (all the way, or part of it): the bound is the first again.
+        if sigma < rv.above_m {
             self.revisit_above_m = rv.above_m;
         }
         match self.goal {
@@ -379,16 +393,18 @@ impl Navigator {
                 );
                 self.goal = None;
                 self.follower.set_path(Vec::new());
+                self.revisit_ended();
             }
             Some(g) if g.kind == GoalKind::Revisit => {}
             goal if self.cfg.autonomous
                 && !self.done
+                && !stalled
                 && self.operator_goal.is_none()
                 && goal.is_none_or(|g| g.kind == GoalKind::Frontier)
                 && sigma > self.revisit_above_m =>
             {
-                match anchor.filter(|p| p.distance_m(here) >= REVISIT_MIN_DISTANCE_M) {
-                    Some(place) => {
+                match anchor {
+                    Some(place) if place.distance_m(here) >= REVISIT_MIN_DISTANCE_M => {
                         self.event(
                             now,
                             format!(
@@ -399,20 +415,31 @@ impl Navigator {
                         );
                         self.start_goal(now, place, GoalKind::Revisit);
                     }
+                    // Already there, and what it sees closes nothing.
+                    Some(place) => self.revisit_closed_nothing(place),
                     // Nowhere to go back to: asked again only once it has grown further.
-                    None => self.revisit_closed_nothing(),
+                    None => self.revisit_closed_nothing(here),
                 }
             }
             _ => {}
         }
     }
 
-    /// A revisit ended (or could not start) without a closure bringing the uncertainty
-    /// down: the next waits until it has grown by [`RevisitConfig::retry_growth_m`] more.
-    fn revisit_closed_nothing(&mut self) {
+    /// A revisit ended: the drive back mapped nothing new, so the stall rule's clock
+    /// starts again rather than count it against exploring.
+    fn revisit_ended(&mut self) {
+        self.grown = None;
+    }
+
+    /// A revisit to `place` ended (or could not start) without a closure bringing the
+    /// uncertainty down: the place is not taken again, and the next revisit waits until the
+    /// uncertainty has grown by [`RevisitConfig::retry_growth_m`] more.
+    fn revisit_closed_nothing(&mut self, place: Point2) {
         if let (Some(rv), Some((sigma, _))) = (self.cfg.revisit, self.localisation) {
             self.revisit_above_m = sigma.max(rv.above_m) + rv.retry_growth_m;
         }
+        self.revisits_closed_nothing.push(place);
+        self.revisit_ended();
     }
 
     /// Whether it wants a fresh map now.
@@ -471,7 +498,12 @@ impl Navigator {
                 self.operator_goal = None;
             }
             if g.kind == GoalKind::Revisit {
-                self.revisit_closed_nothing();
+                // Given up (not pre-empted by the operator): the place closed nothing.
+                if blacklist {
+                    self.revisit_closed_nothing(g.point);
+                } else {
+                    self.revisit_ended();
+                }
             }
             if g.kind == GoalKind::Home && blacklist {
                 self.home_failures += 1;
@@ -594,7 +626,9 @@ impl Navigator {
         {
             self.start_goal(now, op, GoalKind::Operator);
         }
-        self.revise_revisit(now, here);
+        self.revise_revisit(now, here, stalled);
+        // A revisit that ended restarted the stall rule's clock.
+        let stalled = stalled && self.grown.is_some();
         let current = self.goal.map(|g| g.point);
         // A rover on its way home because no frontier was left keeps looking: ground that
         // turns up on the way (a peer's claim lapsing, a corner its map redrew) is taken
@@ -881,7 +915,7 @@ impl Navigator {
                 match goal.kind {
                     GoalKind::Home => self.done = true,
                     GoalKind::Operator => self.operator_goal = None,
-                    GoalKind::Revisit => self.revisit_closed_nothing(),
+                    GoalKind::Revisit => self.revisit_closed_nothing(goal.point),
                     GoalKind::Frontier => {}
                 }
                 self.replan_now = true;
@@ -1090,31 +1124,32 @@ mod tests {
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
     }
 
-    fn revisiting_navigator() -> Navigator {
+    /// A navigator that revisits, with the stall rule's window `stall_s`.
+    fn revisiting_navigator(stall_s: i64) -> Navigator {
         let mut cfg = NavigationConfig::new(Point2::new(1.0, 1.0));
         cfg.revisit = Some(RevisitConfig::default());
+        cfg.stall_window = Duration::from_secs(stall_s);
         Navigator::new(RoverId(1), cfg)
     }
 
     #[test]
     fn a_rover_whose_pose_grew_uncertain_drives_back_to_anchored_ground_until_a_closure_ties_it_back()
      {
-        let mut nav = revisiting_navigator();
+        // The map never grows here: with a stall window of 5 s, exploring would end at the
+        // first map after the revisit unless the revisit restarted the stall rule's clock.
+        let mut nav = revisiting_navigator(5);
         let map = room(false);
         let pose = Pose2::new(4.0, 5.0, 0.0);
         let anchored = Point2::new(2.0, 2.0);
         let at = Time::from_secs_f64;
-        nav.set_localisation(Some((0.08, Some(anchored))));
-        nav.on_map(at(0.0), &map, pose);
-        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
-        // Under the bound, however it grows: exploring on.
+        // Under the bound: exploring.
         nav.set_localisation(Some((0.24, Some(anchored))));
-        nav.on_map(at(3.0), &map, pose);
+        nav.on_map(at(0.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
         nav.take_events();
         // Past it: back to the anchored place, the frontier left.
         nav.set_localisation(Some((0.3, Some(anchored))));
-        nav.on_map(at(6.0), &map, pose);
+        nav.on_map(at(3.0), &map, pose);
         assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
         let events = nav.take_events();
         assert!(
@@ -1125,30 +1160,33 @@ mod tests {
         );
         // Still uncertain on the way (the closure not yet made): it keeps going.
         nav.set_localisation(Some((0.2, Some(anchored))));
-        nav.on_map(at(9.0), &map, pose);
+        nav.on_map(at(6.0), &map, pose);
         assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
         // A closure brought it back within 0.15 m: exploring again, from where it is.
         nav.set_localisation(Some((0.1, Some(anchored))));
-        nav.on_map(at(12.0), &map, pose);
+        nav.on_map(at(9.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        let events = nav.take_events();
         assert!(
-            nav.take_events()
-                .iter()
-                .any(|e| e.what.starts_with("pose tied back")),
+            events.iter().any(|e| e.what.starts_with("pose tied back")),
+            "{events:?}"
         );
+        // The place closed the loop: it may be taken again.
+        assert!(nav.may_revisit(anchored));
     }
 
     #[test]
     fn a_revisit_that_closed_no_loop_waits_until_the_pose_grows_more_uncertain() {
-        let mut nav = revisiting_navigator();
+        let mut nav = revisiting_navigator(300);
         let map = room(false);
         let anchored = Point2::new(2.0, 2.0);
+        let elsewhere = Point2::new(4.0, 2.0);
         let at = Time::from_secs_f64;
         let pose = Pose2::new(4.0, 5.0, 0.0);
         nav.set_localisation(Some((0.3, Some(anchored))));
         nav.on_map(at(0.0), &map, pose);
         assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
-        // It gets there and no closure comes: the revisit ends, and exploring resumes.
+        // It gets there and no closure comes: the revisit ends.
         let there = Pose2::new(anchored.x_m, anchored.y_m, 0.0);
         let guard = Guarded::default();
         let mut arrived = false;
@@ -1157,18 +1195,34 @@ mod tests {
             arrived |= nav.goal().is_none();
         }
         assert!(arrived, "{:?}", nav.take_events());
-        nav.on_map(at(3.0), &map, there);
+        // That place is not taken again; others are.
+        assert!(!nav.may_revisit(anchored));
+        assert!(nav.may_revisit(elsewhere));
+        // Back out exploring, not again at the same uncertainty, nor a little more ...
+        nav.on_map(at(3.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
-        // Not again at the same uncertainty, nor a little more ...
-        nav.set_localisation(Some((0.5, Some(anchored))));
+        nav.set_localisation(Some((0.5, Some(elsewhere))));
         nav.on_map(at(6.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
         // ... but once it has grown by another 0.25 m.
-        nav.set_localisation(Some((0.56, Some(anchored))));
+        nav.set_localisation(Some((0.56, Some(elsewhere))));
         nav.on_map(at(9.0), &map, pose);
-        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
+        assert_eq!(nav.goal(), Some((elsewhere, GoalKind::Revisit)));
+        // Given up (the deadline passed): that place is not taken again either.
+        nav.steer(at(10_000.0), pose, 0.0, guard);
+        assert_eq!(nav.goal(), None);
+        assert!(!nav.may_revisit(elsewhere));
+        // A closure that cut the uncertainty under the first bound, even short of 0.15 m,
+        // brings the bound back: past 0.25 m again, a revisit starts.
+        let third = Point2::new(3.0, 8.0);
+        nav.set_localisation(Some((0.2, Some(third))));
+        nav.on_map(at(10_003.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        nav.set_localisation(Some((0.3, Some(third))));
+        nav.on_map(at(10_006.0), &map, pose);
+        assert_eq!(nav.goal(), Some((third, GoalKind::Revisit)));
         // Without a place to go back to, none starts.
-        let mut nav = revisiting_navigator();
+        let mut nav = revisiting_navigator(300);
         nav.set_localisation(Some((0.3, None)));
         nav.on_map(at(0.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));

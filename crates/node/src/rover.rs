@@ -292,8 +292,9 @@ impl RoverNode {
             if let Some((within_m, points)) = self.navigator.anchored() {
                 let sigma = self.mapping.position_uncertainty_m();
                 let place = sigma.and_then(|_| {
-                    let mapper = self.mapping.mapper();
-                    mapper.anchored_place_near(pose.position(), within_m, points)
+                    let (mapper, nav) = (self.mapping.mapper(), &self.navigator);
+                    let wanted = |p| nav.may_revisit(p);
+                    mapper.anchored_place_near(pose.position(), within_m, points, wanted)
                 });
                 self.navigator.set_localisation(sigma.map(|s| (s, place)));
             }

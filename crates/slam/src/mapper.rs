@@ -1965,26 +1965,34 @@ impl Mapper {
     }
 
     /// Where the rover could drive to tie its pose back to ground mapped while it knew where
-    /// it was: the keyframe nearest to `from` (in the map, as the graph places it now) whose
-    /// position the path from the start held to within `within_m` (standard deviation, as
-    /// [`pose_uncertainty`](Self::pose_uncertainty) last worked it out), among those of
-    /// finished submaps still searched for closures. Only a closure can cut the path from
-    /// the start short: a keyframe of a submap still being built is matched by tracking,
-    /// which ties the pose to that submap and not to the start. `None` without such a
-    /// keyframe, or without the uncertainty's model. Only keyframes whose scans kept at least
-    /// `min_points` returns count: a closure needs something to match, and the ground
-    /// where the uncertainty began to grow is often where the scans saw little.
+    /// it was: the keyframe nearest to `from` (in a straight line, in the map as the graph
+    /// places it now) whose position the path from the start now holds within `within_m`
+    /// (standard deviation, as [`pose_uncertainty`](Self::pose_uncertainty) last worked it
+    /// out), whose scan kept at least `min_points` returns, and which `wanted` accepts (a
+    /// navigator's places that closed nothing), among the keyframes of finished submaps the
+    /// closure search would take for a new keyframe now. Only a closure can cut the path
+    /// from the start short: a keyframe of a submap still being built is matched by
+    /// tracking, which ties the pose to that submap and not to the start. A closure needs
+    /// something to match, and the ground where the uncertainty began to grow is often where
+    /// the scans saw little. `None` without such a keyframe, or without the uncertainty's
+    /// model.
     pub fn anchored_place_near(
         &self,
         from: Point2,
         within_m: f64,
         min_points: usize,
+        wanted: impl Fn(Point2) -> bool,
     ) -> Option<Point2> {
         let model = self.cfg.pose_uncertainty?;
         let sigma = self.paths_from_start.position_m();
+        let newest = self.graph.nodes.len();
         self.submaps
             .iter()
-            .filter(|s| s.finished && !s.trimmed)
+            // As `close_loops` picks them: a submap this recent holds the new keyframe's
+            // neighbourhood and is not searched.
+            .filter(|s| {
+                s.finished && !s.trimmed && s.origin_node + 2 * self.cfg.submap_keyframes <= newest
+            })
             .flat_map(|s| s.origin_node..s.origin_node + s.keyframes)
             .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m))
             .filter(|&k| {
@@ -1993,6 +2001,7 @@ impl Mapper {
                     .is_some_and(|p| p.len() >= min_points)
             })
             .filter_map(|k| self.graph.nodes.get(k).map(Pose2::position))
+            .filter(|p| wanted(*p))
             .min_by(|a, b| a.distance_m(from).total_cmp(&b.distance_m(from)))
     }
 
@@ -3500,6 +3509,11 @@ mod tests {
             heading_floor_rad: 0.001,
             heading_per_m_rad: 0.001,
         };
+        // The laps' circle: 2 m about (0, -1), the start at angle 0.
+        let on_lap = |deg: f64| {
+            let a = deg.to_radians();
+            Point2::new(2.0 * a.cos(), -1.0 + 2.0 * a.sin())
+        };
         let mut asked = Vec::new();
         drive_laps(
             |c| c.pose_uncertainty = Some(model),
@@ -3507,25 +3521,42 @@ mod tests {
                 if [1, 50].contains(&k) {
                     mapper.pose_uncertainty();
                     let here = pose.position();
-                    asked.push((
-                        mapper.anchored_place_near(here, 0.05, 10),
-                        mapper.anchored_place_near(here, 0.01, 10),
-                        mapper.anchored_place_near(here, 0.05, 1000),
-                    ));
+                    let beside_60 = on_lap(60.0);
+                    let any = |_: Point2| true;
+                    asked.push([
+                        mapper.anchored_place_near(here, 0.05, 10, any),
+                        mapper.anchored_place_near(here, 0.01, 10, any),
+                        mapper.anchored_place_near(here, 0.05, 1000, any),
+                        mapper.anchored_place_near(beside_60, 0.05, 10, any),
+                        mapper.anchored_place_near(beside_60, 0.05, 10, |p| {
+                            p.distance_m(beside_60) > 1.0
+                        }),
+                    ]);
                 }
             },
         );
         // At the first steps only the first submap holds keyframes, and it is still built.
-        assert_eq!(asked[0], (None, None, None));
+        assert_eq!(asked[0], [None; 5]);
         // 300 degrees round the first lap (10.5 m driven, nothing closed yet), at (1.0,
         // -2.73): the keyframes within 0.05 m are those of the first 3 m (the first 86
         // degrees of the lap), and the nearest of them the start, at (2, -1). Under the
         // model's floor none is, nor where no scan kept 1,000 returns (a scan has 360 beams).
-        let (place, none, sparse) = asked[1];
+        let [place, none, sparse, from_60, not_near_60] = asked[1];
         let place = place.expect("the start's ground is anchored");
-        assert!(place.distance_m(Point2::new(2.0, -1.0)) < 0.02, "{place:?}");
+        assert!(place.distance_m(on_lap(0.0)) < 0.02, "{place:?}");
         assert_eq!(none, None);
         assert_eq!(sparse, None);
+        // Asked from the lap at 60 degrees, the nearest is a keyframe there (they lie some
+        // 12 degrees, 0.4 m, apart), not the start; with the keyframes within 1 m of it
+        // unwanted, another of the first 86 degrees, farther off.
+        let from_60 = from_60.expect("anchored ground at 60 degrees");
+        assert!(from_60.distance_m(on_lap(60.0)) < 0.25, "{from_60:?}");
+        let not_near_60 = not_near_60.expect("anchored ground farther off");
+        let angle = (not_near_60.y_m + 1.0).atan2(not_near_60.x_m).to_degrees();
+        assert!(
+            not_near_60.distance_m(on_lap(60.0)) > 1.0 && (-1.0..=90.0).contains(&angle),
+            "{not_near_60:?} at {angle:.0} degrees"
+        );
     }
 
     #[test]
