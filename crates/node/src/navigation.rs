@@ -88,9 +88,10 @@ pub struct RevisitConfig {
     pub anchor_points: usize,
     /// ... and ends once a closure has brought it back within this.
     pub resume_m: f64,
-    /// A revisit that ended without that (the place reached, or given up) is not started
-    /// again until the uncertainty has grown by this much more: the place did not close the
-    /// loop, and another revisit at once would only drive there again.
+    /// After a revisit that ended without that (the place reached, or given up), the next
+    /// waits until the uncertainty has grown by this much more (and that place is not taken
+    /// again): it did not close the loop, and another revisit at once would only drive there
+    /// again.
     pub retry_growth_m: f64,
 }
 
@@ -418,7 +419,7 @@ impl Navigator {
                     // Already there, and what it sees closes nothing.
                     Some(place) => self.revisit_closed_nothing(place),
                     // Nowhere to go back to: asked again only once it has grown further.
-                    None => self.revisit_closed_nothing(here),
+                    None => self.raise_revisit_bound(),
                 }
             }
             _ => {}
@@ -435,11 +436,17 @@ impl Navigator {
     /// uncertainty down: the place is not taken again, and the next revisit waits until the
     /// uncertainty has grown by [`RevisitConfig::retry_growth_m`] more.
     fn revisit_closed_nothing(&mut self, place: Point2) {
+        self.raise_revisit_bound();
+        self.revisits_closed_nothing.push(place);
+        self.revisit_ended();
+    }
+
+    /// The next revisit waits until the uncertainty has grown by
+    /// [`RevisitConfig::retry_growth_m`] more than it is now.
+    fn raise_revisit_bound(&mut self) {
         if let (Some(rv), Some((sigma, _))) = (self.cfg.revisit, self.localisation) {
             self.revisit_above_m = sigma.max(rv.above_m) + rv.retry_growth_m;
         }
-        self.revisits_closed_nothing.push(place);
-        self.revisit_ended();
     }
 
     /// Whether it wants a fresh map now.
@@ -1221,11 +1228,20 @@ mod tests {
         nav.set_localisation(Some((0.3, Some(third))));
         nav.on_map(at(10_006.0), &map, pose);
         assert_eq!(nav.goal(), Some((third, GoalKind::Revisit)));
-        // Without a place to go back to, none starts.
+        // Without a place to go back to, none starts, and none until the uncertainty has
+        // grown by 0.25 m more, wherever it leads; where the rover stood is not held against
+        // a place.
         let mut nav = revisiting_navigator(300);
         nav.set_localisation(Some((0.3, None)));
         nav.on_map(at(0.0), &map, pose);
         assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        assert!(nav.may_revisit(pose.position()));
+        nav.set_localisation(Some((0.5, Some(anchored))));
+        nav.on_map(at(3.0), &map, pose);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Frontier));
+        nav.set_localisation(Some((0.56, Some(anchored))));
+        nav.on_map(at(6.0), &map, pose);
+        assert_eq!(nav.goal(), Some((anchored, GoalKind::Revisit)));
     }
 
     #[test]
