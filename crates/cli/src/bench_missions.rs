@@ -223,7 +223,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
 }
 
 /// A change to the rovers' navigation by name (`--nav-variant`).
-fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::NavigationConfig)> {
+pub fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::NavigationConfig)> {
     match name {
         "unjudged-must-pay" => Ok(|n| n.explore.unjudged_must_pay = true),
         "revisit" => Ok(|n| n.revisit = Some(RevisitConfig::default())),

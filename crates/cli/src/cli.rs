@@ -163,6 +163,10 @@ pub struct MissionArgs {
     /// changes in a whole mission, with all its files.
     #[arg(long)]
     pub variant: Option<String>,
+    /// Run the rovers with this change to their navigation, as `realms bench missions
+    /// --nav-variant` names them (e.g. `revisit`; the report names it).
+    #[arg(long)]
+    pub nav_variant: Option<String>,
 }
 
 /// `realms scenario`.

@@ -56,6 +56,14 @@ pub fn run(args: MissionArgs) -> Result<()> {
         .map(crate::bench_slam::variant)
         .transpose()?;
     let source = crate::bench_slam::with_setup(source, variant.as_ref());
+    let navigation_changes = match args.nav_variant.as_deref() {
+        None => Vec::new(),
+        Some(name) => vec![crate::bench_missions::nav_variant(name)?],
+    };
+    let source = match &args.nav_variant {
+        Some(name) => format!("{source}, navigation variant {name}"),
+        None => source,
+    };
     let out = args
         .out
         .clone()
@@ -79,6 +87,7 @@ pub fn run(args: MissionArgs) -> Result<()> {
         ideal_comms: args.ideal_comms,
         cost_clock: realms_mission::CostClock::new(std::time::Instant::now),
         mapping_changes: crate::bench_slam::mapping_changes(variant.as_ref()),
+        navigation_changes,
         ..MissionOptions::default()
     };
     let mut mission = Mission::with_options(World::new(&scenario), options);

@@ -54,6 +54,31 @@ fn mission_writes_its_results_folder_and_says_where() {
     assert_eq!(json["sim_duration_s"], 20.0);
     assert_eq!(json["rovers"].as_array().expect("rovers").len(), 2);
     std::fs::remove_dir_all(&out).ok();
+
+    // With a change to the rovers' navigation, the report names it.
+    let o = realms()
+        .args(["mission", "--scenario", &repo("scenarios/small.toml")])
+        .args([
+            "--duration",
+            "5s",
+            "--quiet",
+            "--nav-variant",
+            "revisit",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
+            .expect("valid");
+    let scenario = json["scenario"].as_str().expect("the scenario's source");
+    assert!(
+        scenario.ends_with("navigation variant revisit"),
+        "{scenario}"
+    );
+    std::fs::remove_dir_all(&out).ok();
 }
 
 #[test]
@@ -180,6 +205,15 @@ fn a_bad_scenario_fails_with_file_and_key() {
         .expect("runs");
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("soon"));
+
+    // An unknown navigation variant is refused before anything runs, naming those known.
+    let o = realms()
+        .args(["mission", "--quiet", "--nav-variant", "wander"])
+        .output()
+        .expect("runs");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("wander") && err.contains("revisit"), "{err}");
 }
 
 #[test]
