@@ -223,7 +223,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
 }
 
 /// A change to the rovers' navigation by name (`--nav-variant`).
-pub fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::NavigationConfig)> {
+fn nav_variant(name: &str) -> Result<NavigationChange> {
     match name {
         "unjudged-must-pay" => Ok(|n| n.explore.unjudged_must_pay = true),
         "revisit" => Ok(|n| n.revisit = Some(RevisitConfig::default())),
@@ -237,6 +237,24 @@ pub fn nav_variant(name: &str) -> Result<fn(&mut realms_node::navigation::Naviga
             "unknown navigation variant `{name}`; known: unjudged-must-pay, revisit, revisit-0.4m"
         ),
     }
+}
+
+/// A change to the rovers' navigation (`--nav-variant`).
+type NavigationChange = fn(&mut realms_node::navigation::NavigationConfig);
+
+/// The navigation changes `name` (`--nav-variant`) stands for, and `source` (the scenario's
+/// name for the report) naming it.
+pub fn with_nav_variant(
+    name: Option<&str>,
+    source: String,
+) -> Result<(Vec<NavigationChange>, String)> {
+    Ok(match name {
+        None => (Vec::new(), source),
+        Some(name) => (
+            vec![nav_variant(name)?],
+            format!("{source}, navigation variant {name}"),
+        ),
+    })
 }
 
 /// `realms bench missions`.
@@ -265,14 +283,7 @@ pub fn run(args: BenchMissionsArgs) -> Result<()> {
         scenarios.push(s);
     }
     let source = crate::bench_slam::with_setup(source, variant.as_ref());
-    let navigation_changes = match args.nav_variant.as_deref() {
-        None => Vec::new(),
-        Some(name) => vec![nav_variant(name)?],
-    };
-    let source = match &args.nav_variant {
-        Some(name) => format!("{source}, navigation variant {name}"),
-        None => source,
-    };
+    let (navigation_changes, source) = with_nav_variant(args.nav_variant.as_deref(), source)?;
     let jobs = workers(args.jobs);
     let mut missions = in_parallel(&scenarios, jobs, |scenario| {
         let wall = std::time::Instant::now();

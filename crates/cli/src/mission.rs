@@ -56,14 +56,8 @@ pub fn run(args: MissionArgs) -> Result<()> {
         .map(crate::bench_slam::variant)
         .transpose()?;
     let source = crate::bench_slam::with_setup(source, variant.as_ref());
-    let navigation_changes = match args.nav_variant.as_deref() {
-        None => Vec::new(),
-        Some(name) => vec![crate::bench_missions::nav_variant(name)?],
-    };
-    let source = match &args.nav_variant {
-        Some(name) => format!("{source}, navigation variant {name}"),
-        None => source,
-    };
+    let (navigation_changes, source) =
+        crate::bench_missions::with_nav_variant(args.nav_variant.as_deref(), source)?;
     let out = args
         .out
         .clone()

@@ -16,6 +16,12 @@ fn repo(path: &str) -> String {
         .to_string()
 }
 
+/// The `mission.json` a mission wrote into `out`.
+fn mission_json(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
+        .expect("valid")
+}
+
 #[test]
 fn mission_writes_its_results_folder_and_says_where() {
     let out = fresh_dir("realms-cli");
@@ -48,9 +54,7 @@ fn mission_writes_its_results_folder_and_says_where() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
-            .expect("valid");
+    let json = mission_json(&out);
     assert_eq!(json["sim_duration_s"], 20.0);
     assert_eq!(json["rovers"].as_array().expect("rovers").len(), 2);
     std::fs::remove_dir_all(&out).ok();
@@ -70,9 +74,7 @@ fn mission_writes_its_results_folder_and_says_where() {
         .output()
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
-            .expect("valid");
+    let json = mission_json(&out);
     let scenario = json["scenario"].as_str().expect("the scenario's source");
     assert!(
         scenario.ends_with("navigation variant revisit"),
@@ -119,9 +121,7 @@ fn bench_missions_grades_each_seed_as_its_own_mission_would() {
         .output()
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("mission.json")).expect("json"))
-            .expect("valid");
+    let report = mission_json(&out);
     let graded = &missions[1];
     assert_eq!(graded["seed"], 4);
     assert_eq!(graded["sim_duration_s"], report["sim_duration_s"]);

@@ -396,7 +396,7 @@ impl Navigator {
                 self.follower.set_path(Vec::new());
                 self.revisit_ended();
             }
-            Some(g) if g.kind == GoalKind::Revisit => {}
+            // A revisit under way goes on: the guard below takes only a frontier or none.
             goal if self.cfg.autonomous
                 && !self.done
                 && !stalled

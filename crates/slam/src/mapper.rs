@@ -1985,14 +1985,11 @@ impl Mapper {
     ) -> Option<Point2> {
         let model = self.cfg.pose_uncertainty?;
         let sigma = self.paths_from_start.position_m();
-        let newest = self.graph.nodes.len();
+        // The keyframe the next scan would add.
+        let next = self.graph.nodes.len();
         self.submaps
             .iter()
-            // As `close_loops` picks them: a submap this recent holds the new keyframe's
-            // neighbourhood and is not searched.
-            .filter(|s| {
-                s.finished && !s.trimmed && s.origin_node + 2 * self.cfg.submap_keyframes <= newest
-            })
+            .filter(|s| self.searched_for_closures(s, next))
             .flat_map(|s| s.origin_node..s.origin_node + s.keyframes)
             .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m))
             .filter(|&k| {
@@ -2163,6 +2160,12 @@ impl Mapper {
         self.heading_offsets.clear();
     }
 
+    /// Whether keyframe `node`'s closure search takes submap `sub`: finished, not trimmed,
+    /// and not so recent that it holds the keyframe's own neighbourhood.
+    fn searched_for_closures(&self, sub: &Submap, node: usize) -> bool {
+        sub.finished && !sub.trimmed && sub.origin_node + 2 * self.cfg.submap_keyframes <= node
+    }
+
     /// Searches finished submaps near `node` for a closure; returns whether one was added.
     fn close_loops(&mut self, node: usize) -> bool {
         let min_points = self
@@ -2178,10 +2181,7 @@ impl Mapper {
         let mut candidates: Vec<(f64, usize)> = (0..self.submaps.len())
             .filter_map(|s| {
                 let sub = &self.submaps[s];
-                if !sub.finished
-                    || sub.trimmed
-                    || sub.origin_node + 2 * self.cfg.submap_keyframes > node
-                {
+                if !self.searched_for_closures(sub, node) {
                     return None;
                 }
                 let end = if self.cfg.loop_search_nearest_keyframe {
