@@ -12,7 +12,7 @@ use crate::mission::{load_scenario, parse_duration_s, run_to_end};
 use anyhow::{Result, bail};
 use realms_core::Time;
 use realms_mission::report::MissionReport;
-use realms_mission::slam_record::CovarianceCheck;
+use realms_mission::slam_record::{CovarianceCheck, LostTime};
 use realms_mission::{Mission, MissionOptions};
 use realms_node::navigation::RevisitConfig;
 use realms_sim::World;
@@ -41,6 +41,8 @@ struct RoverGrades {
     hazard_correct: f64,
     /// [`realms_mission::slam_record::MapGrade::known_correct`] (absent without a map).
     known_correct: Option<f64>,
+    /// How long it was lost: a rover still lost at the end was of no more use.
+    lost: LostTime,
 }
 
 /// One mission's grades.
@@ -101,6 +103,7 @@ impl MissionGrades {
                         hazard_cells: map.map_or(0, |m| m.hazard_cells),
                         hazard_correct: map.map_or(0.0, |m| m.hazard_correct),
                         known_correct: map.map(|m| m.known_correct()),
+                        lost: LostTime::of(&r.slam.localisation, report.sim_duration_s),
                     }
                 })
                 .collect(),
@@ -140,6 +143,12 @@ struct Summary {
     hazard_correct: f64,
     /// Known cells right, mean over the rovers.
     known_correct_mean: f64,
+    /// Times a rover became lost, over every rover ...
+    lost_episodes: usize,
+    /// ... the seconds they spent lost ...
+    lost_s: f64,
+    /// ... and rovers still lost at their mission's end.
+    lost_at_end: usize,
     /// Absent when no mission merged a map (a lone rover).
     merged_occupied_correct_mean: Option<f64>,
     /// The same with every placed map at its known start.
@@ -209,6 +218,9 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
         path_hazards_flagged: pooled(rovers().map(|r| (r.path_hazards_flagged, r.path_hazards))),
         hazard_correct: pooled(rovers().map(|r| (r.hazard_correct, r.hazard_cells))),
         known_correct_mean: mean(&known),
+        lost_episodes: rovers().map(|r| r.lost.episodes).sum(),
+        lost_s: rovers().map(|r| r.lost.seconds).sum(),
+        lost_at_end: rovers().filter(|r| r.lost.at_end).count(),
         merged_occupied_correct_mean: (!merged.is_empty()).then(|| mean(&merged)),
         merged_at_known_starts_mean: (!merged_at_starts.is_empty())
             .then(|| mean(&merged_at_starts)),
@@ -335,13 +347,13 @@ fn print_tables(
     );
     println!();
     println!(
-        "| seed | rover | occupied cells right | final trajectory RMS | published pose within 0.2 m | published pose inside its 95 % circle (median standard deviation) | crater cells near the path marked (cells) | powered at the end |"
+        "| seed | rover | occupied cells right | final trajectory RMS | published pose within 0.2 m | published pose inside its 95 % circle (median standard deviation) | crater cells near the path marked (cells) | lost: times, seconds | powered at the end |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for m in missions {
         for r in &m.rovers {
             println!(
-                "| {} | {} | {} | {} | {:.1} % | {:.1} % ({:.3} m) | {:.1} % ({}) | {} |",
+                "| {} | {} | {} | {} | {:.1} % | {:.1} % ({:.3} m) | {:.1} % ({}) | {} | {} |",
                 m.seed,
                 r.name,
                 pct(r.occupied_correct),
@@ -352,6 +364,7 @@ fn print_tables(
                 r.pose_covariance.median_sigma_m,
                 100.0 * r.path_hazards_flagged,
                 r.path_hazards,
+                lost_cell(&r.lost),
                 if r.powered { "yes" } else { "no" }
             );
         }
@@ -414,6 +427,15 @@ fn print_tables(
     );
     println!();
     println!(
+        "| times a rover became lost | seconds lost, every rover | rovers still lost at the end |"
+    );
+    println!("| --- | --- | --- |");
+    println!(
+        "| {} | {:.0} s | {} |",
+        s.lost_episodes, s.lost_s, s.lost_at_end
+    );
+    println!();
+    println!(
         "| published poses graded | position inside its 95 % circle | heading inside its 95 % interval | median published position standard deviation, median rover |"
     );
     println!("| --- | --- | --- | --- |");
@@ -424,4 +446,20 @@ fn print_tables(
         100.0 * s.heading_inside_95,
         s.median_sigma_m
     );
+}
+
+/// A rover's time lost as the per-rover table shows it.
+fn lost_cell(lost: &LostTime) -> String {
+    match lost.episodes {
+        0 => "-".to_string(),
+        n => format!(
+            "{n}, {:.0} s{}",
+            lost.seconds,
+            if lost.at_end {
+                " (lost at the end)"
+            } else {
+                ""
+            }
+        ),
+    }
 }

@@ -247,12 +247,15 @@ pub enum NavActivity {
     Recovering,
     /// Exploration is over and the rover is home.
     Done,
-    /// Lost, and no view it turned through matched its map: stopped, waiting for the
-    /// operator (its map is kept as it was when it got lost).
+    /// Lost, and no view it turned through or drove back to matched its map: stopped,
+    /// waiting for the operator (its map is kept as it was when it got lost).
     Lost,
     /// Its pose grew too uncertain: driving back to ground it mapped while it knew where it
     /// was, to tie the pose back to it by a loop closure, before exploring on.
     Revisiting,
+    /// Lost, and no view it turned through matched its map: driving on its wheels and gyro
+    /// back to a place where its lidar saw enough to find itself again.
+    Relocalising,
 }
 
 /// A rover's navigation state and target (`nav/status`; no ROS counterpart). Sent when

@@ -41,6 +41,43 @@ pub struct StateChange {
     pub reason: String,
 }
 
+/// How long a rover was lost over a mission, from its changes of localisation state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct LostTime {
+    /// Times it became lost.
+    pub episodes: usize,
+    /// Seconds it spent lost, up to the mission's end.
+    pub seconds: f64,
+    /// Whether it was still lost at the end: it never found its place again.
+    pub at_end: bool,
+}
+
+impl LostTime {
+    /// Reads `changes` (in time order) over a mission that ended at `end_s`.
+    pub fn of(changes: &[StateChange], end_s: f64) -> LostTime {
+        let mut lost = LostTime::default();
+        let mut since: Option<f64> = None;
+        for c in changes {
+            match (c.state == LocalisationState::Lost, since) {
+                (true, None) => {
+                    lost.episodes += 1;
+                    since = Some(c.t_s);
+                }
+                (false, Some(from)) => {
+                    lost.seconds += c.t_s - from;
+                    since = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(from) = since {
+            lost.seconds += (end_s - from).max(0.0);
+            lost.at_end = true;
+        }
+        lost
+    }
+}
+
 /// Everything recorded for one rover.
 #[derive(Clone, Debug, Default)]
 pub struct RoverSlamRecord {
@@ -628,6 +665,33 @@ impl RoverSlamRecord {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lost_time_adds_each_episode_and_runs_the_last_to_the_end() {
+        let change = |t_s, state| StateChange {
+            t_s,
+            state,
+            reason: String::new(),
+        };
+        let changes = [
+            change(10.0, LocalisationState::OdometryUnreliable),
+            change(20.0, LocalisationState::Lost),
+            change(25.0, LocalisationState::Tracking),
+            change(40.0, LocalisationState::Lost),
+            change(41.0, LocalisationState::Lost),
+            change(50.0, LocalisationState::OdometryUnreliable),
+            change(90.0, LocalisationState::Lost),
+        ];
+        let lost = LostTime::of(&changes, 100.0);
+        assert_eq!(lost.episodes, 3);
+        assert!((lost.seconds - (5.0 + 10.0 + 10.0)).abs() < 1e-9);
+        assert!(lost.at_end);
+        let recovered = LostTime::of(&changes[..6], 100.0);
+        assert_eq!(recovered.episodes, 2);
+        assert!((recovered.seconds - 15.0).abs() < 1e-9);
+        assert!(!recovered.at_end);
+        assert_eq!(LostTime::of(&[], 100.0), LostTime::default());
+    }
 
     /// A published map of `width x height` 5 cm cells at the arena's origin.
     fn map_msg(width: u32, height: u32, data: Vec<i8>) -> OccupancyGrid {

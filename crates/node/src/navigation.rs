@@ -144,6 +144,8 @@ pub enum GoalKind {
     Home,
     /// Ground mapped while the pose was known, to tie an uncertain pose back to it.
     Revisit,
+    /// While lost, a place its lidar saw enough of to find itself again.
+    Relocalise,
 }
 
 /// What the navigator is doing, for status messages.
@@ -449,6 +451,29 @@ impl Navigator {
         }
     }
 
+    /// The rover is lost (its pose carried on by its wheels and gyro, on the map as it was
+    /// when it lost its place): it drives to `place`, where its lidar saw enough to find
+    /// itself again, instead of whatever it was doing. An operator's goal waits until it
+    /// knows where it is again.
+    pub fn start_relocalising(&mut self, now: Time, place: Point2) {
+        self.drop_goal(now, "lost its place", false);
+        self.start_goal(now, place, GoalKind::Relocalise);
+    }
+
+    /// Whether it is driving to a place to find itself again.
+    pub fn relocalising(&self) -> bool {
+        self.goal.is_some_and(|g| g.kind == GoalKind::Relocalise)
+    }
+
+    /// The rover found its place again after driving to find it: the drive ends, and the
+    /// stall rule's clock starts again (nothing is mapped while lost).
+    pub fn relocalised(&mut self, now: Time) {
+        if self.relocalising() {
+            self.drop_goal(now, "found its place again", false);
+        }
+        self.grown = None;
+    }
+
     /// Whether it wants a fresh map now.
     pub fn wants_map(&self, now: Time) -> bool {
         now >= self.next_map || self.replan_now
@@ -627,9 +652,11 @@ impl Navigator {
             return self.off_map(now, costmap);
         }
         let stalled = self.stalled(now, explored, map.geometry().resolution_m);
-        // Operator goals first.
+        // Operator goals first, once the rover knows where it is.
         if let Some(op) = self.operator_goal
-            && self.goal.is_none_or(|g| g.kind != GoalKind::Operator)
+            && self
+                .goal
+                .is_none_or(|g| !matches!(g.kind, GoalKind::Operator | GoalKind::Relocalise))
         {
             self.start_goal(now, op, GoalKind::Operator);
         }
@@ -923,7 +950,7 @@ impl Navigator {
                     GoalKind::Home => self.done = true,
                     GoalKind::Operator => self.operator_goal = None,
                     GoalKind::Revisit => self.revisit_closed_nothing(goal.point),
-                    GoalKind::Frontier => {}
+                    GoalKind::Frontier | GoalKind::Relocalise => {}
                 }
                 self.replan_now = true;
                 (0.0, 0.0)

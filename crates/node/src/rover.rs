@@ -8,7 +8,7 @@
 use crate::cost::CostClock;
 use crate::guard::{Guard, GuardConfig};
 use crate::mapping::{Mapping, MappingConfig};
-use crate::navigation::{Activity, GoalKind, NavigationConfig, Navigator};
+use crate::navigation::{Activity, GoalKind, Guarded, NavigationConfig, Navigator};
 use crate::{Node, Outgoing};
 use realms_core::geometry::Vec3;
 use realms_core::msgs::{
@@ -30,10 +30,18 @@ const EXPLORED_FACTOR: usize = 5;
 const NAV_MAP_FACTOR: usize = 2;
 /// Yaw rate while lost: turning in place shows the relocaliser new views.
 const LOST_TURN_RAD_S: f64 = 0.3;
-/// A lost rover turns this long (about four turns) before it gives up and stops: the views
-/// from where it stands are all it can show the relocaliser, and driving blind could end
-/// in a crater.
-const LOST_SEARCH: Duration = Duration::from_secs(90);
+/// A lost rover turns this long (about two turns) to show the relocaliser every view from
+/// where it stands, before it drives back to where it saw more.
+const LOST_TURN: Duration = Duration::from_secs(45);
+/// A lost rover drives back to places whose scans kept at least this many returns: it
+/// lost its place where it saw little (the open middle of a hall, one rock in range), and a
+/// search of the map for a view of a few returns finds it fits many places.
+const RELOCALISE_PLACE_POINTS: usize = 100;
+/// ... at least this far from where it is and from one another, metres ...
+const RELOCALISE_PLACE_SPACING_M: f64 = 1.0;
+/// ... and tries this many of them before it stops and waits for the operator: its wheels
+/// and gyro carry its pose while it drives, and they drift.
+const RELOCALISE_PLACES: usize = 3;
 /// A peer not heard for this long (six of its status repeats) is taken to be gone, powered
 /// off or out of reach, when a rover asks whether the fleet has finished exploring.
 const PEER_GONE: Duration = Duration::from_secs(60);
@@ -71,6 +79,10 @@ pub struct RoverNode {
     next_explored: Time,
     /// Since when it has been lost, if it is.
     lost_since: Option<Time>,
+    /// The places it drove back to since it got lost, to find itself again.
+    relocalisation_places: Vec<realms_core::Point2>,
+    /// Lost, and it stopped looking: no view it turned through or drove back to matched.
+    lost_gave_up: bool,
     /// Whether its map has been drawn from the final trajectory since exploring ended (see
     /// [`RoverNode::finish_when_done`]).
     finished_map: bool,
@@ -99,6 +111,8 @@ impl RoverNode {
             reason: String::new(),
             next_explored: Time::ZERO,
             lost_since: None,
+            relocalisation_places: Vec::new(),
+            lost_gave_up: false,
             finished_map: false,
             peers_heard: Vec::new(),
             outbox: Vec::new(),
@@ -150,7 +164,7 @@ impl RoverNode {
 
     /// Publishes `nav/status` when it changed or is due again.
     fn publish_status(&mut self, now: Time) {
-        let gave_up = self.gave_up(now);
+        let gave_up = self.gave_up();
         let activity = match self.navigator.activity() {
             _ if gave_up => NavActivity::Lost,
             Activity::Idle => NavActivity::Idle,
@@ -158,6 +172,7 @@ impl RoverNode {
             Activity::Driving(GoalKind::Operator) => NavActivity::OperatorGoal,
             Activity::Driving(GoalKind::Home) => NavActivity::ReturningHome,
             Activity::Driving(GoalKind::Revisit) => NavActivity::Revisiting,
+            Activity::Driving(GoalKind::Relocalise) => NavActivity::Relocalising,
             Activity::Recovering => NavActivity::Recovering,
             Activity::Done => NavActivity::Done,
         };
@@ -172,9 +187,11 @@ impl RoverNode {
                 .last_status
                 .is_none_or(|(a, _, _)| a != NavActivity::Lost)
         {
+            let lost_s = self.lost_since.map_or(0.0, |t| (now - t).as_secs_f64());
             self.reason = format!(
-                "lost for {:.0} s and no view matched the map: stopped, waiting for the operator",
-                LOST_SEARCH.as_secs_f64()
+                "lost for {lost_s:.0} s: no view it turned through or drove back to ({} places) \
+                 matched the map: stopped, waiting for the operator",
+                self.relocalisation_places.len()
             );
             news = true;
         }
@@ -219,10 +236,9 @@ impl RoverNode {
         });
     }
 
-    /// Whether it has been lost so long that it stopped looking.
-    fn gave_up(&self, now: Time) -> bool {
-        self.lost_since
-            .is_some_and(|since| now - since >= LOST_SEARCH)
+    /// Whether it is lost and stopped looking.
+    fn gave_up(&self) -> bool {
+        self.lost_gave_up
     }
 
     /// Once the fleet's exploring is over and this rover is home, draws its map again from
@@ -276,13 +292,16 @@ impl RoverNode {
         let guarded = self.guard.on_scan(now, scan);
         if self.mapping.state() == LocalisationState::Lost {
             let since = *self.lost_since.get_or_insert(now);
-            return if now - since < LOST_SEARCH {
-                (0.0, LOST_TURN_RAD_S)
-            } else {
-                (0.0, 0.0)
-            };
+            if now - since < LOST_TURN {
+                return (0.0, LOST_TURN_RAD_S);
+            }
+            return self.drive_to_relocalise(now, guarded);
         }
-        self.lost_since = None;
+        if self.lost_since.take().is_some() && !self.relocalisation_places.is_empty() {
+            self.navigator.relocalised(now);
+        }
+        self.relocalisation_places.clear();
+        self.lost_gave_up = false;
         let pose = self.mapping.pose();
         if self.navigator.wants_map(now) {
             let mapping = &mut self.mapping;
@@ -303,6 +322,52 @@ impl RoverNode {
                 self.next_explored = now + EXPLORED_PERIOD;
                 self.publish_explored(now, &map);
             }
+        }
+        self.navigator.steer(now, pose, self.last_cmd_v, guarded)
+    }
+
+    /// Lost, and turning on the spot found nothing: drives on its wheels and gyro, over the
+    /// map as it was when it got lost, to the nearest place where its lidar saw enough to
+    /// find itself again (the mapper searches its map at every step of the way), trying up
+    /// to [`RELOCALISE_PLACES`] before it stops and waits for the operator. This is the
+    /// "backtrack" recovery of field robots whose localisation fails in sparse terrain: the
+    /// way back is ground it drove, and its own guard still watches the ground ahead.
+    fn drive_to_relocalise(&mut self, now: Time, guarded: Guarded) -> (f64, f64) {
+        if self.lost_gave_up {
+            return (0.0, 0.0);
+        }
+        let pose = self.mapping.pose();
+        if !self.navigator.relocalising() {
+            let tried = &self.relocalisation_places;
+            let wanted = |p: realms_core::Point2| {
+                tried
+                    .iter()
+                    .all(|t| t.distance_m(p) >= RELOCALISE_PLACE_SPACING_M)
+            };
+            let place = (tried.len() < RELOCALISE_PLACES)
+                .then(|| {
+                    self.mapping.mapper().relocalisation_place(
+                        pose.position(),
+                        RELOCALISE_PLACE_SPACING_M,
+                        RELOCALISE_PLACE_POINTS,
+                        wanted,
+                    )
+                })
+                .flatten();
+            let Some(place) = place else {
+                self.lost_gave_up = true;
+                return (0.0, 0.0);
+            };
+            self.relocalisation_places.push(place);
+            self.navigator.set_localisation(None);
+            self.navigator.start_relocalising(now, place);
+        }
+        if self.navigator.wants_map(now) {
+            let mapping = &mut self.mapping;
+            let map = self
+                .cost_clock
+                .time(&mut self.slam_wall, || mapping.nav_map(NAV_MAP_FACTOR));
+            self.navigator.on_map(now, &map, pose);
         }
         self.navigator.steer(now, pose, self.last_cmd_v, guarded)
     }
@@ -415,6 +480,7 @@ mod tests {
     use super::*;
     use crate::mapping::rover_mapper_config;
     use realms_core::Point2;
+    use realms_core::Pose2;
     use realms_core::geometry::Quaternion;
     use realms_core::msgs::{Imu, LaserScan, Odometry};
     use realms_slam::traversability::TraversabilityConfig;
@@ -524,7 +590,7 @@ mod tests {
         // The lidar is back, but sees open ground: nothing to relocalise against.
         let mut turned_until = None;
         let mut lost_status = None;
-        for k in 221..=1500 {
+        for k in 221..=1000 {
             let (w, statuses) = step(&mut node, at(k), Some(false));
             let w = w.expect("a command per scan");
             assert_eq!(node.mapping().state(), LocalisationState::Lost);
@@ -538,15 +604,197 @@ mod tests {
                     .map(|s| (k, s.reason));
             }
         }
-        // It turned from the first scan after the gap for LOST_SEARCH (90 s), then stopped,
-        // and said why.
+        // It turned from the first scan after the gap for LOST_TURN (45 s); it mapped
+        // nowhere else to drive back to, so it stopped then, and said why.
         let turned_until = turned_until.expect("it turned while lost");
         assert!(
-            (1120..=1122).contains(&turned_until),
+            (670..=672).contains(&turned_until),
             "turned until scan {turned_until}"
         );
         let (said_at, why) = lost_status.expect("it reported Lost");
         assert_eq!(said_at, turned_until + 1);
         assert!(why.contains("waiting for the operator"), "{why}");
+    }
+
+    /// A yard 6 m x 4 m walled on three sides (west, north, south), open to the east, and a
+    /// round rock far out in the open, seen by a lidar that reaches 4 m: from inside the yard
+    /// it sees walls all round, beside the rock only the rock, whose arc fits the map at
+    /// any heading.
+    const YARD_WALLS: [(Point2, Point2); 3] = [
+        (Point2::new(-3.0, -2.0), Point2::new(-3.0, 2.0)),
+        (Point2::new(-3.0, 2.0), Point2::new(3.0, 2.0)),
+        (Point2::new(-3.0, -2.0), Point2::new(3.0, -2.0)),
+    ];
+    const YARD_ROCK: (Point2, f64) = (Point2::new(9.0, 1.5), 0.25);
+    const YARD_LIDAR_REACH_M: f64 = 4.0;
+
+    /// Where a beam from `from` along `yaw_rad` meets a yard wall or the rock within the
+    /// lidar's reach.
+    fn yard_range(from: Point2, yaw_rad: f64) -> f32 {
+        let (s, c) = yaw_rad.sin_cos();
+        let mut nearest = f64::INFINITY;
+        for (a, b) in YARD_WALLS {
+            // from + t (c, s) = a + u (b - a), t > 0, u in [0, 1].
+            let (ex, ey) = (b.x_m - a.x_m, b.y_m - a.y_m);
+            let det = c * -ey + s * ex;
+            if det.abs() < 1e-12 {
+                continue;
+            }
+            let (dx, dy) = (a.x_m - from.x_m, a.y_m - from.y_m);
+            let t = (dx * -ey + dy * ex) / det;
+            let u = (c * dy - s * dx) / det;
+            if t > 0.0 && (0.0..=1.0).contains(&u) {
+                nearest = nearest.min(t);
+            }
+        }
+        // |from + t (c, s) - centre| = radius, the nearer root.
+        let (centre, radius) = YARD_ROCK;
+        let (dx, dy) = (from.x_m - centre.x_m, from.y_m - centre.y_m);
+        let b = dx * c + dy * s;
+        let disc = b * b - (dx * dx + dy * dy - radius * radius);
+        if disc >= 0.0 && -b - disc.sqrt() > 0.0 {
+            nearest = nearest.min(-b - disc.sqrt());
+        }
+        if nearest <= YARD_LIDAR_REACH_M {
+            nearest as f32
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// A rover in the yard, driven by its own commands (or the test's) with perfect wheels
+    /// and gyro.
+    struct Yard {
+        node: RoverNode,
+        truth: Pose2,
+        cmd: (f64, f64),
+        t: Time,
+        statuses: Vec<NavStatus>,
+    }
+
+    impl Yard {
+        fn new() -> Yard {
+            let mut node = node();
+            node.navigator = Navigator::new(
+                node.id(),
+                NavigationConfig {
+                    autonomous: false,
+                    ..NavigationConfig::new(Point2::new(0.0, 0.0))
+                },
+            );
+            Yard {
+                node,
+                truth: Pose2::IDENTITY,
+                cmd: (0.0, 0.0),
+                t: Time::ZERO,
+                statuses: Vec::new(),
+            }
+        }
+
+        /// 0.1 s of driving on `joystick`, or else on the node's last command, then the
+        /// sensors (the lidar if `lidar`).
+        fn step(&mut self, lidar: bool, joystick: Option<(f64, f64)>) {
+            let dt = 0.1;
+            let (v, w) = joystick.unwrap_or(self.cmd);
+            let mid = self.truth.yaw_rad + w * dt / 2.0;
+            self.truth = Pose2::new(
+                self.truth.x_m + v * dt * mid.cos(),
+                self.truth.y_m + v * dt * mid.sin(),
+                self.truth.yaw_rad + w * dt,
+            );
+            self.t += Duration::from_millis(100);
+            let (t, id) = (self.t, self.node.id());
+            let mut odom = Odometry::default();
+            odom.header.stamp = t;
+            odom.pose.pose.position.x = self.truth.x_m;
+            odom.pose.pose.position.y = self.truth.y_m;
+            odom.pose.pose.orientation =
+                Quaternion::from_roll_pitch_yaw(0.0, 0.0, self.truth.yaw_rad);
+            odom.twist.twist.linear.x = v;
+            odom.twist.twist.angular.z = w;
+            self.node
+                .on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+            let mut imu = Imu::default();
+            imu.header.stamp = t;
+            imu.angular_velocity.z = w;
+            imu.linear_acceleration.z = 9.81;
+            self.node
+                .on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            if lidar {
+                let n = 360;
+                let here = self.truth.position();
+                let ranges = (0..n)
+                    .map(|i| {
+                        let a = -std::f64::consts::PI + i as f64 * std::f64::consts::TAU / n as f64;
+                        yard_range(here, self.truth.yaw_rad + a)
+                    })
+                    .collect();
+                let scan = crate::test_scan(t, ranges);
+                self.node
+                    .on_message(t, &id.topic("scan"), &Message::LaserScan(scan));
+            } else {
+                self.node.on_tick(t);
+            }
+            for o in self.node.drain_outbox() {
+                match o.message {
+                    Message::CmdVel(c) => self.cmd = (c.twist.linear.x, c.twist.angular.z),
+                    Message::NavStatus(s) => self.statuses.push(s),
+                    _ => {}
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_rover_lost_beside_a_lone_rock_drives_back_to_where_it_saw_enough_and_finds_itself() {
+        let mut yard = Yard::new();
+        for _ in 0..100 {
+            yard.step(true, None);
+        }
+        // Driven out of the yard to the rock, 9 m east, at 0.3 m/s.
+        for _ in 0..300 {
+            yard.step(true, Some((0.3, 0.0)));
+        }
+        assert_ne!(yard.node.mapping().state(), LocalisationState::Lost);
+        // Twelve seconds without the lidar: lost, with only the rock in sight.
+        for _ in 0..120 {
+            yard.step(false, Some((0.0, 0.0)));
+        }
+        let lost_at = yard.truth;
+        let mut found = None;
+        for k in 0..3000 {
+            yard.step(true, None);
+            if k == 0 {
+                assert_eq!(yard.node.mapping().state(), LocalisationState::Lost);
+            }
+            if yard.node.mapping().state() != LocalisationState::Lost {
+                found = Some(k);
+                break;
+            }
+        }
+        let said = |a: NavActivity| yard.statuses.iter().any(|s| s.activity == a);
+        let found = found.unwrap_or_else(|| {
+            panic!(
+                "it found its place again; at {:?}, it said {:?}",
+                yard.truth,
+                yard.statuses.last()
+            )
+        });
+        assert!(said(NavActivity::Relocalising), "it said it drove back");
+        assert!(!said(NavActivity::Lost), "it never gave up");
+        // It turned on the spot first (45 s), then drove back towards the yard.
+        assert!(found > 450, "found after {found} scans");
+        assert!(
+            yard.truth.x_m < lost_at.x_m - 2.0,
+            "it drove back from {lost_at:?} to {:?}",
+            yard.truth
+        );
+        let off = yard
+            .node
+            .mapping()
+            .pose()
+            .position()
+            .distance_m(yard.truth.position());
+        assert!(off < 0.2, "its pose is {off:.2} m off");
     }
 }

@@ -1987,11 +1987,49 @@ impl Mapper {
         let sigma = self.paths_from_start.position_m();
         // The keyframe the next scan would add.
         let next = self.graph.nodes.len();
-        self.submaps
+        let keyframes = self
+            .submaps
             .iter()
             .filter(|s| self.searched_for_closures(s, next))
             .flat_map(|s| s.origin_node..s.origin_node + s.keyframes)
-            .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m))
+            .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m));
+        self.nearest_keyframe(from, keyframes, min_points, wanted)
+    }
+
+    /// Where a lost rover could drive to find itself again: the keyframe nearest to `from`
+    /// (in the map as the graph placed it when the rover lost its place) but at least
+    /// `min_distance_m` from it, whose scan kept at least `min_points` returns, and which
+    /// `wanted` accepts (places already tried), among the keyframes of the submaps a
+    /// relocalisation searches. A scan that rich was matched to its submap when it was
+    /// taken, where the rover's view when it was lost is often nearly empty (in the open
+    /// middle of a hall, one rock), and turning on the spot shows nothing more. `None`
+    /// without such a keyframe.
+    pub fn relocalisation_place(
+        &self,
+        from: Point2,
+        min_distance_m: f64,
+        min_points: usize,
+        wanted: impl Fn(Point2) -> bool,
+    ) -> Option<Point2> {
+        let keyframes = self
+            .submaps
+            .iter()
+            .filter(|s| s.keyframes > 0 && !s.trimmed)
+            .flat_map(|s| s.origin_node..s.origin_node + s.keyframes);
+        let wanted = |p: Point2| p.distance_m(from) >= min_distance_m && wanted(p);
+        self.nearest_keyframe(from, keyframes, min_points, wanted)
+    }
+
+    /// The position nearest to `from` of `keyframes` whose scans kept at least `min_points`
+    /// returns and which `wanted` accepts.
+    fn nearest_keyframe(
+        &self,
+        from: Point2,
+        keyframes: impl Iterator<Item = usize>,
+        min_points: usize,
+        wanted: impl Fn(Point2) -> bool,
+    ) -> Option<Point2> {
+        keyframes
             .filter(|&k| {
                 self.keyframe_points
                     .get(k)
