@@ -238,6 +238,7 @@ fn summarise(missions: &[MissionGrades]) -> Summary {
 fn nav_variant(name: &str) -> Result<NavigationChange> {
     match name {
         "unjudged-must-pay" => Ok(|n| n.explore.unjudged_must_pay = true),
+        "endgame-must-pay" => Ok(|n| n.endgame_unjudged_must_pay = true),
         "revisit" => Ok(|n| n.revisit = Some(RevisitConfig::default())),
         "revisit-0.4m" => Ok(|n| {
             n.revisit = Some(RevisitConfig {
@@ -246,7 +247,8 @@ fn nav_variant(name: &str) -> Result<NavigationChange> {
             })
         }),
         _ => bail!(
-            "unknown navigation variant `{name}`; known: unjudged-must-pay, revisit, revisit-0.4m"
+            "unknown navigation variant `{name}`; known: unjudged-must-pay, endgame-must-pay, \
+             revisit, revisit-0.4m (several joined with `+`)"
         ),
     }
 }
@@ -263,7 +265,7 @@ pub fn with_nav_variant(
     Ok(match name {
         None => (Vec::new(), source),
         Some(name) => (
-            vec![nav_variant(name)?],
+            name.split('+').map(nav_variant).collect::<Result<_>>()?,
             format!("{source}, navigation variant {name}"),
         ),
     })

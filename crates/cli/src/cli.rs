@@ -164,7 +164,8 @@ pub struct MissionArgs {
     #[arg(long)]
     pub variant: Option<String>,
     /// Run the rovers with this change to their navigation, as `realms bench missions
-    /// --nav-variant` names them (e.g. `revisit`; the report names it).
+    /// --nav-variant` names them (e.g. `revisit`, or `revisit+endgame-must-pay`; the report
+    /// names it).
     #[arg(long)]
     pub nav_variant: Option<String>,
 }
@@ -235,7 +236,9 @@ pub struct BenchMissionsArgs {
     /// Run the rovers with this change to their navigation: `unjudged-must-pay` (a frontier
     /// beside ground only the lidar saw is driven to only where it is worth the drive),
     /// `revisit` (a rover whose position grew uncertain past 0.25 m drives back to ground it
-    /// mapped while it knew where it was, to close the loop), `revisit-0.4m` (past 0.4 m).
+    /// mapped while it knew where it was, to close the loop), `revisit-0.4m` (past 0.4 m),
+    /// `endgame-must-pay` (as `unjudged-must-pay`, once a rover has found no frontier left);
+    /// join several with `+`, e.g. `revisit+endgame-must-pay`.
     #[arg(long)]
     pub nav_variant: Option<String>,
 }

@@ -72,6 +72,12 @@ pub struct NavigationConfig {
     pub stall_growth_m2: f64,
     /// Driving back to re-anchor an uncertain pose (off: `None`).
     pub revisit: Option<RevisitConfig>,
+    /// Once the rover has found no reachable frontier left (its map whole as far as it can
+    /// tell), a frontier beside no unknown ground is worth the drive only where its gain
+    /// exceeds the drive ([`ExploreConfig::unjudged_must_pay`], for the end-game alone):
+    /// the scraps of unjudged ground that turn up afterwards (a wall's foot after a closure
+    /// redrew the map) are left unless they are near. Off in the rovers' setup.
+    pub endgame_unjudged_must_pay: bool,
 }
 
 /// When a rover breaks off exploring to tie its pose back to ground it mapped while it knew
@@ -129,6 +135,7 @@ impl NavigationConfig {
             stall_window: Duration::from_secs(300),
             stall_growth_m2: 2.0,
             revisit: None,
+            endgame_unjudged_must_pay: false,
         }
     }
 }
@@ -240,6 +247,9 @@ pub struct Navigator {
     revisit_above_m: f64,
     /// Places revisits reached, or gave up on, without a closure: not taken again.
     revisits_closed_nothing: Vec<Point2>,
+    /// It once found no reachable frontier left (see
+    /// [`NavigationConfig::endgame_unjudged_must_pay`]).
+    ran_out_of_frontiers: bool,
     events: Vec<NavEvent>,
 }
 
@@ -319,6 +329,7 @@ impl Navigator {
             localisation: None,
             revisit_above_m,
             revisits_closed_nothing: Vec::new(),
+            ran_out_of_frontiers: false,
             events: Vec::new(),
         }
     }
@@ -709,9 +720,13 @@ impl Navigator {
         };
         if exploring {
             let claims = self.claims(now, current);
+            let explore = ExploreConfig {
+                unjudged_must_pay: self.cfg.explore.unjudged_must_pay
+                    || (self.cfg.endgame_unjudged_must_pay && self.ran_out_of_frontiers),
+                ..self.cfg.explore
+            };
             let rank = |field: &[f32]| {
-                let explore = &self.cfg.explore;
-                rank_frontiers(&frontiers, &geo, field, &claims, &self.blacklist, explore)
+                rank_frontiers(&frontiers, &geo, field, &claims, &self.blacklist, &explore)
             };
             let (mut options, mut free) = rank(&field);
             // A frontier the bounded flood did not reach costs more than its limit, so is
@@ -748,6 +763,7 @@ impl Navigator {
             } else {
                 self.choose_frontier(now, &free, !options.is_empty());
                 if options.is_empty() && !self.done && self.goal.is_none() {
+                    self.ran_out_of_frontiers = true;
                     self.event(now, "no reachable frontier left: returning home".into());
                     self.start_goal(now, self.cfg.home, GoalKind::Home);
                     self.home_for_stall = false;
@@ -1311,6 +1327,52 @@ mod tests {
         let (goal, kind) = nav.goal().expect("a goal");
         assert_eq!(kind, GoalKind::Frontier);
         assert!((goal.x_m - 5.0).abs() < 0.3, "{goal:?}");
+    }
+
+    #[test]
+    fn after_running_out_of_frontiers_the_endgame_rule_leaves_far_scraps_of_unjudged_ground() {
+        let at = Time::from_secs_f64;
+        // The whole room known and judged but for a strip in its east half that only the
+        // lidar saw (ground behind a rock, still to be judged).
+        let whole = || {
+            let mut map = room(false);
+            for v in map.cells_mut() {
+                if *v < 0 {
+                    *v = 0;
+                }
+            }
+            map
+        };
+        let mut scrap = whole();
+        for y in 40..60 {
+            for x in 85..88 {
+                *scrap.get_mut(x, y).expect("inside") = realms_nav::frontier::UNJUDGED;
+            }
+        }
+        let goal_after = |endgame: bool, ran_out: bool, from: Pose2| {
+            let mut nav = Navigator::new(
+                RoverId(1),
+                NavigationConfig {
+                    endgame_unjudged_must_pay: endgame,
+                    ..NavigationConfig::new(Point2::new(1.0, 1.0))
+                },
+            );
+            if ran_out {
+                nav.on_map(at(0.0), &whole(), from);
+                assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Home));
+            }
+            nav.on_map(at(3.0), &scrap, from);
+            nav.goal().map(|g| g.1)
+        };
+        let far = Pose2::new(2.0, 5.0, 0.0);
+        let near = Pose2::new(8.0, 5.0, 0.0);
+        // Without the rule the rover drives 6 m for the strip; with it, it goes home.
+        assert_eq!(goal_after(false, true, far), Some(GoalKind::Frontier));
+        assert_eq!(goal_after(true, true, far), Some(GoalKind::Home));
+        // A strip beside it is still worth the look ...
+        assert_eq!(goal_after(true, true, near), Some(GoalKind::Frontier));
+        // ... and before the rover first ran out of frontiers, so is the far one.
+        assert_eq!(goal_after(true, false, far), Some(GoalKind::Frontier));
     }
 
     #[test]
