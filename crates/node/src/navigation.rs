@@ -467,6 +467,13 @@ impl Navigator {
     /// itself again, instead of whatever it was doing. An operator's goal waits until it
     /// knows where it is again.
     pub fn start_relocalising(&mut self, now: Time, place: Point2) {
+        // The frontier it was heading for when it got lost lies where its scans are likely
+        // to be poor again: left to a peer, or to later.
+        if let Some(g) = self.goal
+            && g.kind == GoalKind::Frontier
+        {
+            self.blacklist.push(g.point);
+        }
         self.drop_goal(now, "lost its place", false);
         self.start_goal(now, place, GoalKind::Relocalise);
     }
@@ -476,13 +483,24 @@ impl Navigator {
         self.goal.is_some_and(|g| g.kind == GoalKind::Relocalise)
     }
 
-    /// The rover found its place again after driving to find it: the drive ends, and the
-    /// stall rule's clock starts again (nothing is mapped while lost).
-    pub fn relocalised(&mut self, now: Time) {
+    /// The rover knows where it is again after being lost for `lost_for`: a drive to find
+    /// itself ends (and a rover that was done replans, home again from where the drive
+    /// took it), the goal it had keeps no deadline set before (it did not steer while
+    /// lost), and the stall rule's clock is moved on by the time lost, in which nothing
+    /// could be mapped.
+    pub fn relocalised(&mut self, now: Time, lost_for: Duration) {
         if self.relocalising() {
             self.drop_goal(now, "found its place again", false);
+            self.done = false;
         }
-        self.grown = None;
+        if let Some(g) = self.goal.as_mut() {
+            g.deadline = None;
+        }
+        self.history.clear();
+        self.replan_now = true;
+        if let Some((known, since)) = self.grown {
+            self.grown = Some((known, since + lost_for));
+        }
     }
 
     /// Whether it wants a fresh map now.
@@ -494,7 +512,11 @@ impl Navigator {
     pub fn set_operator_goal(&mut self, now: Time, goal: Option<Point2>) {
         self.operator_goal = goal;
         self.done = false;
-        if self.goal.is_some_and(|g| g.kind == GoalKind::Operator) || goal.is_some() {
+        // A lost rover's drive to find itself goes on: the goal is taken once it knows
+        // where it is.
+        if !self.relocalising()
+            && (self.goal.is_some_and(|g| g.kind == GoalKind::Operator) || goal.is_some())
+        {
             self.drop_goal(now, "operator goal changed", false);
         }
         self.replan_now = true;
@@ -1327,6 +1349,33 @@ mod tests {
         let (goal, kind) = nav.goal().expect("a goal");
         assert_eq!(kind, GoalKind::Frontier);
         assert!((goal.x_m - 5.0).abs() < 0.3, "{goal:?}");
+    }
+
+    #[test]
+    fn a_lost_rover_keeps_driving_to_find_itself_and_takes_the_operators_goal_after() {
+        let mut nav = navigator();
+        let map = room(false);
+        let pose = Pose2::new(2.0, 5.0, 0.0);
+        let at = Time::from_secs_f64;
+        nav.on_map(at(0.0), &map, pose);
+        let (frontier, kind) = nav.goal().expect("a frontier");
+        assert_eq!(kind, GoalKind::Frontier);
+        // Lost on the way there: it drives back to where it saw enough.
+        let place = Point2::new(1.5, 8.0);
+        nav.start_relocalising(at(1.0), place);
+        assert_eq!(nav.goal(), Some((place, GoalKind::Relocalise)));
+        // The operator's goal waits ...
+        let operator = Point2::new(3.0, 3.0);
+        nav.set_operator_goal(at(2.0), Some(operator));
+        nav.on_map(at(3.0), &map, pose);
+        assert_eq!(nav.goal(), Some((place, GoalKind::Relocalise)));
+        // ... until it knows where it is again.
+        nav.relocalised(at(4.0), Duration::from_secs(3));
+        assert!(!nav.relocalising());
+        nav.on_map(at(4.0), &map, pose);
+        assert_eq!(nav.goal(), Some((operator, GoalKind::Operator)));
+        // The frontier it was lost on the way to is not taken again.
+        assert!(nav.blacklist().contains(&frontier));
     }
 
     #[test]

@@ -297,8 +297,8 @@ impl RoverNode {
             }
             return self.drive_to_relocalise(now, guarded);
         }
-        if self.lost_since.take().is_some() && !self.relocalisation_places.is_empty() {
-            self.navigator.relocalised(now);
+        if let Some(since) = self.lost_since.take() {
+            self.navigator.relocalised(now, now - since);
         }
         self.relocalisation_places.clear();
         self.lost_gave_up = false;
@@ -796,5 +796,7 @@ mod tests {
             .position()
             .distance_m(yard.truth.position());
         assert!(off < 0.2, "its pose is {off:.2} m off");
+        yard.step(true, None);
+        assert!(!yard.node.navigator.relocalising(), "the drive ended");
     }
 }

@@ -1790,16 +1790,7 @@ impl Mapper {
             step_range_m: LOOP_STEP_RANGE_M,
         };
         let pose = self.pose;
-        let mut order: Vec<(f64, usize)> = (0..self.submaps.len())
-            .filter(|s| self.submaps[*s].keyframes > 0 && !self.submaps[*s].trimmed)
-            .map(|s| {
-                let origin = self.graph.nodes[self.submaps[s].origin_node];
-                (origin.position().distance_m(pose.position()), s)
-            })
-            .filter(|(d, _)| *d <= self.cfg.loop_search_radius_m + RELOCALISE_WINDOW_M)
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (_, s) in order.into_iter().take(self.cfg.loop_candidates) {
+        for s in self.relocalisation_submaps(pose.position()) {
             // The map is frozen while lost, so an active submap's precomputation stays valid
             // until tracking resumes (it is dropped then).
             let Some((_, m)) = self.verified_match(s, &sample, points, pose, &window, None) else {
@@ -1825,6 +1816,25 @@ impl Mapper {
             self.lost_at = None;
             return;
         }
+    }
+
+    /// The submaps a relocalisation from `at` searches, nearest first: those with keyframes,
+    /// not trimmed, whose origins lie nearest `at` within reach of the search.
+    fn relocalisation_submaps(&self, at: Point2) -> Vec<usize> {
+        let mut order: Vec<(f64, usize)> = (0..self.submaps.len())
+            .filter(|s| self.submaps[*s].keyframes > 0 && !self.submaps[*s].trimmed)
+            .map(|s| {
+                let origin = self.graph.nodes[self.submaps[s].origin_node];
+                (origin.position().distance_m(at), s)
+            })
+            .filter(|(d, _)| *d <= self.cfg.loop_search_radius_m + RELOCALISE_WINDOW_M)
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        order
+            .into_iter()
+            .take(self.cfg.loop_candidates)
+            .map(|(_, s)| s)
+            .collect()
     }
 
     /// Searches submap `s` for `points` (robot frame; `sample` a subset for the search)
@@ -1999,11 +2009,11 @@ impl Mapper {
     /// Where a lost rover could drive to find itself again: the keyframe nearest to `from`
     /// (in the map as the graph placed it when the rover lost its place) but at least
     /// `min_distance_m` from it, whose scan kept at least `min_points` returns, and which
-    /// `wanted` accepts (places already tried), among the keyframes of the submaps a
-    /// relocalisation searches. A scan that rich was matched to its submap when it was
-    /// taken, where the rover's view when it was lost is often nearly empty (in the open
-    /// middle of a hall, one rock), and turning on the spot shows nothing more. `None`
-    /// without such a keyframe.
+    /// `wanted` accepts (places already tried), among the keyframes whose submap a
+    /// relocalisation from the keyframe's own position searches. A scan that rich was
+    /// matched to its submap when it was taken, where the rover's view when it was lost is
+    /// often nearly empty (in the open middle of a hall, one rock), and turning on the spot
+    /// shows nothing more. `None` without such a keyframe.
     pub fn relocalisation_place(
         &self,
         from: Point2,
@@ -2011,11 +2021,15 @@ impl Mapper {
         min_points: usize,
         wanted: impl Fn(Point2) -> bool,
     ) -> Option<Point2> {
-        let keyframes = self
-            .submaps
-            .iter()
-            .filter(|s| s.keyframes > 0 && !s.trimmed)
-            .flat_map(|s| s.origin_node..s.origin_node + s.keyframes);
+        let keyframes = (0..self.submaps.len()).flat_map(|s| {
+            let sub = &self.submaps[s];
+            (sub.origin_node..sub.origin_node + sub.keyframes).filter(move |&k| {
+                self.graph
+                    .nodes
+                    .get(k)
+                    .is_some_and(|pose| self.relocalisation_submaps(pose.position()).contains(&s))
+            })
+        });
         let wanted = |p: Point2| p.distance_m(from) >= min_distance_m && wanted(p);
         self.nearest_keyframe(from, keyframes, min_points, wanted)
     }
