@@ -164,7 +164,7 @@ impl RoverNode {
 
     /// Publishes `nav/status` when it changed or is due again.
     fn publish_status(&mut self, now: Time) {
-        let gave_up = self.gave_up();
+        let gave_up = self.lost_gave_up;
         let activity = match self.navigator.activity() {
             _ if gave_up => NavActivity::Lost,
             Activity::Idle => NavActivity::Idle,
@@ -234,11 +234,6 @@ impl RoverNode {
                 known,
             }),
         });
-    }
-
-    /// Whether it is lost and stopped looking.
-    fn gave_up(&self) -> bool {
-        self.lost_gave_up
     }
 
     /// Once the fleet's exploring is over and this rover is home, draws its map again from
