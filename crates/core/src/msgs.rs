@@ -248,13 +248,15 @@ pub enum NavActivity {
     /// Exploration is over and the rover is home.
     Done,
     /// Lost, and no view it turned through or drove back to matched its map: stopped,
-    /// waiting for the operator (its map is kept as it was when it got lost).
+    /// waiting for the operator (its map is kept as it was when it got lost). An operator's
+    /// goal is then driven on its wheels and gyro (`OperatorGoal` while it drives).
     Lost,
     /// Its pose grew too uncertain: driving back to ground it mapped while it knew where it
     /// was, to tie the pose back to it by a loop closure, before exploring on.
     Revisiting,
-    /// Lost, and no view it turned through matched its map: driving on its wheels and gyro
-    /// back to a place where its lidar saw enough to find itself again.
+    /// Lost: turning on the spot to find itself (no target), then, if no view it turned
+    /// through matched its map, driving on its wheels and gyro back to a place where its
+    /// lidar saw enough to find itself again (the target).
     Relocalising,
 }
 

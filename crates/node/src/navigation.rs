@@ -478,6 +478,11 @@ impl Navigator {
         self.start_goal(now, place, GoalKind::Relocalise);
     }
 
+    /// Whether the operator's goal is set and not yet reached or refused.
+    pub fn has_operator_goal(&self) -> bool {
+        self.operator_goal.is_some()
+    }
+
     /// Whether it is driving to a place to find itself again.
     pub fn relocalising(&self) -> bool {
         self.goal.is_some_and(|g| g.kind == GoalKind::Relocalise)

@@ -165,8 +165,17 @@ impl RoverNode {
     /// Publishes `nav/status` when it changed or is due again.
     fn publish_status(&mut self, now: Time) {
         let gave_up = self.lost_gave_up;
+        // Lost and still turning on the spot: whatever goal it had waits, and its target
+        // is no claim a peer should leave alone.
+        let turning_lost = self.lost_since.is_some()
+            && !gave_up
+            && !self.navigator.relocalising()
+            && self.mapping.state() == LocalisationState::Lost;
         let activity = match self.navigator.activity() {
+            // The operator's goal is driven even by a rover that gave up finding itself.
+            Activity::Driving(GoalKind::Operator) if gave_up => NavActivity::OperatorGoal,
             _ if gave_up => NavActivity::Lost,
+            _ if turning_lost => NavActivity::Relocalising,
             Activity::Idle => NavActivity::Idle,
             Activity::Driving(GoalKind::Frontier) => NavActivity::Exploring,
             Activity::Driving(GoalKind::Operator) => NavActivity::OperatorGoal,
@@ -176,11 +185,23 @@ impl RoverNode {
             Activity::Recovering => NavActivity::Recovering,
             Activity::Done => NavActivity::Done,
         };
-        let target = self.navigator.goal().map(|(p, _)| p);
+        let target = self
+            .navigator
+            .goal()
+            .filter(|_| !turning_lost)
+            .map(|(p, _)| p);
         let events = self.navigator.take_events();
         let mut news = !events.is_empty();
         if let Some(e) = events.last() {
             self.reason = e.what.clone();
+        }
+        if turning_lost
+            && self
+                .last_status
+                .is_none_or(|(a, _, _)| a != NavActivity::Relocalising)
+        {
+            self.reason = "lost its place: turning on the spot to find itself".to_string();
+            news = true;
         }
         if gave_up
             && self
@@ -327,12 +348,15 @@ impl RoverNode {
     /// to [`RELOCALISE_PLACES`] before it stops and waits for the operator. This is the
     /// "backtrack" recovery of field robots whose localisation fails in sparse terrain: the
     /// way back is ground it drove, and its own guard still watches the ground ahead.
+    ///
+    /// Once it gave up, it stands still until the operator sends it a goal, which it then
+    /// drives to the same way (the mapper still searches its map at every step).
     fn drive_to_relocalise(&mut self, now: Time, guarded: Guarded) -> (f64, f64) {
-        if self.lost_gave_up {
+        if self.lost_gave_up && !self.navigator.has_operator_goal() {
             return (0.0, 0.0);
         }
         let pose = self.mapping.pose();
-        if !self.navigator.relocalising() {
+        if !self.lost_gave_up && !self.navigator.relocalising() {
             let tried = &self.relocalisation_places;
             let wanted = |p: realms_core::Point2| {
                 tried
@@ -477,7 +501,7 @@ mod tests {
     use realms_core::Point2;
     use realms_core::Pose2;
     use realms_core::geometry::Quaternion;
-    use realms_core::msgs::{Imu, LaserScan, Odometry};
+    use realms_core::msgs::{Imu, LaserScan, NavGoal, Odometry};
     use realms_slam::traversability::TraversabilityConfig;
 
     fn node() -> RoverNode {
@@ -544,8 +568,12 @@ mod tests {
     }
 
     /// Feeds the node 0.1 s of standing still ending at `t`, with a scan if `lidar`; returns
-    /// the yaw rate it commanded last and the navigation statuses it sent.
-    fn step(node: &mut RoverNode, t: Time, lidar: Option<bool>) -> (Option<f64>, Vec<NavStatus>) {
+    /// the speed and yaw rate it commanded last and the navigation statuses it sent.
+    fn step(
+        node: &mut RoverNode,
+        t: Time,
+        lidar: Option<bool>,
+    ) -> (Option<(f64, f64)>, Vec<NavStatus>) {
         let id = node.id();
         let mut odom = Odometry::default();
         odom.header.stamp = t;
@@ -559,19 +587,20 @@ mod tests {
             let topic = id.topic("scan");
             node.on_message(t, &topic, &Message::LaserScan(scan(t, walls)));
         }
-        let (mut yaw_rate, mut statuses) = (None, Vec::new());
+        let (mut cmd, mut statuses) = (None, Vec::new());
         for o in node.drain_outbox() {
             match o.message {
-                Message::CmdVel(c) => yaw_rate = Some(c.twist.angular.z),
+                Message::CmdVel(c) => cmd = Some((c.twist.linear.x, c.twist.angular.z)),
                 Message::NavStatus(s) => statuses.push(s),
                 _ => {}
             }
         }
-        (yaw_rate, statuses)
+        (cmd, statuses)
     }
 
     #[test]
-    fn a_rover_lost_where_nothing_matches_its_map_turns_then_stops_and_says_so() {
+    fn a_rover_lost_where_nothing_matches_its_map_turns_then_stops_and_says_so_and_takes_an_operators_goal()
+     {
         let mut node = node();
         let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
         // Ten seconds mapping the room, then twelve without the lidar: lost.
@@ -585,12 +614,14 @@ mod tests {
         // The lidar is back, but sees open ground: nothing to relocalise against.
         let mut turned_until = None;
         let mut lost_status = None;
+        let mut turning_statuses = Vec::new();
         for k in 221..=1000 {
-            let (w, statuses) = step(&mut node, at(k), Some(false));
-            let w = w.expect("a command per scan");
+            let (cmd, statuses) = step(&mut node, at(k), Some(false));
+            let (_, w) = cmd.expect("a command per scan");
             assert_eq!(node.mapping().state(), LocalisationState::Lost);
             if w != 0.0 {
                 turned_until = Some(k);
+                turning_statuses.extend(statuses.iter().cloned());
             }
             if lost_status.is_none() {
                 lost_status = statuses
@@ -609,6 +640,47 @@ mod tests {
         let (said_at, why) = lost_status.expect("it reported Lost");
         assert_eq!(said_at, turned_until + 1);
         assert!(why.contains("waiting for the operator"), "{why}");
+        // While it turned it said it was finding itself, and claimed no frontier.
+        assert!(
+            !turning_statuses.is_empty(),
+            "it said something while turning"
+        );
+        for s in &turning_statuses {
+            assert_eq!(
+                (s.activity, s.target),
+                (NavActivity::Relocalising, None),
+                "{s:?}"
+            );
+        }
+        // The operator sends it 1.5 m ahead, into the room it mapped: it drives there on
+        // its wheels and gyro, and says so.
+        let id = node.id();
+        node.on_message(
+            at(1001),
+            &id.topic("nav/goal"),
+            &Message::NavGoal(NavGoal {
+                header: Header {
+                    stamp: at(1001),
+                    frame_id: "map".into(),
+                },
+                target: Some(Point2::new(1.5, 0.0)),
+            }),
+        );
+        let mut drove = false;
+        let mut statuses = Vec::new();
+        for k in 1002..=1030 {
+            let (cmd, said) = step(&mut node, at(k), Some(false));
+            drove |= cmd.is_some_and(|(v, _)| v > 0.0);
+            statuses.extend(said);
+        }
+        assert!(drove, "it drove towards the operator's goal");
+        assert!(
+            statuses
+                .iter()
+                .any(|s| s.activity == NavActivity::OperatorGoal
+                    && s.target == Some(Point2::new(1.5, 0.0))),
+            "{statuses:?}"
+        );
     }
 
     /// A yard 6 m x 4 m walled on three sides (west, north, south), open to the east, and a
