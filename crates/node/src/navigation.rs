@@ -483,6 +483,14 @@ impl Navigator {
         self.operator_goal.is_some()
     }
 
+    /// Forgets the operator's goal, and stops driving to it, saying `why`.
+    pub fn forget_operator_goal(&mut self, now: Time, why: &str) {
+        if self.goal.is_some_and(|g| g.kind == GoalKind::Operator) {
+            self.drop_goal(now, why, false);
+        }
+        self.operator_goal = None;
+    }
+
     /// Whether it is driving to a place to find itself again.
     pub fn relocalising(&self) -> bool {
         self.goal.is_some_and(|g| g.kind == GoalKind::Relocalise)

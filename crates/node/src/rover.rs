@@ -174,6 +174,9 @@ impl RoverNode {
         let activity = match self.navigator.activity() {
             // The operator's goal is driven even by a rover that gave up finding itself.
             Activity::Driving(GoalKind::Operator) if gave_up => NavActivity::OperatorGoal,
+            Activity::Recovering if gave_up && self.navigator.has_operator_goal() => {
+                NavActivity::Recovering
+            }
             _ if gave_up => NavActivity::Lost,
             _ if turning_lost => NavActivity::Relocalising,
             Activity::Idle => NavActivity::Idle,
@@ -188,7 +191,7 @@ impl RoverNode {
         let target = self
             .navigator
             .goal()
-            .filter(|_| !turning_lost)
+            .filter(|_| !turning_lost && activity != NavActivity::Lost)
             .map(|(p, _)| p);
         let events = self.navigator.take_events();
         let mut news = !events.is_empty();
@@ -203,7 +206,7 @@ impl RoverNode {
             self.reason = "lost its place: turning on the spot to find itself".to_string();
             news = true;
         }
-        if gave_up
+        if activity == NavActivity::Lost
             && self
                 .last_status
                 .is_none_or(|(a, _, _)| a != NavActivity::Lost)
@@ -375,6 +378,10 @@ impl RoverNode {
                 .flatten();
             let Some(place) = place else {
                 self.lost_gave_up = true;
+                // A goal the operator sent before it gave up was meant for a rover that
+                // knows where it is: only one sent to the rover that gave up is driven blind.
+                self.navigator
+                    .forget_operator_goal(now, "the rover gave up finding itself");
                 return (0.0, 0.0);
             };
             self.relocalisation_places.push(place);
@@ -603,11 +610,35 @@ mod tests {
      {
         let mut node = node();
         let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
-        // Ten seconds mapping the room, then twelve without the lidar: lost.
+        let id = node.id();
+        let send_goal = |node: &mut RoverNode, k: i64, target: Option<Point2>| {
+            node.on_message(
+                at(k),
+                &id.topic("nav/goal"),
+                &Message::NavGoal(NavGoal {
+                    header: Header {
+                        stamp: at(k),
+                        frame_id: "map".into(),
+                    },
+                    target,
+                }),
+            );
+        };
+        // Ten seconds mapping the room, the last on the way to an operator's goal (the
+        // test's wheels stand still), then twelve without the lidar: lost.
         for k in 1..=100 {
+            if k == 90 {
+                send_goal(&mut node, k, Some(Point2::new(1.0, 0.5)));
+            }
             step(&mut node, at(k), Some(true));
         }
         assert_ne!(node.mapping().state(), LocalisationState::Lost);
+        assert!(
+            node.navigator
+                .goal()
+                .is_some_and(|(_, kind)| kind == GoalKind::Operator),
+            "it drove the operator's goal when it got lost"
+        );
         for k in 101..=220 {
             step(&mut node, at(k), None);
         }
@@ -617,8 +648,12 @@ mod tests {
         let mut turning_statuses = Vec::new();
         for k in 221..=1000 {
             let (cmd, statuses) = step(&mut node, at(k), Some(false));
-            let (_, w) = cmd.expect("a command per scan");
+            let (v, w) = cmd.expect("a command per scan");
             assert_eq!(node.mapping().state(), LocalisationState::Lost);
+            assert_eq!(
+                v, 0.0,
+                "scan {k}: the goal it had waits; lost, it does not drive"
+            );
             if w != 0.0 {
                 turned_until = Some(k);
                 turning_statuses.extend(statuses.iter().cloned());
@@ -627,7 +662,7 @@ mod tests {
                 lost_status = statuses
                     .into_iter()
                     .find(|s| s.activity == NavActivity::Lost)
-                    .map(|s| (k, s.reason));
+                    .map(|s| (k, s));
             }
         }
         // It turned from the first scan after the gap for LOST_TURN (45 s); it mapped
@@ -637,10 +672,11 @@ mod tests {
             (670..=672).contains(&turned_until),
             "turned until scan {turned_until}"
         );
-        let (said_at, why) = lost_status.expect("it reported Lost");
+        let (said_at, lost) = lost_status.expect("it reported Lost");
         assert_eq!(said_at, turned_until + 1);
-        assert!(why.contains("waiting for the operator"), "{why}");
-        // While it turned it said it was finding itself, and claimed no frontier.
+        assert!(lost.reason.contains("waiting for the operator"), "{lost:?}");
+        assert_eq!(lost.target, None);
+        // While it turned it said it was finding itself, and claimed nothing.
         assert!(
             !turning_statuses.is_empty(),
             "it said something while turning"
@@ -652,34 +688,35 @@ mod tests {
                 "{s:?}"
             );
         }
-        // The operator sends it 1.5 m ahead, into the room it mapped: it drives there on
-        // its wheels and gyro, and says so.
-        let id = node.id();
-        node.on_message(
-            at(1001),
-            &id.topic("nav/goal"),
-            &Message::NavGoal(NavGoal {
-                header: Header {
-                    stamp: at(1001),
-                    frame_id: "map".into(),
-                },
-                target: Some(Point2::new(1.5, 0.0)),
-            }),
-        );
+        // Now the operator sends it 1.5 m ahead, into the room it mapped: it drives there
+        // on its wheels and gyro, and says so once, not at every scan.
+        send_goal(&mut node, 1001, Some(Point2::new(1.5, 0.0)));
         let mut drove = false;
         let mut statuses = Vec::new();
         for k in 1002..=1030 {
             let (cmd, said) = step(&mut node, at(k), Some(false));
+            assert_eq!(node.mapping().state(), LocalisationState::Lost);
             drove |= cmd.is_some_and(|(v, _)| v > 0.0);
             statuses.extend(said);
         }
         assert!(drove, "it drove towards the operator's goal");
+        let [driving] = &statuses[..] else {
+            panic!("one status for the new goal: {statuses:?}");
+        };
+        assert_eq!(
+            (driving.activity, driving.target),
+            (NavActivity::OperatorGoal, Some(Point2::new(1.5, 0.0)))
+        );
+        assert!(!driving.reason.contains("waiting"), "{driving:?}");
+        // The operator cancels it: it stops and waits again.
+        send_goal(&mut node, 1031, None);
+        let (cmd, said) = step(&mut node, at(1032), Some(false));
+        assert_eq!(cmd.map(|(v, _)| v), Some(0.0));
         assert!(
-            statuses
-                .iter()
-                .any(|s| s.activity == NavActivity::OperatorGoal
-                    && s.target == Some(Point2::new(1.5, 0.0))),
-            "{statuses:?}"
+            said.iter().any(|s| s.activity == NavActivity::Lost
+                && s.target.is_none()
+                && s.reason.contains("waiting for the operator")),
+            "{said:?}"
         );
     }
 
