@@ -708,9 +708,25 @@ mod tests {
             (NavActivity::OperatorGoal, Some(Point2::new(1.5, 0.0)))
         );
         assert!(!driving.reason.contains("waiting"), "{driving:?}");
+        // The test's wheels do not move it: after 20 s it backs off, and says so (not
+        // `Lost`, which peers and the mission take for finished).
+        let mut statuses = Vec::new();
+        for k in 1031..=1280 {
+            statuses.extend(step(&mut node, at(k), Some(false)).1);
+        }
+        assert!(
+            statuses
+                .iter()
+                .any(|s| s.activity == NavActivity::Recovering),
+            "{statuses:?}"
+        );
+        assert!(
+            statuses.iter().all(|s| s.activity != NavActivity::Lost),
+            "{statuses:?}"
+        );
         // The operator cancels it: it stops and waits again.
-        send_goal(&mut node, 1031, None);
-        let (cmd, said) = step(&mut node, at(1032), Some(false));
+        send_goal(&mut node, 1281, None);
+        let (cmd, said) = step(&mut node, at(1282), Some(false));
         assert_eq!(cmd.map(|(v, _)| v), Some(0.0));
         assert!(
             said.iter().any(|s| s.activity == NavActivity::Lost
