@@ -698,7 +698,8 @@ impl Navigator {
             return self.off_map(now, costmap);
         }
         let stalled = self.stalled(now, explored, map.geometry().resolution_m);
-        // Operator goals first, once the rover knows where it is.
+        // Operator goals first (a rover driving to find itself takes them once it has; one
+        // that gave up drives them as they come).
         if let Some(op) = self.operator_goal
             && self
                 .goal

@@ -198,25 +198,24 @@ impl RoverNode {
         if let Some(e) = events.last() {
             self.reason = e.what.clone();
         }
-        if turning_lost
-            && self
-                .last_status
-                .is_none_or(|(a, _, _)| a != NavActivity::Relocalising)
-        {
-            self.reason = "lost its place: turning on the spot to find itself".to_string();
-            news = true;
-        }
-        if activity == NavActivity::Lost
-            && self
-                .last_status
-                .is_none_or(|(a, _, _)| a != NavActivity::Lost)
-        {
-            let lost_s = self.lost_since.map_or(0.0, |t| (now - t).as_secs_f64());
-            self.reason = format!(
-                "lost for {lost_s:.0} s: no view it turned through or drove back to ({} places) \
-                 matched the map: stopped, waiting for the operator",
-                self.relocalisation_places.len()
-            );
+        // Entering a lost state is news, with the reason said once.
+        let entered = self.last_status.is_none_or(|(a, _, _)| a != activity);
+        let entry_reason = match activity {
+            NavActivity::Relocalising if turning_lost => {
+                Some("lost its place: turning on the spot to find itself".to_string())
+            }
+            NavActivity::Lost => {
+                let lost_s = self.lost_since.map_or(0.0, |t| (now - t).as_secs_f64());
+                Some(format!(
+                    "lost for {lost_s:.0} s: no view it turned through or drove back to ({} \
+                     places) matched the map: stopped, waiting for the operator",
+                    self.relocalisation_places.len()
+                ))
+            }
+            _ => None,
+        };
+        if let Some(why) = entry_reason.filter(|_| entered) {
+            self.reason = why;
             news = true;
         }
         let due = match self.last_status {
