@@ -654,9 +654,38 @@ impl Navigator {
     }
 
     /// The rover stands outside its own map: nothing to plan on but the costmap kept.
+    ///
+    /// A goal not yet planned cannot be planned from here, so it is given up, and an
+    /// operator's goal that would start now is refused, each saying why: a lost rover's
+    /// dead-reckoned pose can leave the map it had when it got lost, and its drive back
+    /// (or the operator's goal) would otherwise count an empty path as arrival, or wait
+    /// for ever. A goal already on its way keeps its path: a map that grows catches up.
     fn off_map(&mut self, now: Time, costmap: Costmap) {
-        self.event(now, "the rover is off its own map".into());
+        const WHY: &str = "the rover is off its own map";
+        self.event(now, WHY.into());
         self.costmap = Some(costmap);
+        if self.goal.is_some() && self.follower.path().is_empty() {
+            self.drop_goal(now, WHY, true);
+        }
+        if let Some(op) = self.operator_goal
+            && self.operator_goal_would_start()
+        {
+            self.event(
+                now,
+                format!(
+                    "refused Operator goal ({:.1}, {:.1}): {WHY}",
+                    op.x_m, op.y_m
+                ),
+            );
+            self.operator_goal = None;
+        }
+    }
+
+    /// Whether an operator's goal, if set, pre-empts the current goal at the next map: all
+    /// but a drive to it already and a drive to find the rover's place again.
+    fn operator_goal_would_start(&self) -> bool {
+        self.goal
+            .is_none_or(|g| !matches!(g.kind, GoalKind::Operator | GoalKind::Relocalise))
     }
 
     /// A fresh map (-1 unknown, 0 free, 1 free but unjudged, 90 hazard, 100 obstacle) with
@@ -701,9 +730,7 @@ impl Navigator {
         // Operator goals first (a rover driving to find itself takes them once it has; one
         // that gave up drives them as they come).
         if let Some(op) = self.operator_goal
-            && self
-                .goal
-                .is_none_or(|g| !matches!(g.kind, GoalKind::Operator | GoalKind::Relocalise))
+            && self.operator_goal_would_start()
         {
             self.start_goal(now, op, GoalKind::Operator);
         }
@@ -1390,6 +1417,55 @@ mod tests {
         assert_eq!(nav.goal(), Some((operator, GoalKind::Operator)));
         // The frontier it was lost on the way to is not taken again.
         assert!(nav.blacklist().contains(&frontier));
+    }
+
+    #[test]
+    fn a_rover_off_its_own_map_gives_up_the_goal_it_cannot_plan_and_refuses_the_operators() {
+        let mut nav = navigator();
+        let map = room(false);
+        let at = Time::from_secs_f64;
+        nav.on_map(at(0.0), &map, Pose2::new(2.0, 5.0, 0.0));
+        nav.take_events();
+        // Lost, its dead-reckoned pose drifted west of the map it had: the drive back
+        // cannot be planned, and must not count as arrival.
+        let off = Pose2::new(-2.0, 5.0, 0.0);
+        nav.start_relocalising(at(1.0), Point2::new(1.5, 8.0));
+        nav.on_map(at(1.0), &map, off);
+        assert_eq!(nav.goal(), None);
+        assert_eq!(nav.steer(at(1.1), off, 0.0, Guarded::default()), (0.0, 0.0));
+        let events = nav.take_events();
+        assert!(
+            events
+                .iter()
+                .any(|e| e.what.starts_with("gave up Relocalise")
+                    && e.what.contains("off its own map")),
+            "{events:?}"
+        );
+        assert!(
+            events.iter().all(|e| !e.what.starts_with("reached")),
+            "{events:?}"
+        );
+        // The operator's goal is refused, saying why, rather than left waiting unsaid.
+        nav.set_operator_goal(at(2.0), Some(Point2::new(3.0, 3.0)));
+        nav.on_map(at(2.0), &map, off);
+        assert!(!nav.has_operator_goal());
+        assert_eq!(nav.goal(), None);
+        let events = nav.take_events();
+        assert!(
+            events
+                .iter()
+                .any(|e| e.what.starts_with("refused Operator")
+                    && e.what.contains("off its own map")),
+            "{events:?}"
+        );
+        // A goal already on its way keeps its path while the map catches up.
+        let on = Pose2::new(2.0, 5.0, 0.0);
+        nav.set_operator_goal(at(3.0), Some(Point2::new(3.0, 3.0)));
+        nav.on_map(at(3.0), &map, on);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Operator));
+        nav.on_map(at(6.0), &map, off);
+        assert_eq!(nav.goal().map(|g| g.1), Some(GoalKind::Operator));
+        assert!(nav.has_operator_goal());
     }
 
     #[test]
