@@ -653,6 +653,15 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "walls-square",
+        what: "the walls at right angles to those the first scan saw hold the heading too (a hall's walls meet square)",
+        apply: |c| {
+            if let Some(walls) = &mut c.mapper.wall_headings {
+                walls.square_references = true;
+            }
+        },
+    },
+    Variant {
         name: "wall-headings-1deg",
         what: "each keyframe's heading the walls measured trusted to 1 deg at most, not 0.5",
         apply: |c| {

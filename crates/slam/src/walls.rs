@@ -41,6 +41,10 @@ pub struct WallHeadingConfig {
     /// degrees is a match that fitted the wrong way (BENCHMARKS.md, "Closures searched as
     /// far as a rover can have slid along a wall").
     pub closure_gate_sigmas: Option<f64>,
+    /// The directions at right angles to those the first scan saw are references too: the
+    /// walls of a hall meet square (the Manhattan world of the module's reference), so a
+    /// rover that follows a wall the start could not see still has its heading held.
+    pub square_references: bool,
 }
 
 impl Default for WallHeadingConfig {
@@ -53,6 +57,7 @@ impl Default for WallHeadingConfig {
             gate_rad: 3f64.to_radians(),
             floor_sigma_rad: 0.5f64.to_radians(),
             closure_gate_sigmas: None,
+            square_references: false,
         }
     }
 }
@@ -185,15 +190,20 @@ impl WallHeadings {
     /// Takes the long runs of `points` (robot frame, beam order), seen at a heading known
     /// exactly, as the reference directions; runs within the gate of one already taken
     /// are the same direction.
+    /// With [`WallHeadingConfig::square_references`], each direction's right angle too.
     pub fn set_references(&mut self, yaw_rad: f64, points: &[Point2]) {
         for run in wall_runs(points, &self.cfg) {
             let direction = half_turn(yaw_rad + run.direction_rad);
-            if self
-                .references
-                .iter()
-                .all(|r| half_turn(direction - r).abs() > self.cfg.gate_rad)
-            {
-                self.references.push(direction);
+            let square = self.cfg.square_references;
+            let across = square.then(|| half_turn(direction + std::f64::consts::FRAC_PI_2));
+            for d in std::iter::once(direction).chain(across) {
+                if self
+                    .references
+                    .iter()
+                    .all(|r| half_turn(d - r).abs() > self.cfg.gate_rad)
+                {
+                    self.references.push(d);
+                }
             }
         }
     }
@@ -321,5 +331,55 @@ mod tests {
         assert!(information > 0.5 / (floor * floor), "{information}");
         // Tracked 5 degrees off, beyond the gate: the runs may be other structures.
         assert!(headings.measure(truth + 5f64.to_radians(), &seen).is_none());
+    }
+
+    #[test]
+    fn a_wall_square_to_the_start_walls_measures_the_heading_only_in_a_square_hall() {
+        // The start sees one wall, along x at y = 4.
+        let start = along(Point2::new(-4.0, 4.0), Point2::new(4.0, 4.0), 50, |_| 0.0);
+        // Later, truly facing 100 degrees, the robot sees only a wall along y at x = -5
+        // (in the map frame): at right angles to the start's.
+        let truth = 100f64.to_radians();
+        let (s, c) = truth.sin_cos();
+        let seen: Vec<Point2> = along(Point2::new(-5.0, -3.0), Point2::new(-5.0, 5.0), 50, |_| 0.0)
+            .iter()
+            .map(|p| Point2::new(c * p.x_m + s * p.y_m, -s * p.x_m + c * p.y_m))
+            .collect();
+        let tracked = truth - 1.0f64.to_radians();
+        for square in [false, true] {
+            let cfg = WallHeadingConfig {
+                square_references: square,
+                ..WallHeadingConfig::default()
+            };
+            let mut headings = WallHeadings::new(cfg);
+            headings.set_references(0.0, &start);
+            assert_eq!(headings.references().len(), if square { 2 } else { 1 });
+            let measured = headings.measure(tracked, &seen);
+            if square {
+                let (yaw, _) = measured.expect("the square wall measures the heading");
+                assert!((yaw - truth).abs() < 1e-6, "{}", yaw.to_degrees());
+            } else {
+                assert!(measured.is_none(), "{measured:?}");
+            }
+        }
+        // A start that sees both walls of a corner takes no third direction.
+        let mut corner = start.clone();
+        corner.extend(along(
+            Point2::new(5.0, 3.9),
+            Point2::new(5.0, -4.0),
+            50,
+            |_| 0.0,
+        ));
+        let mut headings = WallHeadings::new(WallHeadingConfig {
+            square_references: true,
+            ..WallHeadingConfig::default()
+        });
+        headings.set_references(0.0, &corner);
+        assert_eq!(
+            headings.references().len(),
+            2,
+            "{:?}",
+            headings.references()
+        );
     }
 }
