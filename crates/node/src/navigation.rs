@@ -660,15 +660,18 @@ impl Navigator {
     /// dead-reckoned pose can leave the map it had when it got lost, and its drive back
     /// (or the operator's goal) would otherwise count an empty path as arrival, or wait
     /// for ever. A goal already on its way keeps its path: a map that grows catches up.
+    /// An operator's goal waiting for a lost rover's drive back is not refused when that
+    /// drive is given up: the rover tries its next place, or gives up and drops it then.
     fn off_map(&mut self, now: Time, costmap: Costmap) {
         const WHY: &str = "the rover is off its own map";
         self.event(now, WHY.into());
         self.costmap = Some(costmap);
+        let refuse_operator = self.operator_goal_would_start();
         if self.goal.is_some() && self.follower.path().is_empty() {
             self.drop_goal(now, WHY, true);
         }
         if let Some(op) = self.operator_goal
-            && self.operator_goal_would_start()
+            && refuse_operator
         {
             self.event(
                 now,
@@ -1445,6 +1448,15 @@ mod tests {
             events.iter().all(|e| !e.what.starts_with("reached")),
             "{events:?}"
         );
+        // An operator's goal waiting for the drive back is not refused with it: the rover
+        // tries its next place, and drops the goal itself if it gives up.
+        nav.start_relocalising(at(1.2), Point2::new(1.5, 2.0));
+        nav.set_operator_goal(at(1.3), Some(Point2::new(3.0, 3.0)));
+        nav.on_map(at(1.3), &map, off);
+        assert_eq!(nav.goal(), None);
+        assert!(nav.has_operator_goal());
+        nav.forget_operator_goal(at(1.4), "the rover gave up finding itself");
+        nav.take_events();
         // The operator's goal is refused, saying why, rather than left waiting unsaid.
         nav.set_operator_goal(at(2.0), Some(Point2::new(3.0, 3.0)));
         nav.on_map(at(2.0), &map, off);

@@ -349,7 +349,9 @@ impl RoverNode {
     /// find itself again (the mapper searches its map at every step of the way), trying up
     /// to [`RELOCALISE_PLACES`] before it stops and waits for the operator. This is the
     /// "backtrack" recovery of field robots whose localisation fails in sparse terrain: the
-    /// way back is ground it drove, and its own guard still watches the ground ahead.
+    /// way back is ground it drove, and its own guard still watches the ground ahead. A rover
+    /// whose dead-reckoned pose left that map can plan no way back: each place is given up
+    /// at the next map (see `Navigator::off_map`), and it gives up within a few scans.
     ///
     /// Once it gave up, it stands still until the operator sends it a goal, which it then
     /// drives to the same way (the mapper still searches its map at every step).

@@ -1130,8 +1130,8 @@ pub struct Mapper {
     wheel_scale: Option<WheelScale>,
     /// The newest keyframe's uncertainty from the start, kept up to date as asked.
     paths_from_start: PathsFromStart,
-    /// The wall directions the first keyframe saw (with `wall_headings`); the headings they
-    /// measured are the graph's heading priors.
+    /// The wall directions the first keyframe saw, and their right angles if so set (with
+    /// `wall_headings`); the headings they measured are the graph's heading priors.
     walls: Option<WallHeadings>,
 }
 

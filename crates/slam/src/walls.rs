@@ -7,8 +7,9 @@
 //! correlation of -0.84; BENCHMARKS.md, "The gyro's leftover bias measured out").
 //! Structural regularities of built environments are a standard anchor for that drift (e.g.
 //! Peasley, Birchfield, Cunningham & Fisher, "Accurate On-line 3D Occupancy Grids Using
-//! Manhattan World Constraints", IROS 2012); here only directions actually seen from the
-//! start are trusted, not an assumed grid of right angles.
+//! Manhattan World Constraints", IROS 2012); here the directions actually seen from the
+//! start are trusted, and an assumed grid of right angles only if asked
+//! ([`WallHeadingConfig::square_references`]).
 
 use realms_core::Point2;
 use realms_core::geometry::{LineFit, normalize_angle_rad};
@@ -189,21 +190,27 @@ impl WallHeadings {
 
     /// Takes the long runs of `points` (robot frame, beam order), seen at a heading known
     /// exactly, as the reference directions; runs within the gate of one already taken
-    /// are the same direction.
-    /// With [`WallHeadingConfig::square_references`], each direction's right angle too.
+    /// are the same direction. With [`WallHeadingConfig::square_references`], each seen
+    /// direction's right angle too, where no seen direction lies within the gate of it: a
+    /// corner a little off square keeps the wall it was seen to have.
     pub fn set_references(&mut self, yaw_rad: f64, points: &[Point2]) {
+        let gate_rad = self.cfg.gate_rad;
+        let add = |d: f64, references: &mut Vec<f64>| {
+            if references.iter().all(|r| half_turn(d - r).abs() > gate_rad) {
+                references.push(d);
+            }
+        };
+        let first_new = self.references.len();
         for run in wall_runs(points, &self.cfg) {
-            let direction = half_turn(yaw_rad + run.direction_rad);
-            let square = self.cfg.square_references;
-            let across = square.then(|| half_turn(direction + std::f64::consts::FRAC_PI_2));
-            for d in std::iter::once(direction).chain(across) {
-                if self
-                    .references
-                    .iter()
-                    .all(|r| half_turn(d - r).abs() > self.cfg.gate_rad)
-                {
-                    self.references.push(d);
-                }
+            add(half_turn(yaw_rad + run.direction_rad), &mut self.references);
+        }
+        if self.cfg.square_references {
+            let seen = self.references[first_new..].to_vec();
+            for d in seen {
+                add(
+                    half_turn(d + std::f64::consts::FRAC_PI_2),
+                    &mut self.references,
+                );
             }
         }
     }
@@ -381,5 +388,25 @@ mod tests {
             "{:?}",
             headings.references()
         );
+        // One 2 degrees off square keeps the wall as seen, not the assumed right angle,
+        // whichever of its walls comes first in the beams.
+        let off = 92f64.to_radians();
+        let end = Point2::new(4.0 + 8.0 * off.cos(), 4.0 + 8.0 * off.sin());
+        let leg = along(Point2::new(4.0, 4.0), end, 50, |_| 0.0);
+        for corner in [[start.clone(), leg.clone()].concat(), [leg, start].concat()] {
+            let mut headings = WallHeadings::new(WallHeadingConfig {
+                square_references: true,
+                ..WallHeadingConfig::default()
+            });
+            headings.set_references(0.0, &corner);
+            let refs = headings.references();
+            assert_eq!(refs.len(), 2, "{refs:?}");
+            for seen in [0.0, off] {
+                assert!(
+                    refs.iter().any(|r| half_turn(r - seen).abs() < 1e-3),
+                    "{refs:?}"
+                );
+            }
+        }
     }
 }
