@@ -34,7 +34,7 @@ pub fn write(
     write_pixels(grid, dir, stem, |c| pixel(*c), "")
 }
 
-/// [`write`] with the cells `hazard` says are hazards (occupied to map_server) written as
+/// [`write()`] with the cells `hazard` says are hazards (occupied to map_server) written as
 /// [`HAZARD_PIXEL`], and `hazard_value: 1` in the YAML.
 pub fn write_with_hazards<T>(
     grid: &Grid<T>,

@@ -142,7 +142,7 @@ pub struct Imu {
     pub header: Header,
     /// Orientation estimate, if provided.
     pub orientation: Quaternion,
-    /// Its covariance (-1 in [0][0]: not provided).
+    /// Its covariance (-1 in `[0][0]`: not provided).
     pub orientation_covariance: Covariance3,
     /// Angular velocity in rad/s (yaw rate in `z`).
     pub angular_velocity: Vec3,
@@ -150,7 +150,7 @@ pub struct Imu {
     pub angular_velocity_covariance: Covariance3,
     /// Linear acceleration in m/s^2.
     pub linear_acceleration: Vec3,
-    /// Its covariance (-1 in [0][0]: not provided).
+    /// Its covariance (-1 in `[0][0]`: not provided).
     pub linear_acceleration_covariance: Covariance3,
 }
 

@@ -21,12 +21,12 @@ use realms_core::{Point2, Pose2};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Landmark {
     /// Centre of the circle fitted to the blob's outline where one fits
-    /// ([`circle_through`]), else the centroid of its cells; grid-local metres.
+    /// (`circle_through`), else the centroid of its cells; grid-local metres.
     pub c: Point2,
     /// Radius of that circle, else of the disc of the blob's area; metres. The circle runs
     /// through the outline cells' centres, so for a solid blob it is about half a cell
     /// smaller than the area's disc: compare radii of one kind with a slack
-    /// ([`SIZE_SLACK_M`]).
+    /// (`SIZE_SLACK_M`).
     pub radius_m: f64,
 }
 

@@ -476,8 +476,8 @@ pub struct Comparison {
     pub common: usize,
     /// How much worse the second pose fits, in standard errors of the mean difference of
     /// the points' costs (negative: it fits better). 0 with too few points in common:
-    /// [`MIN_COMMON_POINTS`], or between two poses at one heading
-    /// [`MIN_MOVED_ACROSS_POINTS`] of those the shift moves across their surface (the
+    /// `MIN_COMMON_POINTS`, or between two poses at one heading
+    /// `MIN_MOVED_ACROSS_POINTS` of those the shift moves across their surface (the
     /// only ones counted there).
     /// Each pair of surface points is counted from both maps and neighbouring points' costs
     /// are correlated, so this overstates the evidence; the thresholds were chosen on it as

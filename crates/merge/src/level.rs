@@ -54,7 +54,7 @@ pub struct Level {
     /// `normal` as a direction bin, [`NO_BIN`] where there is none.
     pub bin: Vec<u8>,
     /// For feature cells: whether their blob (8-connected feature cells) is a landmark,
-    /// compact and not a straight line (see [`landmarks`]).
+    /// compact and not a straight line (see `landmarks`).
     pub landmark: Vec<bool>,
     /// Whether the map's free cells were judged for hazards ([`Map::free_judged_for_hazards`]).
     pub free_judged_for_hazards: bool,
@@ -489,7 +489,7 @@ fn thin<T: Copy>(pts: Vec<T>, max_points: usize) -> Vec<T> {
 
 /// A map's cells with lone feature cells (no feature among their 8 neighbours) made
 /// unknown: speckle is neither evidence of an obstacle nor of free space. So are pockets
-/// of free space too small to stand in ([`MAX_FREE_POCKET_CELLS`]) and walled in all
+/// of free space too small to stand in (`MAX_FREE_POCKET_CELLS`) and walled in all
 /// round: missed returns inside a rock, a wall or the lander, which would otherwise line
 /// it with surface points facing inwards, different in each map, that drown its true
 /// outline when two poses are compared.
@@ -505,7 +505,7 @@ impl Despeckled {
         Despeckled::cleaned(map, true)
     }
 
-    /// Despeckles `map`; its walled-in free pockets ([`MAX_FREE_POCKET_CELLS`]) are made
+    /// Despeckles `map`; its walled-in free pockets (`MAX_FREE_POCKET_CELLS`) are made
     /// unknown only if `free_pockets` is set.
     pub fn cleaned(map: &Map, free_pockets: bool) -> Despeckled {
         let g = map.geometry();

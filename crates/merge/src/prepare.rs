@@ -101,7 +101,7 @@ pub struct Params {
     /// ([`crate::fine::nearby`]), restarted around the best, that settles apart from it and
     /// fits about as closely refuses the merge as imprecise; one that fits clearly more
     /// closely takes the best's place (a few times, and only near the verified best; see
-    /// [`Params::fine_reach_m`] and `FINE_MAX_HOPS` in [`crate::estimate`]).
+    /// [`Params::fine_reach_m`] and `FINE_MAX_HOPS` in [`crate::estimate`](mod@crate::estimate)).
     pub precision: crate::fine::RivalRule,
     /// Whether the precision check runs at all (the sub-cell fit of the verified best
     /// does either way).

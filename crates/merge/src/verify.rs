@@ -859,7 +859,7 @@ const FAR_SHIFT_DISCOUNT: f64 = 0.25;
 /// moved twice as far, where a slide along bare walls keeps 70 % or more (BENCHMARKS.md,
 /// "The rovers' own maps"). So where the near moves keep more than half the score, the
 /// moves twice as far are probed too, and the shifts' sharpness is the better of one less
-/// what the near moves keep and [`FAR_SHIFT_DISCOUNT`] less what the far ones keep: with
+/// what the near moves keep and `FAR_SHIFT_DISCOUNT` less what the far ones keep: with
 /// the merge's 0.25 threshold, a pose whose far moves keep at most half its score is
 /// pinned.
 ///

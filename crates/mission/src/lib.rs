@@ -1,6 +1,6 @@
 //! realms-mission: runs a simulated mission end to end.
 //!
-//! [`Mission`] owns the [`World`](realms_sim::World), one node per rover, the on-board bus and
+//! [`Mission`] owns the [`World`], one node per rover, the on-board bus and
 //! the simulated network between nodes ([`realms_net::SimNetwork`]; ideal delivery with
 //! [`MissionOptions::ideal_comms`]), and advances all of it on the world's clock. [`report`] turns a finished
 //! mission into its results folder (`mission.json`, `truth.png`, `trajectories.png`,

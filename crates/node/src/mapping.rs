@@ -1,6 +1,6 @@
 //! A rover's SLAM on board: feeds its lidar scans, and wheel odometry with the gyro's heading,
 //! to the
-//! [`Mapper`](realms_slam::mapper::Mapper), and publishes what the rest of the mission needs
+//! [`Mapper`], and publishes what the rest of the mission needs
 //! to know: the pose with its covariance after every scan, every change of localisation state
 //! with its reason, and the map now and then. Depth frames feed a hazard layer
 //! ([`SubmapHazards`]) that marks what the lidar cannot see (crater bowls, low rocks) in the

@@ -380,7 +380,7 @@ impl Navigator {
         self.cfg.revisit.map(|r| (r.anchored_m, r.anchor_points))
     }
 
-    /// Whether `place` may be revisited: it is not within [`REVISIT_MIN_DISTANCE_M`] of a
+    /// Whether `place` may be revisited: it is not within `REVISIT_MIN_DISTANCE_M` of a
     /// place a revisit reached, or gave up on, without a closure.
     pub fn may_revisit(&self, place: Point2) -> bool {
         self.revisits_closed_nothing

@@ -297,7 +297,7 @@ impl RoverNode {
     }
 
     /// Whether its map is drawn from its final trajectory: exploring is over for the
-    /// fleet as far as it heard, and it is home (see [`RoverNode::finish_when_done`]).
+    /// fleet as far as it heard, and it is home (see `RoverNode::finish_when_done`).
     pub fn map_finished(&self) -> bool {
         self.finished_map
     }

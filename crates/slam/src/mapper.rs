@@ -347,7 +347,7 @@ pub struct MapperConfig {
     /// When to call the estimate unreliable or lost.
     pub health: HealthConfig,
     /// The slip check hears each match with the matcher's pull towards the wheels'
-    /// prediction taken back along the heading ([`without_prior_along_heading`]): where the
+    /// prediction taken back along the heading (`without_prior_along_heading`): where the
     /// map pins the travel only a few times as firmly as that pull, slipping wheels drag the
     /// match a quarter or more of the way towards their over-report. Off by default: it was
     /// measured on the rovers only, not on the recorded logs.
@@ -2726,7 +2726,7 @@ impl Mapper {
     /// its first. A submap's cells show its keyframes where tracking had them when they
     /// were drawn; the graph moves them later, and the final map should show the final
     /// trajectory (as Karto and slam_toolbox draw their maps from every scan at its
-    /// optimised pose). Only submaps bent more than [`FINAL_REDRAW_BEND`] are drawn again,
+    /// optimised pose). Only submaps bent more than `FINAL_REDRAW_BEND` are drawn again,
     /// unless [`MapperConfig::final_map_hit_range_m`] asks for every one with hits cut to a
     /// range (the active submaps stay as they are). Costs one keyframe's tracing per
     /// keyframe kept: for a final map, not for every optimisation.

@@ -2,7 +2,7 @@
 //! closures) as edges, optimised by Gauss-Newton with a Huber loss on loop-closure edges so a
 //! wrong closure cannot drag the whole map (Grisetti et al., "A Tutorial on Graph-Based SLAM",
 //! 2010). The normal equations are block-sparse (3 x 3 blocks). They are solved exactly by
-//! block elimination in minimum-degree order ([`crate::elimination`]), or by conjugate
+//! block elimination in minimum-degree order (the `elimination` module), or by conjugate
 //! gradients preconditioned by block-Jacobi (each pose's own block) or by the chain of
 //! consecutive poses solved exactly (subgraph preconditioning, after Dellaert, Carlson, Ila,
 //! Ni & Thorpe, "Subgraph-preconditioned Conjugate Gradients for Large Scale SLAM", IROS
@@ -111,7 +111,7 @@ pub enum GraphSolver {
     /// exactly: corrections travel along the chain in one iteration, and the solve reaches
     /// the optimum on graphs of any length.
     Chain,
-    /// Exactly, by block elimination in minimum-degree order ([`crate::elimination`]): the
+    /// Exactly, by block elimination in minimum-degree order (the `elimination` module): the
     /// optimum of each step without the iterations' hundreds of passes over every edge.
     /// Falls back to the chain if the system is not positive definite.
     Elimination,

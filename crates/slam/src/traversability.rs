@@ -423,7 +423,7 @@ impl PinholeDepth {
     /// top-down, NaN where nothing returned), per column, as [`silent_end`](Self::silent_end)s:
     /// for each run of at least two pixels without a return that starts right above a return
     /// (deep enough that the run cannot be ground too near to see, see
-    /// [`SILENT_ABOVE_DEPTH_M`]), the run's lowest ray. A lone pixel without a return is a
+    /// `SILENT_ABOVE_DEPTH_M`), the run's lowest ray. A lone pixel without a return is a
     /// real camera's speckle; pixels below a column's lowest return saw ground too near.
     pub fn silent_ends(
         &self,
