@@ -2,9 +2,10 @@
 //!
 //! - [`map`]: [`Map`], a grid of [`MapCell`] (unknown, free, occupied, hazard) and its frame.
 //! - [`io`]: ROS map_server maps (PGM + YAML) in and out, with errors naming file and field.
-//! - [`estimate`](mod@estimate): the relative pose of two maps with no prior ([`estimate::estimate`]) or
-//!   from a known start ([`estimate::estimate_with_prior`]): every hypothesis verified, a
-//!   confidence in 0..1, and a refusal with the reason when the answer is not clear.
+//! - [`estimate`](mod@estimate): the relative pose of two maps with no prior
+//!   ([`estimate::estimate`]) or from a known start ([`estimate::estimate_with_prior`]): every
+//!   hypothesis verified, a confidence in 0..1, and a refusal with the reason when the answer
+//!   is not clear.
 //! - [`compose`]: N maps into one: pairwise estimates, a spanning tree of the most confident
 //!   links from the first map, and the merged grid with a per-map contribution layer.
 //! - [`synth`]: cases with a known answer cut from a source map, for tests and benchmarks.

@@ -205,12 +205,10 @@ impl WallHeadings {
             add(half_turn(yaw_rad + run.direction_rad), &mut self.references);
         }
         if self.cfg.square_references {
-            let seen = self.references[first_new..].to_vec();
-            for d in seen {
-                add(
-                    half_turn(d + std::f64::consts::FRAC_PI_2),
-                    &mut self.references,
-                );
+            let seen_end = self.references.len();
+            for k in first_new..seen_end {
+                let across = half_turn(self.references[k] + std::f64::consts::FRAC_PI_2);
+                add(across, &mut self.references);
             }
         }
     }
@@ -401,9 +399,9 @@ mod tests {
             headings.set_references(0.0, &corner);
             let refs = headings.references();
             assert_eq!(refs.len(), 2, "{refs:?}");
-            for seen in [0.0, off] {
+            for wall in [0.0, off] {
                 assert!(
-                    refs.iter().any(|r| half_turn(r - seen).abs() < 1e-3),
+                    refs.iter().any(|r| half_turn(r - wall).abs() < 1e-3),
                     "{refs:?}"
                 );
             }
