@@ -430,6 +430,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.weak_direction_floor = Some(100.0),
     },
     Variant {
+        name: "weak-floor-300",
+        what: "where the map pins the position less than 300 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
+        apply: |c| c.mapper.weak_direction_floor = Some(300.0),
+    },
+    Variant {
+        name: "weak-floor-1000",
+        what: "where the map pins the position less than 1000 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
+        apply: |c| c.mapper.weak_direction_floor = Some(1000.0),
+    },
+    Variant {
         name: "weak-floor-100-chain",
         what: "weak-floor-100, the slip check hearing each match's motion from the previous match",
         apply: |c| held_where_weak(c, None, false),
