@@ -440,6 +440,24 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.weak_direction_floor = Some(1000.0),
     },
     Variant {
+        name: "slip-segments-7",
+        what: "the wheel scale the median of the last 7 pinned segments, not 15 (a scale that follows the soil sooner)",
+        apply: |c| {
+            if let Some(s) = &mut c.mapper.slip_calibration {
+                s.segments = 7;
+            }
+        },
+    },
+    Variant {
+        name: "slip-segments-31",
+        what: "the wheel scale the median of the last 31 pinned segments, not 15 (a scale that follows a segment whose matches slid less)",
+        apply: |c| {
+            if let Some(s) = &mut c.mapper.slip_calibration {
+                s.segments = 31;
+            }
+        },
+    },
+    Variant {
         name: "weak-floor-100-chain",
         what: "weak-floor-100, the slip check hearing each match's motion from the previous match",
         apply: |c| held_where_weak(c, None, false),
