@@ -107,6 +107,14 @@ fn held_where_weak(c: &mut MappingConfig, gate_m: Option<f64>, own_match: bool) 
     c.mapper.slip_check_own_match = own_match;
 }
 
+/// The wheel scale the median of the last `segments` pinned segments, if the setup learns
+/// one.
+fn slip_segments(c: &mut MappingConfig, segments: usize) {
+    if let Some(s) = &mut c.mapper.slip_calibration {
+        s.segments = segments;
+    }
+}
+
 /// Changes the refinement on the hits, if the setup has one.
 fn on_refinement(c: &mut MappingConfig, change: impl FnOnce(&mut realms_slam::ndt::NdtConfig)) {
     if let Some(n) = &mut c.mapper.ndt_refine {
@@ -442,20 +450,12 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "slip-segments-7",
         what: "the wheel scale the median of the last 7 pinned segments, not 15 (a scale that follows the soil sooner)",
-        apply: |c| {
-            if let Some(s) = &mut c.mapper.slip_calibration {
-                s.segments = 7;
-            }
-        },
+        apply: |c| slip_segments(c, 7),
     },
     Variant {
         name: "slip-segments-31",
         what: "the wheel scale the median of the last 31 pinned segments, not 15 (a scale that follows a segment whose matches slid less)",
-        apply: |c| {
-            if let Some(s) = &mut c.mapper.slip_calibration {
-                s.segments = 31;
-            }
-        },
+        apply: |c| slip_segments(c, 31),
     },
     Variant {
         name: "weak-floor-100-chain",
