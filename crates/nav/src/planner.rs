@@ -151,6 +151,9 @@ const NEIGHBOURS: [(isize, isize, f32); 8] = [
 #[derive(Clone, Debug, Default)]
 struct RadixHeap {
     buckets: Vec<Vec<(u64, u32)>>,
+    /// Bit `b` set while bucket `b` holds items: the next bucket to empty is found by one
+    /// count of trailing zeros, not by looking into each empty bucket below it.
+    occupied: u128,
     last: u64,
     len: usize,
 }
@@ -163,6 +166,7 @@ impl RadixHeap {
         for b in &mut self.buckets {
             b.clear();
         }
+        self.occupied = 0;
         self.last = 0;
         self.len = 0;
     }
@@ -175,6 +179,7 @@ impl RadixHeap {
         let key = key.max(self.last);
         let b = self.bucket(key);
         self.buckets[b].push((key, item));
+        self.occupied |= 1 << b;
         self.len += 1;
     }
 
@@ -183,12 +188,19 @@ impl RadixHeap {
             return None;
         }
         if self.buckets[0].is_empty() {
-            let i = (1..65).find(|&i| !self.buckets[i].is_empty())?;
+            // The lowest bucket above the first that holds items.
+            let higher = self.occupied & !1;
+            if higher == 0 {
+                return None;
+            }
+            let i = higher.trailing_zeros() as usize;
             let items = std::mem::take(&mut self.buckets[i]);
+            self.occupied &= !(1 << i);
             self.last = items.iter().map(|(k, _)| *k).min().unwrap_or(self.last);
             for (k, item) in &items {
                 let b = self.bucket(*k);
                 self.buckets[b].push((*k, *item));
+                self.occupied |= 1 << b;
             }
             // Give the emptied bucket its allocation back for the next round.
             let mut items = items;
@@ -198,7 +210,11 @@ impl RadixHeap {
             }
         }
         self.len -= 1;
-        self.buckets[0].pop().map(|(_, item)| item)
+        let popped = self.buckets[0].pop().map(|(_, item)| item);
+        if self.buckets[0].is_empty() {
+            self.occupied &= !1;
+        }
+        popped
     }
 }
 
