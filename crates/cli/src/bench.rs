@@ -36,6 +36,7 @@ pub fn run(cmd: crate::cli::BenchCommand) -> Result<()> {
         crate::cli::BenchCommand::Slam(args) => crate::bench_slam::run(args),
         crate::cli::BenchCommand::Logs(args) => crate::bench_logs::run(args),
         crate::cli::BenchCommand::Missions(args) => crate::bench_missions::run(args),
+        crate::cli::BenchCommand::Compare(args) => crate::bench_compare::run(args),
     }
 }
 

@@ -204,6 +204,20 @@ pub enum BenchCommand {
     Logs(BenchLogsArgs),
     /// Whole missions, one per seed, run as `realms mission` runs them: each rover's map and trajectory against the truth, the crater cells near its path, the lander's merged map.
     Missions(BenchMissionsArgs),
+    /// Two `bench missions --json` runs on the same seeds side by side, mission by mission, with the interval chance alone would move each difference within.
+    Compare(BenchCompareArgs),
+}
+
+/// `realms bench compare`.
+#[derive(Debug, ClapArgs)]
+pub struct BenchCompareArgs {
+    /// The baseline run: what `realms bench missions --json` printed.
+    pub baseline: std::path::PathBuf,
+    /// The run compared with it, over the same seeds.
+    pub candidate: std::path::PathBuf,
+    /// Redrawings of the paired missions for the intervals.
+    #[arg(long, default_value_t = 10_000)]
+    pub resamples: usize,
 }
 
 /// `realms bench missions`.

@@ -8,6 +8,7 @@
 #![allow(clippy::disallowed_methods)]
 
 mod bench;
+mod bench_compare;
 mod bench_logs;
 mod bench_merge;
 mod bench_merge_rovers;
