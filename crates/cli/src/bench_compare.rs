@@ -187,13 +187,15 @@ fn parse(text: &str, file: &Path) -> Result<BTreeMap<u64, Mission>> {
     Ok(by_seed)
 }
 
-/// One figure compared: both runs' values, the difference, the interval holding the middle
-/// 95 % of the differences over `resamples` redrawings of the paired missions, and how many
-/// missions came out better and worse on their own.
+/// One figure compared: both runs' values, the intervals holding the middle 95 % of the
+/// baseline's figure and of the differences over `resamples` redrawings of the paired
+/// missions, and how many missions came out better and worse on their own.
 #[derive(Clone, Debug, PartialEq)]
 struct Compared {
     baseline: f64,
     candidate: f64,
+    /// The middle 95 % of the baseline's own figure over the redrawings.
+    baseline_interval: (f64, f64),
     interval: (f64, f64),
     better: usize,
     worse: usize,
@@ -224,6 +226,7 @@ fn compare(
         }
     }
     let mut differences = Vec::with_capacity(resamples);
+    let mut baselines = Vec::with_capacity(resamples);
     let (mut ra, mut rb) = (
         Vec::with_capacity(pairs.len()),
         Vec::with_capacity(pairs.len()),
@@ -238,17 +241,22 @@ fn compare(
         }
         if let (Some(x), Some(y)) = ((figure.over)(&ra), (figure.over)(&rb)) {
             differences.push(y - x);
+            baselines.push(x);
         }
     }
-    differences.sort_by(f64::total_cmp);
-    let at = |q: f64| {
-        let i = ((differences.len() as f64 - 1.0) * q).round() as usize;
-        differences.get(i).copied().unwrap_or(f64::NAN)
+    let middle_95 = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| {
+            let i = ((v.len() as f64 - 1.0) * q).round() as usize;
+            v.get(i).copied().unwrap_or(f64::NAN)
+        };
+        (at(0.025), at(0.975))
     };
     Some(Compared {
         baseline,
         candidate,
-        interval: (at(0.025), at(0.975)),
+        baseline_interval: middle_95(baselines),
+        interval: middle_95(differences),
         better,
         worse,
     })
@@ -290,7 +298,7 @@ pub fn run(args: BenchCompareArgs) -> Result<()> {
     );
     println!();
     println!(
-        "| figure | baseline | candidate | difference | 95 % interval of the difference | missions better / worse |"
+        "| figure | baseline (its own 95 % interval) | candidate | difference | 95 % interval of the difference | missions better / worse |"
     );
     println!("| --- | --- | --- | --- | --- | --- |");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
@@ -307,9 +315,11 @@ pub fn run(args: BenchCompareArgs) -> Result<()> {
             }
         };
         println!(
-            "| {} | {} | {} | {} | {} to {} | {} / {} |",
+            "| {} | {} ({} to {}) | {} | {} | {} to {} | {} / {} |",
             figure.name,
             figure.unit.show(c.baseline),
+            figure.unit.show(c.baseline_interval.0),
+            figure.unit.show(c.baseline_interval.1),
             figure.unit.show(c.candidate),
             signed(c.candidate - c.baseline),
             signed(c.interval.0),
@@ -362,6 +372,9 @@ mod tests {
             .expect("both runs have poses");
         assert!((c.candidate - c.baseline - 0.021).abs() < 0.001, "{c:?}");
         assert!(c.interval.0 > 0.015 && c.interval.1 < 0.025, "{c:?}");
+        // The baseline's own interval is about its 90 %, which every mission has.
+        assert!((c.baseline_interval.0 - 0.9).abs() < 1e-9, "{c:?}");
+        assert!((c.baseline_interval.1 - 0.9).abs() < 1e-9, "{c:?}");
         assert_eq!((c.better, c.worse), (16, 0));
         // Half the missions 9 points better and half 7 worse: a mean gain of a point, an
         // interval that holds 0.
