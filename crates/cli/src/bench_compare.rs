@@ -9,6 +9,7 @@
 //! that holds the middle 95 % of the redrawn differences is how sure the difference is. An
 //! interval that holds 0 says the runs do not tell the two setups apart.
 
+use crate::bench::{mean, pooled};
 use crate::cli::BenchCompareArgs;
 use anyhow::{Context, Result, bail};
 use rand::{Rng, SeedableRng};
@@ -16,9 +17,8 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// What one mission holds for the figures compared: per rover (name, occupied cells right,
-/// final trajectory RMS, published pose within 0.2 m, crater cells near the path and the
-/// share of them marked), the lander's merged map and the mission's length.
+/// What one mission holds for the figures compared: its rovers' grades, the lander's merged
+/// map and the mission's length.
 #[derive(Clone, Debug, PartialEq)]
 struct Mission {
     rovers: Vec<Rover>,
@@ -26,12 +26,15 @@ struct Mission {
     length_s: f64,
 }
 
+/// One rover's grades, as `bench missions --json` names them.
 #[derive(Clone, Debug, PartialEq)]
 struct Rover {
     occupied_correct: Option<f64>,
     trajectory_rmse_m: Option<f64>,
     pose_within_0_2_m: f64,
-    path_hazards: f64,
+    /// Crater cells near the path ...
+    path_hazards: usize,
+    /// ... and the share of them marked.
     path_hazards_flagged: f64,
 }
 
@@ -68,7 +71,7 @@ fn rover_mean(missions: &[&Mission], of: impl Fn(&Rover) -> Option<f64>) -> Opti
         .iter()
         .flat_map(|m| m.rovers.iter().filter_map(&of))
         .collect();
-    (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
+    (!values.is_empty()).then(|| mean(&values))
 }
 
 const FIGURES: &[Figure] = &[
@@ -96,11 +99,8 @@ const FIGURES: &[Figure] = &[
         higher_is_better: true,
         over: |missions| {
             let rovers = || missions.iter().flat_map(|m| &m.rovers);
-            let cells: f64 = rovers().map(|r| r.path_hazards).sum();
-            let marked: f64 = rovers()
-                .map(|r| r.path_hazards * r.path_hazards_flagged)
-                .sum();
-            (cells > 0.0).then(|| marked / cells)
+            (rovers().any(|r| r.path_hazards > 0))
+                .then(|| pooled(rovers().map(|r| (r.path_hazards_flagged, r.path_hazards))))
         },
     },
     Figure {
@@ -109,7 +109,7 @@ const FIGURES: &[Figure] = &[
         higher_is_better: true,
         over: |missions| {
             let values: Vec<f64> = missions.iter().filter_map(|m| m.merged).collect();
-            (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
+            (!values.is_empty()).then(|| mean(&values))
         },
     },
     Figure {
@@ -117,8 +117,8 @@ const FIGURES: &[Figure] = &[
         unit: Unit::Seconds,
         higher_is_better: false,
         over: |missions| {
-            (!missions.is_empty())
-                .then(|| missions.iter().map(|m| m.length_s).sum::<f64>() / missions.len() as f64)
+            let lengths: Vec<f64> = missions.iter().map(|m| m.length_s).collect();
+            (!lengths.is_empty()).then(|| mean(&lengths))
         },
     },
 ];
@@ -170,7 +170,13 @@ fn parse(text: &str, file: &Path) -> Result<BTreeMap<u64, Mission>> {
                     occupied_correct: optional(r, "occupied_correct", &whence)?,
                     trajectory_rmse_m: optional(r, "trajectory_rmse_m", &whence)?,
                     pose_within_0_2_m: number(r, "pose_within_0_2_m", &whence)?,
-                    path_hazards: number(r, "path_hazards", &whence)?,
+                    path_hazards: r
+                        .get("path_hazards")
+                        .and_then(Value::as_u64)
+                        .and_then(|n| usize::try_from(n).ok())
+                        .with_context(|| {
+                            format!("{whence}: `path_hazards` is missing or not a whole number")
+                        })?,
                     path_hazards_flagged: number(r, "path_hazards_flagged", &whence)?,
                 })
             })
@@ -341,7 +347,7 @@ mod tests {
                 occupied_correct: Some(0.9),
                 trajectory_rmse_m: Some(rmse),
                 pose_within_0_2_m: pose,
-                path_hazards: 100.0,
+                path_hazards: 100,
                 path_hazards_flagged: 0.95,
             }],
             merged: Some(0.9),
@@ -399,7 +405,7 @@ mod tests {
     #[test]
     fn crater_cells_are_pooled_over_every_rover_as_bench_missions_pools_them() {
         let mut a = mission(0.9, 0.08, 2500.0);
-        a.rovers[0].path_hazards = 300.0;
+        a.rovers[0].path_hazards = 300;
         a.rovers[0].path_hazards_flagged = 0.9;
         let b = mission(0.9, 0.08, 2500.0);
         // (270 + 95) of (300 + 100) cells, not the mean of 90 and 95 %.

@@ -151,8 +151,9 @@ const NEIGHBOURS: [(isize, isize, f32); 8] = [
 #[derive(Clone, Debug, Default)]
 struct RadixHeap {
     buckets: Vec<Vec<(u64, u32)>>,
-    /// Bit `b` set while bucket `b` holds items: the next bucket to empty is found by one
-    /// count of trailing zeros, not by looking into each empty bucket below it.
+    /// Bit `b` (1..=64) set while bucket `b` holds items: the next bucket to empty is found
+    /// by one count of trailing zeros, not by looking into each empty bucket below it. Bit 0
+    /// is never read (bucket 0 is looked at directly), so it is not kept.
     occupied: u128,
     last: u64,
     len: usize,
@@ -188,7 +189,6 @@ impl RadixHeap {
             return None;
         }
         if self.buckets[0].is_empty() {
-            // The lowest bucket above the first that holds items.
             let higher = self.occupied & !1;
             if higher == 0 {
                 return None;
@@ -210,11 +210,7 @@ impl RadixHeap {
             }
         }
         self.len -= 1;
-        let popped = self.buckets[0].pop().map(|(_, item)| item);
-        if self.buckets[0].is_empty() {
-            self.occupied &= !1;
-        }
-        popped
+        self.buckets[0].pop().map(|(_, item)| item)
     }
 }
 
