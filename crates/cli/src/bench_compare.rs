@@ -67,10 +67,16 @@ impl Unit {
 /// The mean over every rover of the missions of what `of` gives it (rovers without it left
 /// out).
 fn rover_mean(missions: &[&Mission], of: impl Fn(&Rover) -> Option<f64>) -> Option<f64> {
-    let values: Vec<f64> = missions
-        .iter()
-        .flat_map(|m| m.rovers.iter().filter_map(&of))
-        .collect();
+    mean_of(
+        missions
+            .iter()
+            .flat_map(|m| m.rovers.iter().filter_map(&of)),
+    )
+}
+
+/// The mean of `values`; none without any.
+fn mean_of(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let values: Vec<f64> = values.collect();
     (!values.is_empty()).then(|| mean(&values))
 }
 
@@ -107,19 +113,13 @@ const FIGURES: &[Figure] = &[
         name: "lander's merged map, mean",
         unit: Unit::Percent,
         higher_is_better: true,
-        over: |missions| {
-            let values: Vec<f64> = missions.iter().filter_map(|m| m.merged).collect();
-            (!values.is_empty()).then(|| mean(&values))
-        },
+        over: |missions| mean_of(missions.iter().filter_map(|m| m.merged)),
     },
     Figure {
         name: "mission length, mean",
         unit: Unit::Seconds,
         higher_is_better: false,
-        over: |missions| {
-            let lengths: Vec<f64> = missions.iter().map(|m| m.length_s).collect();
-            (!lengths.is_empty()).then(|| mean(&lengths))
-        },
+        over: |missions| mean_of(missions.iter().map(|m| m.length_s)),
     },
 ];
 
