@@ -44,7 +44,15 @@ pub fn run(args: MissionArgs) -> Result<()> {
         scenario.duration_s = parse_duration_s(d)?;
     }
     if let Some(n) = args.rovers {
-        scenario.rovers.count = n;
+        for f in scenario.resize_fleet(n) {
+            eprintln!(
+                "note: the scenario's {} fault for {} at {} s is left out: the fleet has {n} rover{}",
+                f.kind.name(),
+                f.rover,
+                f.at_s,
+                if n == 1 { "" } else { "s" }
+            );
+        }
     }
     if args.no_faults {
         scenario.faults.clear();
@@ -74,8 +82,11 @@ pub fn run(args: MissionArgs) -> Result<()> {
 
     let wall = std::time::Instant::now();
     eprintln!(
-        "realms mission: scenario {source}, seed {}, {} rovers, {:.0} s simulated",
-        scenario.seed, scenario.rovers.count, scenario.duration_s
+        "realms mission: scenario {source}, seed {}, {} rover{}, {:.0} s simulated",
+        scenario.seed,
+        scenario.rovers.count,
+        if scenario.rovers.count == 1 { "" } else { "s" },
+        scenario.duration_s
     );
     let options = MissionOptions {
         ideal_comms: args.ideal_comms,

@@ -308,6 +308,17 @@ pub enum FaultKind {
     PowerOff,
 }
 
+impl FaultKind {
+    /// The kind as a scenario file names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::SlipBurst => "slip_burst",
+            FaultKind::SensorDropout => "sensor_dropout",
+            FaultKind::PowerOff => "power_off",
+        }
+    }
+}
+
 /// The rover's sensors, as named in faults.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -581,6 +592,18 @@ impl Scenario {
         })?;
         scenario.validate(file)?;
         Ok(scenario)
+    }
+
+    /// Sets the fleet to `count` rovers, as a command line's override of the scenario does,
+    /// and returns the faults it scheduled for rovers no longer in the fleet, which are
+    /// dropped: a fault written for the scenario's own fleet says nothing of a smaller one.
+    pub fn resize_fleet(&mut self, count: u8) -> Vec<Fault> {
+        self.rovers.count = count;
+        let (kept, dropped) = std::mem::take(&mut self.faults)
+            .into_iter()
+            .partition(|f| realms_core::RoverId::parse(&f.rover).is_none_or(|id| id.0 <= count));
+        self.faults = kept;
+        dropped
     }
 
     /// The default scenario as TOML (what `realms scenario --print-default` prints).
@@ -963,6 +986,46 @@ mod tests {
         assert_eq!(s.seed, 7);
         assert_eq!(s.rovers.count, 2);
         assert_eq!(s.arena, Arena::default());
+    }
+
+    #[test]
+    fn a_smaller_fleet_drops_the_faults_of_the_rovers_it_no_longer_has() {
+        let mut s = Scenario::default();
+        let before = s.faults.clone();
+        assert!(
+            before.iter().any(|f| f.rover == "rover1")
+                && before.iter().any(|f| f.rover == "rover2"),
+            "the default schedules faults for rover1 and rover2: {before:?}"
+        );
+        let dropped = s.resize_fleet(1);
+        assert_eq!(s.rovers.count, 1);
+        assert!(dropped.iter().all(|f| f.rover != "rover1"), "{dropped:?}");
+        assert!(
+            s.faults.iter().all(|f| f.rover == "rover1"),
+            "{:?}",
+            s.faults
+        );
+        assert_eq!(s.faults.len() + dropped.len(), before.len());
+        s.validate("default")
+            .expect("a one-rover fleet of the default is valid");
+        // A larger fleet keeps every fault.
+        let mut s = Scenario::default();
+        assert!(s.resize_fleet(5).is_empty());
+        assert_eq!(s.faults, before);
+        s.validate("default").expect("valid");
+        // Each kind's name is the one a scenario file uses.
+        for kind in [
+            FaultKind::SlipBurst,
+            FaultKind::SensorDropout,
+            FaultKind::PowerOff,
+        ] {
+            let f: Fault = toml::from_str(&format!(
+                "kind = \"{}\"\nrover = \"rover1\"\nat_s = 1.0\n",
+                kind.name()
+            ))
+            .expect("the name parses");
+            assert_eq!(f.kind, kind);
+        }
     }
 
     #[test]
