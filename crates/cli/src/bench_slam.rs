@@ -428,6 +428,27 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "start-rivals-0.5m",
+        what: "a closure into a submap begun at the known start counts a rival only 0.5 m or more from the winner (not 0.3 m) at any time, not only while the rover drives home at the end or is home (the rovers')",
+        apply: |c| {
+            c.mapper.start_rivals_beyond_m = Some(0.5);
+            c.mapper.start_rivals_homing_only = false;
+        },
+    },
+    Variant {
+        name: "start-rivals-0.75m",
+        what: "a closure into a submap begun at the known start counts a rival only 0.75 m or more from the winner (not 0.3 m) at any time",
+        apply: |c| {
+            c.mapper.start_rivals_beyond_m = Some(0.75);
+            c.mapper.start_rivals_homing_only = false;
+        },
+    },
+    Variant {
+        name: "no-home-rivals",
+        what: "a closure into a submap begun at the known start counts a rival 30 cm off as any other closure does, also while the rover drives home at the end (the rovers' setup before the eighty-seventh session)",
+        apply: |c| c.mapper.start_rivals_beyond_m = None,
+    },
+    Variant {
         name: "weak-floor-30",
         what: "where the map pins the position less than 30 per point per m^2 in some direction, the position there pulled towards the prediction as if it did",
         apply: |c| c.mapper.weak_direction_floor = Some(30.0),

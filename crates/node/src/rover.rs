@@ -308,6 +308,10 @@ impl RoverNode {
             return (0.0, 0.0);
         }
         let guarded = self.guard.on_scan(now, scan);
+        self.mapping.set_homing(matches!(
+            self.navigator.activity(),
+            Activity::Driving(GoalKind::Home) | Activity::Done
+        ));
         if self.mapping.state() == LocalisationState::Lost {
             let since = *self.lost_since.get_or_insert(now);
             if now - since < LOST_TURN {

@@ -383,6 +383,33 @@ pub fn search_allowing_ridges(
     rival_margin: f64,
     dip: Option<f64>,
 ) -> Option<SearchResult> {
+    search_with_rivals_beyond(
+        map,
+        points,
+        prior,
+        window,
+        min_score,
+        rival_margin,
+        dip,
+        None,
+    )
+}
+
+/// [`search_allowing_ridges`], a pose counting as a rival only farther than `rival_beyond_m`
+/// from the winner (`None`: [`RIVAL_CELLS`] cells) or [`RIVAL_RAD`] from its heading: a
+/// score that falls slowly round the winner, out to that distance, is one broad peak.
+#[allow(clippy::too_many_arguments)]
+pub fn search_with_rivals_beyond(
+    map: &PrecomputedMap,
+    points: &[Point2],
+    prior: Pose2,
+    window: &SearchWindow,
+    min_score: f64,
+    rival_margin: f64,
+    dip: Option<f64>,
+    rival_beyond_m: Option<f64>,
+) -> Option<SearchResult> {
+    let rival_cells = rival_beyond_m.map_or(RIVAL_CELLS, |m| (m / map.resolution_m).round() as i64);
     search_rivals(
         map,
         points,
@@ -392,6 +419,7 @@ pub fn search_allowing_ridges(
         rival_margin,
         true,
         dip,
+        rival_cells,
     )
 }
 
@@ -408,6 +436,7 @@ fn search_rivals(
     rival_margin: f64,
     stop_when_ambiguous: bool,
     ridge_dip: Option<f64>,
+    rival_cells: i64,
 ) -> Option<SearchResult> {
     if points.is_empty() {
         return None;
@@ -493,8 +522,8 @@ fn search_rivals(
     let winner = best?;
     // The rival: the same search, leaves near the winner excluded.
     let near = |c: &Candidate| {
-        (c.dx - winner.dx).abs() <= RIVAL_CELLS
-            && (c.dy - winner.dy).abs() <= RIVAL_CELLS
+        (c.dx - winner.dx).abs() <= rival_cells
+            && (c.dy - winner.dy).abs() <= rival_cells
             && ((c.angle as f64 - winner.angle as f64) * angle_step).abs() <= RIVAL_RAD
     };
     // Only rivals that come within `rival_margin` matter, and looking for nothing lower
@@ -896,14 +925,15 @@ mod tests {
         );
     }
 
-    /// The best score of any pose of the window clearly away (see [`RIVAL_CELLS`] and
-    /// [`RIVAL_RAD`]) from `winner`, by brute force.
+    /// The best score of any pose of the window clearly away (farther than `rival_cells`,
+    /// or [`RIVAL_RAD`]) from `winner`, by brute force.
     fn brute_force_rival(
         map: &PrecomputedMap,
         points: &[Point2],
         prior: Pose2,
         window: &SearchWindow,
         winner: Pose2,
+        rival_cells: i64,
     ) -> f64 {
         let grid = Discretised::new(map, window);
         let r = map.resolution_m;
@@ -913,8 +943,8 @@ mod tests {
         );
         let wk = ((winner.yaw_rad - prior.yaw_rad) / grid.angle_step).round() as i64;
         brute_force_where(map, points, prior, window, |k, dx, dy| {
-            let near = (dx - wx).abs() <= RIVAL_CELLS
-                && (dy - wy).abs() <= RIVAL_CELLS
+            let near = (dx - wx).abs() <= rival_cells
+                && (dy - wy).abs() <= rival_cells
                 && ((k - wk) as f64 * grid.angle_step).abs() <= RIVAL_RAD;
             !near
         })
@@ -954,15 +984,35 @@ mod tests {
                 angular_rad: 6f64.to_radians(),
                 step_range_m: 6.0,
             };
-            let found = search_rivals(&map, &points, prior, &window, 0.1, 1.0, false, None)
+            // Rivals beyond the usual 30 cm, and beyond 50 cm (a closure into the submaps
+            // begun at the known start): the winner is the same, the rival the best of the
+            // poses farther away, which can only score as well or less.
+            let mut rivals = Vec::new();
+            for rival_cells in [RIVAL_CELLS, 10] {
+                let found = search_rivals(
+                    &map,
+                    &points,
+                    prior,
+                    &window,
+                    0.1,
+                    1.0,
+                    false,
+                    None,
+                    rival_cells,
+                )
                 .expect("a match");
-            let exhaustive = brute_force_rival(&map, &points, prior, &window, found.pose);
-            assert!(found.rival_score > 0.1, "{found:?}");
-            assert!(
-                (found.rival_score - exhaustive).abs() < 1e-12,
-                "{} vs {exhaustive}",
-                found.rival_score
-            );
+                let exhaustive =
+                    brute_force_rival(&map, &points, prior, &window, found.pose, rival_cells);
+                assert!(found.rival_score > 0.1, "{found:?}");
+                assert!(
+                    (found.rival_score - exhaustive).abs() < 1e-12,
+                    "{rival_cells} cells: {} vs {exhaustive}",
+                    found.rival_score
+                );
+                rivals.push((found.pose, found.rival_score));
+            }
+            assert_eq!(rivals[0].0, rivals[1].0, "the winner is the same");
+            assert!(rivals[1].1 <= rivals[0].1, "{rivals:?}");
         }
     }
 
@@ -985,8 +1035,18 @@ mod tests {
             step_range_m: 6.0,
         };
         let prior = Pose2::new(1.2, 0.1, 0.0);
-        let best_rival = search_rivals(&map, &points, prior, &window, 0.3, 0.1, false, None)
-            .expect("the corridor matches");
+        let best_rival = search_rivals(
+            &map,
+            &points,
+            prior,
+            &window,
+            0.3,
+            0.1,
+            false,
+            None,
+            RIVAL_CELLS,
+        )
+        .expect("the corridor matches");
         assert!(
             best_rival.score - best_rival.rival_score < 0.02,
             "the corridor must look ambiguous: {best_rival:?}"
@@ -1098,8 +1158,17 @@ mod tests {
                 );
                 for margin in [0.01, 0.05, 0.1, 0.3] {
                     let early = search(&map, &points, prior, &window, 0.3, margin);
-                    let full =
-                        search_rivals(&map, &points, prior, &window, 0.3, margin, false, None);
+                    let full = search_rivals(
+                        &map,
+                        &points,
+                        prior,
+                        &window,
+                        0.3,
+                        margin,
+                        false,
+                        None,
+                        RIVAL_CELLS,
+                    );
                     let (Some(early), Some(full)) = (early, full) else {
                         assert_eq!(early.is_some(), full.is_some());
                         continue;

@@ -362,6 +362,16 @@ pub struct MapperConfig {
     /// wheels, not from the pose, wherever the two lie apart (a second match per scan).
     /// Only with [`MapperConfig::slip_check_match_to_match`], whose chain it is.
     pub slip_check_own_match: bool,
+    /// A closure into a submap begun at the known start (among the first
+    /// `submap_keyframes` keyframes) counts a pose as the winner's rival only this far from
+    /// it or more (`None`: 30 cm, as any other closure). Near the lander the score falls
+    /// slowly for some decimetres round the right pose, and the rover coming home at the
+    /// end found its start ambiguous every time.
+    pub start_rivals_beyond_m: Option<f64>,
+    /// ... and only while the rover drives home at the end of its exploring, or is home
+    /// ([`Mapper::set_homing`]): the closure that ties the end of the trajectory to the
+    /// start, never one that steers the tracking mid-mission.
+    pub start_rivals_homing_only: bool,
     /// A finished submap whose origin lies this close to a newer finished one's is dropped
     /// (`None`: keep every submap, as for a recorded log).
     pub trim_radius_m: Option<f64>,
@@ -850,6 +860,8 @@ impl Default for MapperConfig {
             slip_check_match_to_match: false,
             slip_check_own_match: false,
             trim_radius_m: None,
+            start_rivals_beyond_m: None,
+            start_rivals_homing_only: false,
             motion_filter: None,
             min_scan_points: 10,
             max_heading_step_rad: None,
@@ -1128,6 +1140,9 @@ pub struct Mapper {
     assembly: Assembly,
     /// How far the wheels over-report, learnt from the matches.
     wheel_scale: Option<WheelScale>,
+    /// Whether the rover is driving home at the end, or is home
+    /// ([`MapperConfig::start_rivals_homing_only`]).
+    homing: bool,
     /// The newest keyframe's uncertainty from the start, kept up to date as asked.
     paths_from_start: PathsFromStart,
     /// The wall directions the first keyframe saw, and their right angles if so set (with
@@ -1202,6 +1217,7 @@ impl Mapper {
                 .with_miss_rule(cfg.frontend.miss_rule)
                 .with_occupied_above(cfg.map_occupied_above),
             wheel_scale: cfg.slip_calibration.map(WheelScale::new),
+            homing: false,
             paths_from_start: PathsFromStart::default(),
             walls: cfg.wall_headings.map(WallHeadings::new),
         }
@@ -1859,6 +1875,7 @@ impl Mapper {
         if self.submaps[s].precomputed.is_none() {
             self.drop_precomputed_beyond(self.cfg.precomputed_kept.saturating_sub(1));
         }
+        let rivals_beyond_m = self.start_rivals_beyond(self.submaps[s].origin_node);
         let sub = &mut self.submaps[s];
         sub.searched_at = self.searches;
         // A finished submap is kept whole while its precomputation is: the refinement below
@@ -1868,7 +1885,7 @@ impl Mapper {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
         let margin = self.cfg.loop_ambiguity_margin;
-        let found = bnb::search_allowing_ridges(
+        let found = bnb::search_with_rivals_beyond(
             precomputed,
             sample,
             origin.inverse() * prior,
@@ -1876,6 +1893,7 @@ impl Mapper {
             self.cfg.loop_search_min_score,
             margin,
             ridges.map(|r| r.dip),
+            rivals_beyond_m,
         )?;
         if found.is_ambiguous(margin) {
             return None;
@@ -1889,6 +1907,18 @@ impl Mapper {
         let moved = m.pose.relative_to(&found.pose);
         (m.score >= self.cfg.loop_min_score && moved.x_m.hypot(moved.y_m) < MAX_REFINE_SHIFT_M)
             .then_some((found, m))
+    }
+
+    /// How far from a closure search's winner a rival must lie, into the submap begun at
+    /// keyframe `origin_node`: [`MapperConfig::start_rivals_beyond_m`] for the submaps begun
+    /// at the known start (drawn where the rover knew its pose), while it applies; `None`
+    /// (the search's own 30 cm) otherwise.
+    fn start_rivals_beyond(&self, origin_node: usize) -> Option<f64> {
+        let at_start = origin_node < self.cfg.submap_keyframes;
+        let applies = self.homing || !self.cfg.start_rivals_homing_only;
+        self.cfg
+            .start_rivals_beyond_m
+            .filter(|_| at_start && applies)
     }
 
     /// Drops the closure-search precomputations of the submaps searched longest ago until
@@ -1924,6 +1954,12 @@ impl Mapper {
                 sub.map.cut_to_content();
             }
         }
+    }
+
+    /// Tells the mapper whether the rover is driving home at the end of its exploring, or
+    /// is home (see [`MapperConfig::start_rivals_homing_only`]).
+    pub fn set_homing(&mut self, homing: bool) {
+        self.homing = homing;
     }
 
     /// The current pose estimate.
@@ -2997,6 +3033,24 @@ mod tests {
             mapper.closure_window(0, 40).linear_m,
             mapper.cfg.loop_window_m
         );
+    }
+
+    #[test]
+    fn the_start_s_rivals_are_counted_farther_only_into_the_start_s_submaps_and_while_homing() {
+        let mut mapper = Mapper::new(MapperConfig::default());
+        let n = mapper.cfg.submap_keyframes;
+        assert_eq!(mapper.start_rivals_beyond(0), None, "off by default");
+        mapper.cfg.start_rivals_beyond_m = Some(0.5);
+        mapper.cfg.start_rivals_homing_only = true;
+        assert_eq!(mapper.start_rivals_beyond(0), None, "not homing yet");
+        mapper.set_homing(true);
+        assert_eq!(mapper.start_rivals_beyond(0), Some(0.5));
+        assert_eq!(mapper.start_rivals_beyond(n - 1), Some(0.5));
+        assert_eq!(mapper.start_rivals_beyond(n), None, "a submap begun later");
+        mapper.set_homing(false);
+        assert_eq!(mapper.start_rivals_beyond(0), None);
+        mapper.cfg.start_rivals_homing_only = false;
+        assert_eq!(mapper.start_rivals_beyond(0), Some(0.5), "at any time");
     }
 
     /// A finished submap at the origin that saw a wall 4 m east, then a newer one at the
