@@ -396,8 +396,9 @@ pub fn search_allowing_ridges(
 }
 
 /// [`search_allowing_ridges`], a pose counting as a rival only farther than `rival_beyond_m`
-/// from the winner (`None`: [`RIVAL_CELLS`] cells) or [`RIVAL_RAD`] from its heading: a
-/// score that falls slowly round the winner, out to that distance, is one broad peak.
+/// from the winner (`None`: 6 cells, 30 cm on the rovers' 5 cm grids) or 0.05 rad from its
+/// heading: a score that falls slowly round the winner, out to that distance, is one broad
+/// peak.
 #[allow(clippy::too_many_arguments)]
 pub fn search_with_rivals_beyond(
     map: &PrecomputedMap,
