@@ -429,7 +429,7 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "start-rivals-0.5m",
-        what: "a closure into a submap begun at the known start counts a rival only 0.5 m or more from the winner (not 0.3 m) at any time, not only while the rover drives home at the end or is home (the rovers')",
+        what: "a closure into a submap begun at the known start counts a rival only 0.5 m or more from the winner (not 0.3 m) at any time (the rovers do so only while they drive home at the end or are home)",
         apply: |c| {
             c.mapper.start_rivals_beyond_m = Some(0.5);
             c.mapper.start_rivals_homing_only = false;

@@ -34,6 +34,11 @@ pub fn load_scenario(path: Option<&Path>) -> Result<(Scenario, String)> {
     }
 }
 
+/// `n` rovers, as a sentence says it ("1 rover", "3 rovers").
+fn rovers(n: u8) -> String {
+    format!("{n} rover{}", if n == 1 { "" } else { "s" })
+}
+
 /// `realms mission`.
 pub fn run(args: MissionArgs) -> Result<()> {
     let (mut scenario, source) = load_scenario(args.scenario.as_deref())?;
@@ -46,11 +51,11 @@ pub fn run(args: MissionArgs) -> Result<()> {
     if let Some(n) = args.rovers {
         for f in scenario.resize_fleet(n) {
             eprintln!(
-                "note: the scenario's {} fault for {} at {} s is left out: the fleet has {n} rover{}",
+                "note: the scenario's {} fault for {} at {} s is left out: the fleet has {}",
                 f.kind.name(),
                 f.rover,
                 f.at_s,
-                if n == 1 { "" } else { "s" }
+                rovers(n)
             );
         }
     }
@@ -82,10 +87,9 @@ pub fn run(args: MissionArgs) -> Result<()> {
 
     let wall = std::time::Instant::now();
     eprintln!(
-        "realms mission: scenario {source}, seed {}, {} rover{}, {:.0} s simulated",
+        "realms mission: scenario {source}, seed {}, {}, {:.0} s simulated",
         scenario.seed,
-        scenario.rovers.count,
-        if scenario.rovers.count == 1 { "" } else { "s" },
+        rovers(scenario.rovers.count),
         scenario.duration_s
     );
     let options = MissionOptions {

@@ -362,7 +362,16 @@ pub fn search(
     min_score: f64,
     rival_margin: f64,
 ) -> Option<SearchResult> {
-    search_allowing_ridges(map, points, prior, window, min_score, rival_margin, None)
+    search_allowing_ridges(
+        map,
+        points,
+        prior,
+        window,
+        min_score,
+        rival_margin,
+        None,
+        None,
+    )
 }
 
 /// [`search`], where a rival within `rival_margin` that lies on a ridge of high scores
@@ -374,33 +383,12 @@ pub fn search(
 /// only if one comes within the margin there; otherwise it carries the ridge.
 /// Olson ("Real-Time Correlative Scan Matching", ICRA 2009) reads the same shape of the
 /// score as the match's uncertainty, not as a second answer. `dip` `None`: [`search`].
-pub fn search_allowing_ridges(
-    map: &PrecomputedMap,
-    points: &[Point2],
-    prior: Pose2,
-    window: &SearchWindow,
-    min_score: f64,
-    rival_margin: f64,
-    dip: Option<f64>,
-) -> Option<SearchResult> {
-    search_with_rivals_beyond(
-        map,
-        points,
-        prior,
-        window,
-        min_score,
-        rival_margin,
-        dip,
-        None,
-    )
-}
-
-/// [`search_allowing_ridges`], a pose counting as a rival only farther than `rival_beyond_m`
-/// from the winner (`None`: 6 cells, 30 cm on the rovers' 5 cm grids) or 0.05 rad from its
-/// heading: a score that falls slowly round the winner, out to that distance, is one broad
-/// peak.
+///
+/// A pose counts as a rival only farther than `rival_beyond_m` from the winner (`None`: 6
+/// cells, 30 cm on the rovers' 5 cm grids) or 0.05 rad from its heading: a score that falls
+/// slowly round the winner, out to that distance, is one broad peak.
 #[allow(clippy::too_many_arguments)]
-pub fn search_with_rivals_beyond(
+pub fn search_allowing_ridges(
     map: &PrecomputedMap,
     points: &[Point2],
     prior: Pose2,
@@ -1090,8 +1078,9 @@ mod tests {
         };
         let prior = Pose2::new(truth.x_m + 0.2, truth.y_m - 0.05, truth.yaw_rad);
         let plain = search(&map, &points, prior, &window, 0.3, 0.08).expect("a match");
-        let ridged = search_allowing_ridges(&map, &points, prior, &window, 0.3, 0.08, Some(0.02))
-            .expect("a match");
+        let ridged =
+            search_allowing_ridges(&map, &points, prior, &window, 0.3, 0.08, Some(0.02), None)
+                .expect("a match");
         assert_eq!(plain.pose, ridged.pose, "the winner is the same either way");
         (plain, ridged)
     }

@@ -1885,7 +1885,7 @@ impl Mapper {
             PrecomputedMap::with_margin(sub.map.finest(), LOOP_DEPTH, margin)
         });
         let margin = self.cfg.loop_ambiguity_margin;
-        let found = bnb::search_with_rivals_beyond(
+        let found = bnb::search_allowing_ridges(
             precomputed,
             sample,
             origin.inverse() * prior,
