@@ -15,7 +15,7 @@ use crate::bench_slam_drift::{BAND_EDGES_M, Band, WINDOW_SCANS, drift_by_band};
 use crate::cli::BenchSlamArgs;
 use crate::mission::{load_scenario, parse_duration_s};
 use anyhow::{Context, Result, bail};
-use realms_core::msgs::{LaserScan, LocalisationState, Message};
+use realms_core::msgs::{LaserScan, LocalisationState, Message, OccupancyGrid};
 use realms_core::{Duration, Point2, Pose2, RoverId, Time};
 use realms_mission::slam_record::{
     CRATER_BANDS, CREST_SLACK_M, CraterCells, MapGrade, PATH_REACH_M, PoseErrors, aligned_rmse,
@@ -843,6 +843,19 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.hazards_rounded_out = false,
     },
     Variant {
+        name: "hazards-follow-keyframes",
+        what: "each depth frame kept with the keyframe it came after, and for the map the rover publishes last every hazard layer drawn again where the pose graph has those keyframes, not left where tracking had them (as the lidar's submaps are drawn again)",
+        apply: |c| c.hazards_follow_keyframes = Some(realms_mission::HAZARD_LAYER_BEND),
+    },
+    Variant {
+        name: "hazards-follow-keyframes-while-mapping",
+        what: "as `hazards-follow-keyframes`, the layers drawn again whenever the graph moves, for the maps the rover plans on while it maps too",
+        apply: |c| {
+            c.hazards_follow_keyframes = Some(realms_mission::HAZARD_LAYER_BEND);
+            c.hazards_redrawn_while_mapping = true;
+        },
+    },
+    Variant {
         name: "depth-every-frame",
         what: "every depth frame judged, however long the rover has stood still (the rovers' setup before the seventy-fourth session; they judge 240 frames, two minutes, from where they stand)",
         apply: |c| c.depth_motion_filter = None,
@@ -1028,6 +1041,8 @@ struct Replay {
     relief: Vec<(ReliefHop, Pose2)>,
     /// The final map graded against the truth, as the mission's report grades it.
     map: MapGrade,
+    /// ... and the map itself, when the poses are asked for (`--trajectories`).
+    final_map: Option<OccupancyGrid>,
     /// ... and what it says of the crater cells near the path, by where in their craters.
     crater_cells: CraterCells,
     /// The pose as tracked: its drift by distance to the arena's edge.
@@ -1145,7 +1160,9 @@ fn replay(
     let end = input.last().map_or(Time::ZERO, |c| c.t);
     // As the rover does before its last map.
     mapping.finish_map();
-    let (map, crater_cells) = match map_grid(&mapping.map(end)) {
+    mapping.finish_hazards();
+    let final_map = mapping.map(end);
+    let (map, crater_cells) = match map_grid(&final_map) {
         Some(grid) => (
             grade_grid(&grid, truth, &path),
             crater_cells(&grid, truth, &graded.craters, &path),
@@ -1222,6 +1239,7 @@ fn replay(
         csv,
         relief,
         map,
+        final_map: with_csv.then_some(final_map),
         crater_cells,
         drift,
     }
@@ -1494,6 +1512,11 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                 std::fs::write(&path, csv)
                     .with_context(|| format!("cannot write {}", path.display()))?;
             }
+            if let Some(map) = &r.final_map {
+                let name = format!("seed{}-{}-{}", r.seed, r.rover, r.variant);
+                realms_mission::report::write_map(map, dir, &name)
+                    .with_context(|| format!("cannot write the map {name} in {}", dir.display()))?;
+            }
             if let Some(csv) = &r.closures_csv {
                 let name = format!("seed{}-{}-{}-closures.csv", r.seed, r.rover, r.variant);
                 let path = dir.join(name);
@@ -1501,7 +1524,7 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                     .with_context(|| format!("cannot write {}", path.display()))?;
             }
         }
-        println!("poses scan by scan: {}", dir.display());
+        println!("poses scan by scan, and the final maps: {}", dir.display());
     }
     println!(
         "| seed | rover | variant | tracked RMS | final RMS | final max | aligned RMS | final heading RMS | lost | closures (wrong) | SLAM speed | scans per wall second (with the depth frames between them) | hazards near the path marked (cells) | hazard cells truly untraversable | occupied right (cells) | obstacle faces marked | explorable area known |"

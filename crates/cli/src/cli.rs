@@ -314,7 +314,8 @@ pub struct BenchSlamArgs {
     /// Also write each replay's poses, scan by scan, to
     /// `DIR/seed<N>-<rover>-<variant>.csv` (time, truth, tracked and final pose, state,
     /// closures so far, the wheels' odometry as published), to see when and where an error
-    /// grew.
+    /// grew, and each replay's final map as `DIR/seed<N>-<rover>-<variant>_map.png` (and the
+    /// map_server pair), as `realms mission` writes a rover's.
     #[arg(long, value_name = "DIR")]
     pub trajectories: Option<PathBuf>,
 }

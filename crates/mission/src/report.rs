@@ -392,7 +392,7 @@ fn map_stem(rover: &str) -> String {
 /// Writes `<rover>_map.png` (unknown grey, free white, occupied black, hazard orange) and
 /// the ROS map_server pair `<rover>_map.pgm` + `.yaml` (hazards occupied to map_server, and
 /// kept for `realms merge`: [`map_server::write_with_hazards`]).
-fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportError> {
+pub fn write_map(map: &OccupancyGrid, dir: &Path, rover: &str) -> Result<(), ReportError> {
     let Some(grid) = map_grid(map) else {
         // A map whose size does not match its data is not drawn; the grade still says so.
         return Ok(());

@@ -21,7 +21,7 @@ use realms_core::msgs::{
 use realms_core::{CentreLookup, Duration, Grid, GridGeometry, Point2, Pose2, RoverId, Time};
 use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
-use realms_slam::mapper::{Mapper, MapperConfig};
+use realms_slam::mapper::{Mapper, MapperConfig, SubmapBend};
 use realms_slam::occupancy::CellState;
 use realms_slam::odometry::OdomSample;
 use realms_slam::relief::{self, ElevationPatch, Registration, ReliefConfig};
@@ -97,6 +97,17 @@ pub struct MappingConfig {
     /// hazard too (`false`: each 5 cm cell takes the verdict of the cell holding its
     /// centre). The planner's layer is drawn as before either way.
     pub hazards_rounded_out: bool,
+    /// Each depth frame is kept with the keyframe it came after, and a hazard layer is
+    /// drawn again from its frames once the pose graph has moved their keyframes this far
+    /// within its submap, as the lidar's submaps are for the final map
+    /// ([`SubmapHazards::redraw_bent`]; `None`: each layer stays as its frames were drawn,
+    /// with the tracking's drift within its submap).
+    pub hazards_follow_keyframes: Option<SubmapBend>,
+    /// With [`hazards_follow_keyframes`](Self::hazards_follow_keyframes), the layers are
+    /// drawn again whenever the graph moves, for the maps the rover plans on and publishes
+    /// while it maps (`false`: only for its final map, so nothing it does while mapping
+    /// changes).
+    pub hazards_redrawn_while_mapping: bool,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -912,8 +923,21 @@ impl Mapping {
             ));
         }
         if let Some((submap, origin)) = self.mapper.newest_submap() {
-            let rover = origin.inverse() * self.pose_at(cloud.header.stamp);
-            self.hazards.insert(submap, rover, &verdicts);
+            let pose = self.pose_at(cloud.header.stamp);
+            let rover = origin.inverse() * pose;
+            match self
+                .mapper
+                .newest_keyframe()
+                .filter(|_| self.cfg.hazards_follow_keyframes.is_some())
+            {
+                Some((node, keyframe)) => self.hazards.insert_from_keyframe(
+                    submap,
+                    rover,
+                    (node, keyframe.inverse() * pose),
+                    &verdicts,
+                ),
+                None => self.hazards.insert(submap, rover, &verdicts),
+            }
             self.hazard_frames += 1;
         }
         if self.cfg.depth_features {
@@ -1250,8 +1274,42 @@ impl Mapping {
 
     /// The hazard layer drawn at the submaps' poses now, with the craters or hollows it
     /// implies marked if the rover infers them.
+    /// Draws the hazard layers the graph bent again where it has their keyframes
+    /// ([`MappingConfig::hazards_follow_keyframes`]), for the map the rover publishes last.
+    /// Apart from [`finish_map`](Self::finish_map): a rover finishes its map when it is home
+    /// and its peers are done, and layers drawn anew there leave slivers of ground it judged
+    /// unjudged on its map, which it would drive out again to judge (sixteen missions ran
+    /// 81 s longer on average).
+    pub fn finish_hazards(&mut self) {
+        self.redraw_bent_hazards();
+    }
+
+    /// Draws again the hazard layers the graph bent ([`MappingConfig::hazards_follow_keyframes`]).
+    fn redraw_bent_hazards(&mut self) {
+        let Some(bend) = self.cfg.hazards_follow_keyframes else {
+            return;
+        };
+        let mapper = &self.mapper;
+        if self
+            .hazards
+            .redraw_bent(|s, node| mapper.keyframe_in_submap(s, node), bend)
+            > 0
+        {
+            self.hazard_cache = None;
+        }
+    }
+
     fn hazard_states(&mut self) -> (Grid<CellState>, u64) {
         let origins = self.mapper.submap_origins();
+        // The graph moved: it may have bent some layers' keyframes too.
+        if self.cfg.hazards_redrawn_while_mapping
+            && self
+                .hazard_cache
+                .as_ref()
+                .is_none_or(|kept| kept.origins != origins)
+        {
+            self.redraw_bent_hazards();
+        }
         let discs = self.cfg.traversability.crater_discs;
         let reads_live = self.hollows.is_some() || discs.is_some();
         let view = reads_live.then(|| self.mapper.live_map());
@@ -1383,6 +1441,8 @@ mod tests {
                 levelled_points: false,
                 depth_at_own_stamp: false,
                 hazards_rounded_out: false,
+                hazards_follow_keyframes: None,
+                hazards_redrawn_while_mapping: false,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),

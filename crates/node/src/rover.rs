@@ -486,6 +486,7 @@ impl Node for RoverNode {
         let (mapping, outbox) = (&mut self.mapping, &mut self.outbox);
         self.cost_clock.time(&mut self.slam_wall, || {
             mapping.finish_map();
+            mapping.finish_hazards();
             mapping.publish_map(now, outbox)
         });
     }
@@ -531,6 +532,8 @@ mod tests {
                     levelled_points: false,
                     depth_at_own_stamp: false,
                     hazards_rounded_out: false,
+                    hazards_follow_keyframes: None,
+                    hazards_redrawn_while_mapping: false,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),

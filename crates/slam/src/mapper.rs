@@ -2677,6 +2677,23 @@ impl Mapper {
         Some((i, self.graph.nodes[self.submaps[i].origin_node]))
     }
 
+    /// The newest submap's newest keyframe: its node in the pose graph, and its pose now.
+    pub fn newest_keyframe(&self) -> Option<(usize, Pose2)> {
+        let sub = self.submaps.last()?;
+        let node = (sub.origin_node + sub.keyframes).checked_sub(1)?;
+        (sub.keyframes > 0).then(|| (node, self.graph.nodes[node]))
+    }
+
+    /// Keyframe `node`'s pose now in submap `submap`'s frame (that of the submap's first
+    /// keyframe, as the submap's cells are drawn); `None` if either is unknown.
+    pub fn keyframe_in_submap(&self, submap: usize, node: usize) -> Option<Pose2> {
+        let origin = self
+            .graph
+            .nodes
+            .get(self.submaps.get(submap)?.origin_node)?;
+        Some(origin.inverse() * *self.graph.nodes.get(node)?)
+    }
+
     /// Places every finished submap in the assembly at its pose now; returns the submaps
     /// still being built, with their poses.
     fn sync_assembly(&mut self) -> Vec<(usize, Pose2)> {

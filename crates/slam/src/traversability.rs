@@ -512,6 +512,29 @@ pub struct SubmapHazards {
     /// The layers' cell edge, metres.
     resolution_m: f64,
     assembly: Assembly,
+    /// Each layer's frames, kept to draw it again where the graph moves the keyframes
+    /// they hang from (see [`SubmapHazards::insert_from_keyframe`]).
+    kept: Vec<Vec<KeptFrame>>,
+    /// The kept frames' verdicts, one after another (single precision: a micrometre at
+    /// the camera's range).
+    verdicts: Vec<(f32, f32, bool)>,
+    /// Frames fused into each layer, kept or not: a layer is drawn again only from all
+    /// of them.
+    inserted: Vec<usize>,
+}
+
+/// A depth frame kept with the keyframe it hangs from, so its layer can be drawn again
+/// where the pose graph moves that keyframe within its submap.
+#[derive(Clone, Debug)]
+struct KeptFrame {
+    /// The keyframe (a node of the pose graph) newest when the frame came.
+    anchor: usize,
+    /// The rover at the frame, in that keyframe's frame.
+    from_anchor: Pose2,
+    /// Where the frame was drawn last, in its submap's frame.
+    drawn_at: Pose2,
+    /// Its verdicts in [`SubmapHazards::verdicts`].
+    verdicts: std::ops::Range<usize>,
 }
 
 impl SubmapHazards {
@@ -522,7 +545,94 @@ impl SubmapHazards {
             current: None,
             resolution_m,
             assembly: Assembly::hazard_votes(assembled_m),
+            kept: Vec::new(),
+            verdicts: Vec::new(),
+            inserted: Vec::new(),
         }
+    }
+
+    /// [`insert`](Self::insert), the frame kept with the keyframe it hangs from:
+    /// `anchor` is that keyframe's node and the rover's pose in the keyframe's frame, so
+    /// that [`redraw_bent`](Self::redraw_bent) can draw the layer again where the graph
+    /// moves the keyframe.
+    pub fn insert_from_keyframe(
+        &mut self,
+        submap: usize,
+        rover_in_submap: Pose2,
+        anchor: (usize, Pose2),
+        verdicts: &[(Point2, bool)],
+    ) {
+        self.insert(submap, rover_in_submap, verdicts);
+        if self.kept.len() <= submap {
+            self.kept.resize(submap + 1, Vec::new());
+        }
+        let start = self.verdicts.len();
+        self.verdicts.extend(
+            verdicts
+                .iter()
+                .map(|(p, h)| (p.x_m as f32, p.y_m as f32, *h)),
+        );
+        self.kept[submap].push(KeptFrame {
+            anchor: anchor.0,
+            from_anchor: anchor.1,
+            drawn_at: rover_in_submap,
+            verdicts: start..self.verdicts.len(),
+        });
+    }
+
+    /// Draws again, from their kept frames, the layers whose frames now lie more than
+    /// `bend` from where they were drawn: each frame at its keyframe's pose in the submap
+    /// now (`keyframe_in_submap(submap, node)`, `None` if the graph no longer has it),
+    /// moved on as far as the rover was from the keyframe then. A submap's keyframes are
+    /// drawn where tracking had them, and the graph moves them later; the lidar's submaps
+    /// are drawn again from them ([`Mapper::redraw_finished_submaps`](crate::mapper::Mapper::redraw_finished_submaps)), and a hazard
+    /// layer left as drawn keeps the tracking's drift within its submap. Returns how many
+    /// layers were drawn again.
+    pub fn redraw_bent(
+        &mut self,
+        keyframe_in_submap: impl Fn(usize, usize) -> Option<Pose2>,
+        bend: crate::mapper::SubmapBend,
+    ) -> usize {
+        let mut redrawn = 0;
+        for s in 0..self.kept.len() {
+            let placed: Vec<Option<Pose2>> = self.kept[s]
+                .iter()
+                .map(|f| keyframe_in_submap(s, f.anchor).map(|k| k * f.from_anchor))
+                .collect();
+            let bent = self.kept[s].iter().zip(&placed).any(|(f, p)| {
+                p.is_some_and(|p| {
+                    let d = p.relative_to(&f.drawn_at);
+                    d.x_m.hypot(d.y_m) > bend.translation_m || d.yaw_rad.abs() > bend.rotation_rad
+                })
+            });
+            let Some(Some(old)) = self.layers.get(s) else {
+                continue;
+            };
+            if !bent || self.inserted.get(s) != Some(&self.kept[s].len()) {
+                continue;
+            }
+            // The sum holds the layer as it was placed: take that out before it changes.
+            self.assembly.remove(s, &old.grid);
+            let mut layer = HazardMap::new(self.resolution_m);
+            let mut world = Vec::new();
+            for (f, p) in self.kept[s].iter_mut().zip(&placed) {
+                let at = p.unwrap_or(f.drawn_at);
+                world.clear();
+                world.extend(
+                    self.verdicts[f.verdicts.clone()].iter().map(|(x, y, h)| {
+                        (at.transform_point(Point2::new(*x as f64, *y as f64)), *h)
+                    }),
+                );
+                layer.grid.observe_cells(&world);
+                f.drawn_at = at;
+            }
+            if self.current != Some(s) {
+                layer.grid.cut_to_content();
+            }
+            self.layers[s] = Some(layer);
+            redrawn += 1;
+        }
+        redrawn
     }
 
     /// Fuses one frame's verdicts into submap `submap`'s layer, judged with the rover at
@@ -541,6 +651,10 @@ impl SubmapHazards {
         self.layers[submap]
             .get_or_insert_with(|| HazardMap::new(resolution))
             .insert(rover_in_submap, verdicts);
+        if self.inserted.len() <= submap {
+            self.inserted.resize(submap + 1, 0);
+        }
+        self.inserted[submap] += 1;
         self.current = Some(submap);
     }
 
@@ -639,6 +753,80 @@ mod tests {
         safe.insert(0, Pose2::IDENTITY, &[(rock, false)]);
         let states = safe.states(&origins[..1]);
         assert_eq!(states.at_world(rock), Some(&CellState::Free));
+    }
+
+    #[test]
+    fn a_layer_is_drawn_again_where_the_graph_moves_the_keyframes_its_frames_hang_from() {
+        let bend = crate::mapper::SubmapBend {
+            translation_m: 0.03,
+            rotation_rad: 0.01,
+        };
+        // A rock 0.55 m ahead of the rover, safe ground 0.25 m ahead (cell centres).
+        let verdicts = [
+            (Point2::new(0.55, 0.05), true),
+            (Point2::new(0.25, 0.05), false),
+        ];
+        // Submap 0 (finished) and submap 1 (being built), each from the origin; frames
+        // from keyframes 0 and 1 in the first, 2 in the second. Tracking had keyframe 1 at
+        // 1 m along x; the graph moves it to (1, 0.4), a frame 0.2 m past it with it.
+        let drawn = [
+            Pose2::new(0.0, 0.0, 0.0),
+            Pose2::new(1.0, 0.0, 0.0),
+            Pose2::new(0.0, 2.0, 0.0),
+        ];
+        let past = Pose2::new(0.2, 0.0, 0.0);
+        let frames = [
+            (0, 0, Pose2::IDENTITY),
+            (0, 1, Pose2::IDENTITY),
+            (0, 1, past),
+            (1, 2, Pose2::IDENTITY),
+        ];
+        let mut layers = SubmapHazards::new(0.1, 0.1);
+        for (submap, node, from) in frames {
+            layers.insert_from_keyframe(submap, drawn[node] * from, (node, from), &verdicts);
+        }
+        let origins = [Pose2::IDENTITY, Pose2::IDENTITY];
+        let before = layers.states(&origins);
+        assert_eq!(
+            layers.redraw_bent(|_, n| Some(drawn[n]), bend),
+            0,
+            "nothing moved"
+        );
+        assert_eq!(layers.states(&origins), before);
+        let moved = [drawn[0], Pose2::new(1.0, 0.4, 0.0), drawn[2]];
+        assert_eq!(layers.redraw_bent(|_, n| Some(moved[n]), bend), 1);
+        let after = layers.states(&origins);
+        // As if drawn where the graph has the keyframes from the start.
+        let mut fresh = SubmapHazards::new(0.1, 0.1);
+        for (submap, node, from) in frames {
+            fresh.insert(submap, moved[node] * from, &verdicts);
+        }
+        // (Compared cell by cell: the redrawn sum's grid also spans where the layer was.)
+        let fresh = fresh.states(&origins);
+        for (grid, other) in [(&after, &fresh), (&fresh, &after)] {
+            for (c, v) in grid.iter() {
+                let p = grid.geometry().cell_center(c);
+                assert_eq!(
+                    other.at_world(p).unwrap_or(&CellState::Unknown),
+                    v,
+                    "at {p:?}"
+                );
+            }
+        }
+        for x in [1.55, 1.75] {
+            assert_eq!(
+                after.at_world(Point2::new(x, 0.45)),
+                Some(&CellState::Occupied)
+            );
+            assert_ne!(
+                after.at_world(Point2::new(x, 0.05)),
+                Some(&CellState::Occupied)
+            );
+        }
+        // A layer holding a frame not kept is left as drawn: it cannot be drawn whole.
+        layers.insert(1, drawn[2], &verdicts);
+        let moved = [drawn[0], moved[1], Pose2::new(0.5, 2.0, 0.0)];
+        assert_eq!(layers.redraw_bent(|_, n| Some(moved[n]), bend), 0);
     }
 
     /// [`judge_frame`] by its definition, column by column from the points: each judged
