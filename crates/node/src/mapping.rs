@@ -105,8 +105,8 @@ pub struct MappingConfig {
     pub hazards_follow_keyframes: Option<SubmapBend>,
     /// With [`hazards_follow_keyframes`](Self::hazards_follow_keyframes), the layers are
     /// drawn again whenever the graph moves, for the maps the rover plans on and publishes
-    /// while it maps (`false`: only for its final map, so nothing it does while mapping
-    /// changes).
+    /// while it maps (`false`: only for the map it publishes last,
+    /// [`Mapping::finish_hazards`], so nothing it does while mapping changes).
     pub hazards_redrawn_while_mapping: bool,
     /// SLAM tuning.
     pub mapper: MapperConfig,
@@ -1272,8 +1272,6 @@ impl Mapping {
         c
     }
 
-    /// The hazard layer drawn at the submaps' poses now, with the craters or hollows it
-    /// implies marked if the rover infers them.
     /// Draws the hazard layers the graph bent again where it has their keyframes
     /// ([`MappingConfig::hazards_follow_keyframes`]), for the map the rover publishes last.
     /// Apart from [`finish_map`](Self::finish_map): a rover finishes its map when it is home
@@ -1299,6 +1297,8 @@ impl Mapping {
         }
     }
 
+    /// The hazard layer drawn at the submaps' poses now, with the craters or hollows it
+    /// implies marked if the rover infers them.
     fn hazard_states(&mut self) -> (Grid<CellState>, u64) {
         let origins = self.mapper.submap_origins();
         // The graph moved: it may have bent some layers' keyframes too.
