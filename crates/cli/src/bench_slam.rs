@@ -856,6 +856,16 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "clear-rays-6m",
+        what: "a lidar beam that returns nothing drawn as free space out to 6 m (Cartographer's missing_data_ray_length), not dropped",
+        apply: |c| c.clear_rays_m = Some(6.0),
+    },
+    Variant {
+        name: "clear-rays-12m",
+        what: "a lidar beam that returns nothing drawn as free space out to 12 m, the lidar's range, not dropped",
+        apply: |c| c.clear_rays_m = Some(12.0),
+    },
+    Variant {
         name: "depth-every-frame",
         what: "every depth frame judged, however long the rover has stood still (the rovers' setup before the seventy-fourth session; they judge 240 frames, two minutes, from where they stand)",
         apply: |c| c.depth_motion_filter = None,

@@ -129,6 +129,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // keyframes"): variant `hazards-follow-keyframes`.
         hazards_follow_keyframes: None,
         hazards_redrawn_while_mapping: false,
+        clear_rays_m: None,
         mapper: rover_mapper_config(),
         map_period: MAP_PERIOD,
         delta_period: MAP_DELTA_PERIOD,

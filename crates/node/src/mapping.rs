@@ -108,6 +108,12 @@ pub struct MappingConfig {
     /// while it maps (`false`: only for the map it publishes last,
     /// [`Mapping::finish_hazards`], so nothing it does while mapping changes).
     pub hazards_redrawn_while_mapping: bool,
+    /// A lidar beam that returns nothing within the lidar's range (and was not dropped as
+    /// a floor hit) is drawn into the maps as free space out to this range, as
+    /// Cartographer's `missing_data_ray_length` does: nothing stood in the lidar's plane
+    /// along it (`None`: such beams are dropped, and the ground they crossed stays unknown
+    /// unless a beam that found something crossed it).
+    pub clear_rays_m: Option<f64>,
     /// SLAM tuning.
     pub mapper: MapperConfig,
     /// How often the map is published.
@@ -1099,8 +1105,15 @@ impl Mapping {
         } else {
             std::borrow::Cow::Borrowed(&scan.ranges_m)
         };
+        let mut clear = Vec::new();
         for (i, r) in ranges.iter().enumerate() {
             if !(r.is_finite() && *r >= min && *r < max) {
+                if let Some(reach) = self.cfg.clear_rays_m
+                    && !(r.is_finite() && *r < max)
+                {
+                    let a = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad) as f64;
+                    clear.push(Point2::new(lx + reach * a.cos(), reach * a.sin()));
+                }
                 continue;
             }
             let a = (scan.angle_min_rad + i as f32 * scan.angle_increment_rad) as f64;
@@ -1149,6 +1162,7 @@ impl Mapping {
             _ => Vec::new(),
         };
         self.mapper.set_features(features);
+        self.mapper.set_clear_rays(clear);
         self.mapper.set_point_heights(heights);
         let tracked = self
             .mapper
@@ -1443,6 +1457,7 @@ mod tests {
                 hazards_rounded_out: false,
                 hazards_follow_keyframes: None,
                 hazards_redrawn_while_mapping: false,
+                clear_rays_m: None,
                 mapper: rover_mapper_config(),
                 map_period: Duration::from_secs(60),
                 delta_period: Duration::from_secs(2),

@@ -534,6 +534,7 @@ mod tests {
                     hazards_rounded_out: false,
                     hazards_follow_keyframes: None,
                     hazards_redrawn_while_mapping: false,
+                    clear_rays_m: None,
                     mapper: rover_mapper_config(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),

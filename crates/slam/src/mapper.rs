@@ -1057,6 +1057,11 @@ pub struct Mapper {
     cfg: MapperConfig,
     graph: PoseGraph,
     keyframe_points: Vec<Vec<Point2>>,
+    /// Each keyframe's beams that returned nothing, as the ends of the free rays drawn
+    /// along them (robot frame; see [`Mapper::set_clear_rays`]).
+    keyframe_clear: Vec<Vec<Point2>>,
+    /// ... for the next scan.
+    clear_rays: Vec<Point2>,
     /// Each keyframe's time and odometry pose.
     keyframe_odom: Vec<(f64, Pose2)>,
     /// Wheel travel since the previous keyframe with nothing to match against (too few
@@ -1175,6 +1180,8 @@ impl Mapper {
                 ..PoseGraph::default()
             },
             keyframe_points: Vec::new(),
+            keyframe_clear: Vec::new(),
+            clear_rays: Vec::new(),
             keyframe_odom: Vec::new(),
             keyframe_unmatched_m: Vec::new(),
             unmatched_m: 0.0,
@@ -1250,12 +1257,18 @@ impl Mapper {
                 _ => (p, true),
             }
         };
+        let clear = self.keyframe_clear.get(node).map_or(&[][..], |c| &c[..]);
         let world: Vec<(Point2, bool)> = dense
             .iter()
             .map(|p| {
                 let (p, hit) = within(*p);
                 (local.transform_point(p), hit)
             })
+            .chain(
+                clear
+                    .iter()
+                    .map(|p| (local.transform_point(within(*p).0), false)),
+            )
             .collect();
         // Filled-in points are hits only: free space along the beams themselves, cut to the
         // same range.
@@ -1263,6 +1276,7 @@ impl Mapper {
             (!self.cfg.frontend.trace_filled && self.cfg.frontend.densify.is_some()).then(|| {
                 self.keyframe_points[node]
                     .iter()
+                    .chain(clear)
                     .map(|p| local.transform_point(within(*p).0))
                     .collect()
             });
@@ -1291,6 +1305,13 @@ impl Mapper {
     /// the hits pairs them too, and its keyframe, if it makes one, adds them to the hits.
     pub fn set_features(&mut self, features: Vec<Point2>) {
         self.features = features;
+    }
+
+    /// The next scan's beams that returned nothing, each as the end of a ray (robot frame)
+    /// along which the scan saw nothing: drawn into the maps as free space, never matched.
+    /// For the next scan only.
+    pub fn set_clear_rays(&mut self, ends: Vec<Point2>) {
+        self.clear_rays = ends;
     }
 
     /// Each point of the next scan's height above the ground under the rover, levelled by
@@ -2105,6 +2126,8 @@ impl Mapper {
             }
         }
         self.keyframe_points.push(points);
+        self.keyframe_clear
+            .push(std::mem::take(&mut self.clear_rays));
         self.keyframe_odom.push((time_s, odom));
         let unmatched_m = std::mem::take(&mut self.unmatched_m);
         self.keyframe_unmatched_m.push(unmatched_m);
@@ -2186,6 +2209,11 @@ impl Mapper {
         let beams: Vec<(Point2, bool)> = self.keyframe_points[node]
             .iter()
             .map(|p| (self.pose.transform_point(*p), true))
+            .chain(
+                self.keyframe_clear[node]
+                    .iter()
+                    .map(|p| (self.pose.transform_point(*p), false)),
+            )
             .collect();
         self.assembly.trace(&into, self.pose.position(), &beams);
         // Closures are searched every few keyframes and the graph re-optimised in batches:
@@ -4518,6 +4546,52 @@ mod tests {
         // the cells out to 4 m (not dropped), and none beyond.
         assert!((3.0..=4.0 + 0.036).contains(&hit), "{hit}");
         assert!((3.9..=4.0 + 0.036).contains(&free), "{free}");
+    }
+
+    #[test]
+    fn beams_that_returned_nothing_clear_the_ground_they_crossed_and_are_never_matched() {
+        // A wall 1 m to the left; to the right nothing within the lidar's range, told as
+        // rays 3 m long every degree, as the lidar's beams are.
+        let wall: Vec<Point2> = (0..100)
+            .map(|i| Point2::new(-1.0 + 0.05 * i as f64, 1.0))
+            .collect();
+        let clear: Vec<Point2> = (1..180)
+            .map(|k| {
+                let a = -(k as f64).to_radians();
+                Point2::new(3.0 * a.cos(), 3.0 * a.sin())
+            })
+            .collect();
+        let run = |with_clear: bool| {
+            let mut m = Mapper::new(MapperConfig::default());
+            for k in 0..=10 {
+                if with_clear {
+                    m.set_clear_rays(clear.clone());
+                }
+                m.add_points(
+                    0.1 * k as f64,
+                    Pose2::new(0.1 * k as f64, 0.0, 0.0),
+                    wall.clone(),
+                );
+            }
+            m
+        };
+        let (mut with_clear, mut without) = (run(true), run(false));
+        assert_eq!(
+            with_clear.pose(),
+            without.pose(),
+            "the rays are never matched"
+        );
+        let (south, farther) = (Point2::new(0.5, -2.0), Point2::new(0.5, -3.5));
+        assert_eq!(
+            with_clear.map_states().at_world(south),
+            Some(&CellState::Free)
+        );
+        assert_ne!(without.map_states().at_world(south), Some(&CellState::Free));
+        assert_ne!(
+            with_clear.map_states().at_world(farther),
+            Some(&CellState::Free),
+            "only as far as the rays reach"
+        );
     }
 
     #[test]
