@@ -595,6 +595,12 @@ impl SubmapHazards {
     ) -> usize {
         let mut redrawn = 0;
         for s in 0..self.kept.len() {
+            let Some(Some(old)) = self.layers.get(s) else {
+                continue;
+            };
+            if self.inserted.get(s) != Some(&self.kept[s].len()) {
+                continue;
+            }
             let placed: Vec<Option<Pose2>> = self.kept[s]
                 .iter()
                 .map(|f| keyframe_in_submap(s, f.anchor).map(|k| k * f.from_anchor))
@@ -605,25 +611,22 @@ impl SubmapHazards {
                     d.x_m.hypot(d.y_m) > bend.translation_m || d.yaw_rad.abs() > bend.rotation_rad
                 })
             });
-            let Some(Some(old)) = self.layers.get(s) else {
-                continue;
-            };
-            if !bent || self.inserted.get(s) != Some(&self.kept[s].len()) {
+            if !bent {
                 continue;
             }
             // The sum holds the layer as it was placed: take that out before it changes.
             self.assembly.remove(s, &old.grid);
             let mut layer = HazardMap::new(self.resolution_m);
-            let mut world = Vec::new();
+            let mut frame = Vec::new();
             for (f, p) in self.kept[s].iter_mut().zip(&placed) {
                 let at = p.unwrap_or(f.drawn_at);
-                world.clear();
-                world.extend(
-                    self.verdicts[f.verdicts.clone()].iter().map(|(x, y, h)| {
-                        (at.transform_point(Point2::new(*x as f64, *y as f64)), *h)
-                    }),
+                frame.clear();
+                frame.extend(
+                    self.verdicts[f.verdicts.clone()]
+                        .iter()
+                        .map(|(x, y, h)| (Point2::new(*x as f64, *y as f64), *h)),
                 );
-                layer.grid.observe_cells(&world);
+                layer.insert(at, &frame);
                 f.drawn_at = at;
             }
             if self.current != Some(s) {
