@@ -861,6 +861,14 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.clear_rays_m = Some(6.0),
     },
     Variant {
+        name: "clear-rays-6m-published",
+        what: "as `clear-rays-6m`, but the beams that returned nothing clear only the maps the rover publishes and plans on, not the grids its scans are matched against",
+        apply: |c| {
+            c.clear_rays_m = Some(6.0);
+            c.mapper.clear_rays_published_only = true;
+        },
+    },
+    Variant {
         name: "clear-rays-12m",
         what: "a lidar beam that returns nothing drawn as free space out to 12 m, the lidar's range, not dropped",
         apply: |c| c.clear_rays_m = Some(12.0),

@@ -533,6 +533,14 @@ pub struct MapperConfig {
     /// among the submaps near it, and over a 30-minute mission the fleet precomputed 248
     /// times instead of 219 (BENCHMARKS.md, "A rover's memory bounded by what it maps").
     pub precomputed_kept: usize,
+    /// Beams that returned nothing ([`Mapper::set_clear_rays`]) clear only the published
+    /// grids (each submap then keeps one beside its matching grid, and the live map sums
+    /// them), not the grids scans are matched against. In the open middle of a hall a
+    /// matching grid cleared all round a lone rock scores a scan that lands a little off it
+    /// as a poor fit where unknown ground round it would not, and a rover lost there on a
+    /// pose 0.15 m off found no wall to relocalise on (BENCHMARKS.md, "Lidar beams that
+    /// return nothing").
+    pub clear_rays_published_only: bool,
     /// ... by this many Gauss-Newton steps ...
     pub graph_iterations: usize,
     /// ... the iterative solvers' steps after the first stopped after this many
@@ -915,6 +923,7 @@ impl Default for MapperConfig {
             ndt_refine: None,
             optimize_every_keyframes: 20,
             precomputed_kept: 8,
+            clear_rays_published_only: false,
             graph_iterations: 3,
             graph_later_cap: None,
             drop_closures_beyond: None,
@@ -1163,10 +1172,11 @@ impl Submap {
 }
 
 /// A submap's grid for the published map, when its matching grid's beams stop short of
-/// their hits (see [`Submap::published`]).
-fn published_grid(f: &FrontendConfig) -> Option<OccupancyGrid> {
-    f.miss_margin
-        .map(|_| OccupancyGrid::new(f.resolution_m).with_miss_rule(f.miss_rule))
+/// their hits or leave out the beams that returned nothing (see [`Submap::published`]).
+fn published_grid(cfg: &MapperConfig) -> Option<OccupancyGrid> {
+    let f = &cfg.frontend;
+    (f.miss_margin.is_some() || cfg.clear_rays_published_only)
+        .then(|| OccupancyGrid::new(f.resolution_m).with_miss_rule(f.miss_rule))
 }
 
 impl Mapper {
@@ -1258,33 +1268,52 @@ impl Mapper {
             }
         };
         let clear = self.keyframe_clear.get(node).map_or(&[][..], |c| &c[..]);
-        let world: Vec<(Point2, bool)> = dense
-            .iter()
-            .map(|p| {
-                let (p, hit) = within(*p);
-                (local.transform_point(p), hit)
-            })
-            .chain(
-                clear
-                    .iter()
-                    .map(|p| (local.transform_point(within(*p).0), false)),
-            )
-            .collect();
+        let beams = |clear: &[Point2]| -> Vec<(Point2, bool)> {
+            dense
+                .iter()
+                .map(|p| {
+                    let (p, hit) = within(*p);
+                    (local.transform_point(p), hit)
+                })
+                .chain(
+                    clear
+                        .iter()
+                        .map(|p| (local.transform_point(within(*p).0), false)),
+                )
+                .collect()
+        };
         // Filled-in points are hits only: free space along the beams themselves, cut to the
         // same range.
-        let rays: Option<Vec<Point2>> =
+        let rays = |clear: &[Point2]| -> Option<Vec<Point2>> {
             (!self.cfg.frontend.trace_filled && self.cfg.frontend.densify.is_some()).then(|| {
                 self.keyframe_points[node]
                     .iter()
                     .chain(clear)
                     .map(|p| local.transform_point(within(*p).0))
                     .collect()
-            });
+            })
+        };
+        let matched_clear = if self.cfg.clear_rays_published_only {
+            &[][..]
+        } else {
+            clear
+        };
+        let (world, world_rays) = (beams(matched_clear), rays(matched_clear));
+        let published_own = (self.cfg.clear_rays_published_only
+            && self.submaps[submap].published.is_some())
+        .then(|| (beams(clear), rays(clear)));
+        let (published_world, published_rays) = published_own
+            .as_ref()
+            .map_or((&world, &world_rays), |(w, r)| (w, r));
         let s = &mut self.submaps[submap];
         s.map
-            .insert_with_rays(local.position(), &world, rays.as_deref());
+            .insert_with_rays(local.position(), &world, world_rays.as_deref());
         if let Some(published) = &mut s.published {
-            published.insert_with_rays(local.position(), &world, rays.as_deref());
+            published.insert_with_rays(
+                local.position(),
+                published_world,
+                published_rays.as_deref(),
+            );
         }
         s.keyframes += 1;
         s.drawn.push(local);
@@ -2177,7 +2206,7 @@ impl Mapper {
                 map: MultiResMap::new(f.resolution_m, f.levels)
                     .with_miss_rule(f.miss_rule)
                     .with_miss_margin(f.miss_margin),
-                published: published_grid(f),
+                published: published_grid(&self.cfg),
                 keyframes: 0,
                 finished: false,
                 precomputed: None,
@@ -2844,7 +2873,7 @@ impl Mapper {
                 .with_miss_margin(f.miss_margin);
             self.assembly.remove(s, self.submaps[s].published());
             self.submaps[s].map = fresh;
-            self.submaps[s].published = published_grid(&f);
+            self.submaps[s].published = published_grid(&self.cfg);
             self.submaps[s].keyframes = 0;
             self.submaps[s].precomputed = None;
             self.submaps[s].drawn.clear();
@@ -4592,6 +4621,30 @@ mod tests {
             Some(&CellState::Free),
             "only as far as the rays reach"
         );
+        // Told to clear only the published grids, the grid the scans are matched against
+        // keeps the ground south unknown, and the map shows it free all the same.
+        let mut published_only = Mapper::new(MapperConfig {
+            clear_rays_published_only: true,
+            ..MapperConfig::default()
+        });
+        for k in 0..=10 {
+            published_only.set_clear_rays(clear.clone());
+            published_only.add_points(
+                0.1 * k as f64,
+                Pose2::new(0.1 * k as f64, 0.0, 0.0),
+                wall.clone(),
+            );
+        }
+        assert_eq!(published_only.pose(), without.pose());
+        assert_eq!(
+            published_only.map_states().at_world(south),
+            Some(&CellState::Free)
+        );
+        // The first submap starts at the first keyframe, the origin.
+        let matched = |m: &Mapper| m.submaps[0].map.finest().log_odds_at(south);
+        assert!(matched(&with_clear) < 0.0, "cleared where matched too");
+        assert_eq!(matched(&published_only), 0.0, "never cleared where matched");
+        assert_eq!(matched(&published_only), matched(&without));
     }
 
     #[test]
