@@ -37,6 +37,10 @@ const LOST_TURN: Duration = Duration::from_secs(45);
 /// lost its place where it saw little (the open middle of a hall, one rock in range), and a
 /// search of the map for a view of a few returns finds it fits many places.
 const RELOCALISE_PLACE_POINTS: usize = 100;
+/// ... whose returns pin a pose every way, at least this share of their surfaces' weight
+/// across the direction they pin least (`realms_slam::mapper::weakest_direction_share`; a
+/// straight wall's is 0, a corner's up to 0.5) ...
+const RELOCALISE_PLACE_WEAKEST_SHARE: f64 = 0.1;
 /// ... at least this far from where it is and from one another, metres ...
 const RELOCALISE_PLACE_SPACING_M: f64 = 1.0;
 /// ... and tries this many of them before it stops and waits for the operator: its wheels
@@ -377,6 +381,7 @@ impl RoverNode {
                         pose.position(),
                         RELOCALISE_PLACE_SPACING_M,
                         RELOCALISE_PLACE_POINTS,
+                        RELOCALISE_PLACE_WEAKEST_SHARE,
                         wanted,
                     )
                 })

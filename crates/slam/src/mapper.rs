@@ -1171,6 +1171,39 @@ impl Submap {
     }
 }
 
+/// Neighbouring returns farther apart than this lie on different surfaces: no normal is
+/// taken across them, metres.
+const NORMAL_MAX_CHORD_M: f64 = 0.5;
+
+/// How well a scan's returns (in beam order) pin a pose in the direction they pin least:
+/// the smaller eigenvalue of the mean of `n nᵀ` over the surface normals along the scan,
+/// each normal across the chord between a return's two neighbours on the same surface.
+/// 0 for a straight wall (nothing pins the pose along it), 0.5 for surfaces facing every
+/// way equally (a corner of two equal walls); `0` with no normal at all. The degeneracy
+/// measure of point-to-line matching (Zhang, Kaess and Singh 2016, "On degeneracy of
+/// optimization-based state estimation problems"), normalised by the count.
+pub fn weakest_direction_share(points: &[Point2]) -> f64 {
+    let (mut xx, mut xy, mut yy, mut n) = (0.0, 0.0, 0.0, 0usize);
+    for w in points.windows(3) {
+        let (dx, dy) = (w[2].x_m - w[0].x_m, w[2].y_m - w[0].y_m);
+        let chord = dx.hypot(dy);
+        if chord < 1e-9 || chord > NORMAL_MAX_CHORD_M {
+            continue;
+        }
+        let (nx, ny) = (-dy / chord, dx / chord);
+        xx += nx * nx;
+        xy += nx * ny;
+        yy += ny * ny;
+        n += 1;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let (xx, xy, yy) = (xx / n as f64, xy / n as f64, yy / n as f64);
+    let half_trace = 0.5 * (xx + yy);
+    (half_trace - (0.25 * (xx - yy).powi(2) + xy * xy).sqrt()).max(0.0)
+}
+
 /// A submap's grid for the published map, when its matching grid's beams stop short of
 /// their hits or leave out the beams that returned nothing (see [`Submap::published`]).
 fn published_grid(cfg: &MapperConfig) -> Option<OccupancyGrid> {
@@ -2099,23 +2132,31 @@ impl Mapper {
     /// relocalisation from the keyframe's own position searches. A scan that rich was
     /// matched to its submap when it was taken, where the rover's view when it was lost is
     /// often nearly empty (in the open middle of a hall, one rock), and turning on the spot
-    /// shows nothing more. `None` without such a keyframe.
+    /// shows nothing more. The scan must also pin a pose every way: at least
+    /// `min_weakest_share` of its surfaces' weight across the direction they pin least
+    /// ([`weakest_direction_share`]). A long straight wall gives hundreds of returns, and
+    /// a search along it finds rivals all the way (BENCHMARKS.md, "Lidar beams that return
+    /// nothing": a rover gave up by the north wall with its pose 0.24 m off). `None`
+    /// without such a keyframe.
     pub fn relocalisation_place(
         &self,
         from: Point2,
         min_distance_m: f64,
         min_points: usize,
+        min_weakest_share: f64,
         wanted: impl Fn(Point2) -> bool,
     ) -> Option<Point2> {
-        let keyframes = (0..self.submaps.len()).flat_map(|s| {
-            let sub = &self.submaps[s];
-            (sub.origin_node..sub.origin_node + sub.keyframes).filter(move |&k| {
-                self.graph
-                    .nodes
-                    .get(k)
-                    .is_some_and(|pose| self.relocalisation_submaps(pose.position()).contains(&s))
-            })
-        });
+        let keyframes =
+            (0..self.submaps.len()).flat_map(|s| {
+                let sub = &self.submaps[s];
+                (sub.origin_node..sub.origin_node + sub.keyframes).filter(move |&k| {
+                    self.graph.nodes.get(k).is_some_and(|pose| {
+                        self.relocalisation_submaps(pose.position()).contains(&s)
+                    }) && self.keyframe_points.get(k).is_some_and(|p| {
+                        p.len() >= min_points && weakest_direction_share(p) >= min_weakest_share
+                    })
+                })
+            });
         let wanted = |p: Point2| p.distance_m(from) >= min_distance_m && wanted(p);
         self.nearest_keyframe(from, keyframes, min_points, wanted)
     }
@@ -4645,6 +4686,43 @@ mod tests {
         assert!(matched(&with_clear) < 0.0, "cleared where matched too");
         assert_eq!(matched(&published_only), 0.0, "never cleared where matched");
         assert_eq!(matched(&published_only), matched(&without));
+    }
+
+    #[test]
+    fn a_straight_wall_pins_nothing_along_it_and_a_corner_pins_both_ways() {
+        // Returns every degree from a sensor at the origin, in beam order.
+        let beams = |range: &dyn Fn(f64) -> Option<f64>| -> Vec<Point2> {
+            (-90..=90)
+                .filter_map(|d| {
+                    let a = (d as f64).to_radians();
+                    range(a).map(|r| Point2::new(r * a.cos(), r * a.sin()))
+                })
+                .collect()
+        };
+        // A wall 2 m ahead, across the whole view.
+        let wall = beams(&|a| Some(2.0 / a.cos()).filter(|r| *r < 12.0));
+        assert!(weakest_direction_share(&wall) < 1e-9);
+        // Walls 2 m ahead and 2 m to the left, meeting in a corner.
+        let corner = beams(&|a| {
+            let ahead = (a.cos() > 1e-9).then(|| 2.0 / a.cos());
+            let left = (a.sin() > 1e-9).then(|| 2.0 / a.sin());
+            match (ahead, left) {
+                (Some(f), Some(l)) => Some(f.min(l)),
+                (f, l) => f.or(l),
+            }
+            .filter(|r| *r < 12.0)
+        });
+        let share = weakest_direction_share(&corner);
+        assert!(share > 0.2 && share <= 0.5, "{share}");
+        // No normal across a gap between surfaces: two returns far apart pin nothing.
+        assert_eq!(
+            weakest_direction_share(&[
+                Point2::new(0.0, 2.0),
+                Point2::new(3.0, 0.0),
+                Point2::new(0.0, -2.0)
+            ]),
+            0.0
+        );
     }
 
     #[test]
