@@ -1187,7 +1187,7 @@ pub fn weakest_direction_share(points: &[Point2]) -> f64 {
     for w in points.windows(3) {
         let (dx, dy) = (w[2].x_m - w[0].x_m, w[2].y_m - w[0].y_m);
         let chord = dx.hypot(dy);
-        if chord < 1e-9 || chord > NORMAL_MAX_CHORD_M {
+        if !(1e-9..=NORMAL_MAX_CHORD_M).contains(&chord) {
             continue;
         }
         let (nx, ny) = (-dy / chord, dx / chord);
