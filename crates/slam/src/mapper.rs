@@ -535,11 +535,11 @@ pub struct MapperConfig {
     pub precomputed_kept: usize,
     /// Beams that returned nothing ([`Mapper::set_clear_rays`]) clear only the published
     /// grids (each submap then keeps one beside its matching grid, and the live map sums
-    /// them), not the grids scans are matched against. In the open middle of a hall a
-    /// matching grid cleared all round a lone rock scores a scan that lands a little off it
-    /// as a poor fit where unknown ground round it would not, and a rover lost there on a
-    /// pose 0.15 m off found no wall to relocalise on (BENCHMARKS.md, "Lidar beams that
-    /// return nothing").
+    /// them), not the grids scans are matched against. In the open middle of a hall the
+    /// rays clear a matching grid all round a lone rock, and a scan that lands a little off
+    /// it then scores as a poor fit where unknown ground would score half: a rover 0.15 m
+    /// off reported itself lost there (BENCHMARKS.md, "Lidar beams that return nothing over
+    /// 48 missions").
     pub clear_rays_published_only: bool,
     /// ... by this many Gauss-Newton steps ...
     pub graph_iterations: usize,
