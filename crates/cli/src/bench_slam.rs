@@ -869,6 +869,14 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "clear-rays-3m-published",
+        what: "as `clear-rays-6m-published`, the rays 3 m long",
+        apply: |c| {
+            c.clear_rays_m = Some(3.0);
+            c.mapper.clear_rays_published_only = true;
+        },
+    },
+    Variant {
         name: "clear-rays-12m",
         what: "a lidar beam that returns nothing drawn as free space out to 12 m, the lidar's range, not dropped",
         apply: |c| c.clear_rays_m = Some(12.0),
