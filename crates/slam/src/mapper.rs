@@ -2122,7 +2122,7 @@ impl Mapper {
             .filter(|s| self.searched_for_closures(s, next))
             .flat_map(|s| s.origin_node..s.origin_node + s.keyframes)
             .filter(|&k| sigma.get(k).is_some_and(|d| model.floor_m + d <= within_m));
-        self.nearest_keyframe(from, keyframes, min_points, wanted)
+        self.nearest_keyframe(from, keyframes, |p| p.len() >= min_points, wanted)
     }
 
     /// Where a lost rover could drive to find itself again: the keyframe nearest to `from`
@@ -2146,36 +2146,32 @@ impl Mapper {
         min_weakest_share: f64,
         wanted: impl Fn(Point2) -> bool,
     ) -> Option<Point2> {
-        let keyframes =
-            (0..self.submaps.len()).flat_map(|s| {
-                let sub = &self.submaps[s];
-                (sub.origin_node..sub.origin_node + sub.keyframes).filter(move |&k| {
-                    self.graph.nodes.get(k).is_some_and(|pose| {
-                        self.relocalisation_submaps(pose.position()).contains(&s)
-                    }) && self.keyframe_points.get(k).is_some_and(|p| {
-                        p.len() >= min_points && weakest_direction_share(p) >= min_weakest_share
-                    })
-                })
-            });
+        let keyframes = (0..self.submaps.len()).flat_map(|s| {
+            let sub = &self.submaps[s];
+            (sub.origin_node..sub.origin_node + sub.keyframes).filter(move |&k| {
+                self.graph
+                    .nodes
+                    .get(k)
+                    .is_some_and(|pose| self.relocalisation_submaps(pose.position()).contains(&s))
+            })
+        });
+        let usable =
+            |p: &[Point2]| p.len() >= min_points && weakest_direction_share(p) >= min_weakest_share;
         let wanted = |p: Point2| p.distance_m(from) >= min_distance_m && wanted(p);
-        self.nearest_keyframe(from, keyframes, min_points, wanted)
+        self.nearest_keyframe(from, keyframes, usable, wanted)
     }
 
-    /// The position nearest to `from` of `keyframes` whose scans kept at least `min_points`
-    /// returns and which `wanted` accepts.
+    /// The position nearest to `from` of `keyframes` whose scans `usable` accepts and which
+    /// `wanted` accepts.
     fn nearest_keyframe(
         &self,
         from: Point2,
         keyframes: impl Iterator<Item = usize>,
-        min_points: usize,
+        usable: impl Fn(&[Point2]) -> bool,
         wanted: impl Fn(Point2) -> bool,
     ) -> Option<Point2> {
         keyframes
-            .filter(|&k| {
-                self.keyframe_points
-                    .get(k)
-                    .is_some_and(|p| p.len() >= min_points)
-            })
+            .filter(|&k| self.keyframe_points.get(k).is_some_and(|p| usable(p)))
             .filter_map(|k| self.graph.nodes.get(k).map(Pose2::position))
             .filter(|p| wanted(*p))
             .min_by(|a, b| a.distance_m(from).total_cmp(&b.distance_m(from)))
