@@ -869,6 +869,24 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "clear-rays-6m-published-every-1m",
+        what: "as `clear-rays-6m-published`, the rays drawn only from keyframes 1 m or more from the last whose were",
+        apply: |c| {
+            c.clear_rays_m = Some(6.0);
+            c.mapper.clear_rays_published_only = true;
+            c.mapper.clear_rays_spacing_m = Some(1.0);
+        },
+    },
+    Variant {
+        name: "clear-rays-6m-published-every-0.25m",
+        what: "as `clear-rays-6m-published`, the rays drawn only from keyframes 0.25 m or more from the last whose were (none from a keyframe made for turning on the spot)",
+        apply: |c| {
+            c.clear_rays_m = Some(6.0);
+            c.mapper.clear_rays_published_only = true;
+            c.mapper.clear_rays_spacing_m = Some(0.25);
+        },
+    },
+    Variant {
         name: "clear-rays-3m-published",
         what: "as `clear-rays-6m-published`, the rays 3 m long",
         apply: |c| {
