@@ -4636,19 +4636,29 @@ mod tests {
         assert!((3.9..=4.0 + 0.036).contains(&free), "{free}");
     }
 
+    /// Returns every 5 cm of a wall along y = 1 m, from x = `from_x_m`.
+    fn wall_at_y1(from_x_m: f64, points: usize) -> Vec<Point2> {
+        (0..points)
+            .map(|i| Point2::new(from_x_m + 0.05 * i as f64, 1.0))
+            .collect()
+    }
+
+    /// Beams to the right (robot frame) that returned nothing, as rays `length_m` long every
+    /// degree, as the lidar's beams are.
+    fn rays_to_the_right(length_m: f64) -> Vec<Point2> {
+        (1..180)
+            .map(|k| {
+                let a = -(k as f64).to_radians();
+                Point2::new(length_m * a.cos(), length_m * a.sin())
+            })
+            .collect()
+    }
+
     #[test]
     fn beams_that_returned_nothing_clear_the_ground_they_crossed_and_are_never_matched() {
         // A wall 1 m to the left; to the right nothing within the lidar's range, told as
         // rays 3 m long every degree, as the lidar's beams are.
-        let wall: Vec<Point2> = (0..100)
-            .map(|i| Point2::new(-1.0 + 0.05 * i as f64, 1.0))
-            .collect();
-        let clear: Vec<Point2> = (1..180)
-            .map(|k| {
-                let a = -(k as f64).to_radians();
-                Point2::new(3.0 * a.cos(), 3.0 * a.sin())
-            })
-            .collect();
+        let (wall, clear) = (wall_at_y1(-1.0, 100), rays_to_the_right(3.0));
         let run = |with_clear: bool| {
             let mut m = Mapper::new(MapperConfig::default());
             for k in 0..=10 {
@@ -4711,15 +4721,7 @@ mod tests {
         // A wall 1 m to the north; to the rover's right nothing within the lidar's range,
         // told as rays 3 m long every degree. It drives 3 m east, then turns on the spot to
         // face north, its right then facing east.
-        let wall: Vec<Point2> = (0..110)
-            .map(|i| Point2::new(-2.0 + 0.05 * i as f64, 1.0))
-            .collect();
-        let clear: Vec<Point2> = (1..180)
-            .map(|k| {
-                let a = -(k as f64).to_radians();
-                Point2::new(3.0 * a.cos(), 3.0 * a.sin())
-            })
-            .collect();
+        let (wall, clear) = (wall_at_y1(-2.0, 110), rays_to_the_right(3.0));
         let poses: Vec<Pose2> = (0..=30)
             .map(|k| Pose2::new(0.1 * k as f64, 0.0, 0.0))
             .chain((1..=9).map(|k| Pose2::new(3.0, 0.0, (10.0 * k as f64).to_radians())))
