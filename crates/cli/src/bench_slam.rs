@@ -856,47 +856,51 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
-        name: "clear-rays-6m",
-        what: "a lidar beam that returns nothing drawn as free space out to 6 m (Cartographer's missing_data_ray_length), not dropped",
-        apply: |c| c.clear_rays_m = Some(6.0),
-    },
-    Variant {
-        name: "clear-rays-6m-published",
-        what: "as `clear-rays-6m`, but the beams that returned nothing clear only the maps the rover publishes and plans on, not the grids its scans are matched against",
+        name: "setup-89",
+        what: "the rovers' setup before the ninetieth session: beams that returned nothing dropped, and every beam clearing cells up to its hit in the grids scans are matched against too",
         apply: |c| {
-            c.clear_rays_m = Some(6.0);
-            c.mapper.clear_rays_published_only = true;
+            c.clear_rays_m = None;
+            c.mapper.frontend.miss_margin = None;
+            c.mapper.clear_rays_published_only = false;
+            c.mapper.clear_rays_spacing_m = None;
         },
     },
     Variant {
-        name: "clear-rays-6m-published-every-1m",
-        what: "as `clear-rays-6m-published`, the rays drawn only from keyframes 1 m or more from the last whose were",
+        name: "no-clear-rays",
+        what: "a lidar beam that returns nothing dropped, not drawn as free space out to 6 m",
+        apply: |c| c.clear_rays_m = None,
+    },
+    Variant {
+        name: "no-miss-margin",
+        what: "every beam clears cells up to its hit in the grids scans are matched against too, not stopping 3 cm plus 0.6 % of its range short of it",
+        apply: |c| c.mapper.frontend.miss_margin = None,
+    },
+    Variant {
+        name: "clear-rays-matched",
+        what: "the beams that returned nothing clear the grids scans are matched against too, from every keyframe (the eighty-eighth session's `clear-rays-6m`)",
         apply: |c| {
-            c.clear_rays_m = Some(6.0);
-            c.mapper.clear_rays_published_only = true;
-            c.mapper.clear_rays_spacing_m = Some(1.0);
+            c.mapper.clear_rays_published_only = false;
+            c.mapper.clear_rays_spacing_m = None;
         },
     },
     Variant {
-        name: "clear-rays-6m-published-every-0.25m",
-        what: "as `clear-rays-6m-published`, the rays drawn only from keyframes 0.25 m or more from the last whose were (none from a keyframe made for turning on the spot)",
-        apply: |c| {
-            c.clear_rays_m = Some(6.0);
-            c.mapper.clear_rays_published_only = true;
-            c.mapper.clear_rays_spacing_m = Some(0.25);
-        },
+        name: "clear-rays-every-keyframe",
+        what: "the beams that returned nothing drawn from every keyframe, not only from those a metre or more from the last whose were",
+        apply: |c| c.mapper.clear_rays_spacing_m = None,
     },
     Variant {
-        name: "clear-rays-3m-published",
-        what: "as `clear-rays-6m-published`, the rays 3 m long",
-        apply: |c| {
-            c.clear_rays_m = Some(3.0);
-            c.mapper.clear_rays_published_only = true;
-        },
+        name: "clear-rays-every-0.25m",
+        what: "the beams that returned nothing drawn from keyframes 0.25 m or more from the last whose were (none from a keyframe made for turning on the spot), not 1 m",
+        apply: |c| c.mapper.clear_rays_spacing_m = Some(0.25),
+    },
+    Variant {
+        name: "clear-rays-3m",
+        what: "the beams that returned nothing drawn as free space out to 3 m, not 6",
+        apply: |c| c.clear_rays_m = Some(3.0),
     },
     Variant {
         name: "clear-rays-12m",
-        what: "a lidar beam that returns nothing drawn as free space out to 12 m, the lidar's range, not dropped",
+        what: "the beams that returned nothing drawn as free space out to 12 m, the lidar's range, not 6",
         apply: |c| c.clear_rays_m = Some(12.0),
     },
     Variant {
@@ -1015,21 +1019,11 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "miss-margin-2cm",
-        what: "each beam stops clearing cells 2 cm plus 0.4 % of its range short of its hit, so a surface's cells are left to the hits around it (the lidar's noise no longer pushes surfaces out)",
+        what: "in the grids scans are matched against, each beam stops clearing cells 2 cm plus 0.4 % of its range short of its hit, not 3 cm plus 0.6 %",
         apply: |c| {
             c.mapper.frontend.miss_margin = Some(realms_slam::occupancy::MissMargin {
                 base_m: 0.02,
                 per_m: 0.004,
-            })
-        },
-    },
-    Variant {
-        name: "miss-margin-3cm",
-        what: "each beam stops clearing cells 3 cm plus 0.6 % of its range short of its hit",
-        apply: |c| {
-            c.mapper.frontend.miss_margin = Some(realms_slam::occupancy::MissMargin {
-                base_m: 0.03,
-                per_m: 0.006,
             })
         },
     },

@@ -129,7 +129,11 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // keyframes"): variant `hazards-follow-keyframes`.
         hazards_follow_keyframes: None,
         hazards_redrawn_while_mapping: false,
-        clear_rays_m: None,
+        // A beam that returns nothing crossed open ground: drawn as free space out to 6 m
+        // (Cartographer's missing_data_ray_length), into the published map only (see
+        // `rover_mapper_config`). The open middle of the hall is then known before a rover
+        // drives there to judge it (BENCHMARKS.md, "Lidar beams that return nothing").
+        clear_rays_m: Some(6.0),
         mapper: rover_mapper_config(),
         map_period: MAP_PERIOD,
         delta_period: MAP_DELTA_PERIOD,

@@ -223,17 +223,26 @@ fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
 
 /// A sweeping lidar (each beam 0.28 ms after the one before) on rovers that turn and drive:
 /// de-skewed, the scans track the truth; taken as if measured at once, the same scans put
-/// the rovers off by far more (the turns smear every wall a scan sees).
+/// the rovers off by far more (the turns smear every wall a scan sees). The rovers' miss
+/// margin leaves the cells round each hit to the hits, which forgives the smear of this
+/// minute's turns (both within 2 cm), so the two are compared without it.
 #[test]
 fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     let mut s = small();
     s.rovers.lidar.sweeps = true;
     let (cfg, ids, _, capture) = common::captured_run(&s, 60.0);
     assert!(cfg.deskew, "the rovers de-skew");
+    assert!(
+        cfg.mapper.frontend.miss_margin.is_some(),
+        "the rovers' margin"
+    );
     // The tracked pose's RMS error against the truth over every scan, for one setup.
-    let rms = |id: RoverId, input: &[realms_mission::CapturedInput], deskew: bool| {
+    let rms = |id: RoverId, input: &[realms_mission::CapturedInput], deskew: bool, margin: bool| {
         let mut c = cfg.clone();
         c.deskew = deskew;
+        if !margin {
+            c.mapper.frontend.miss_margin = None;
+        }
         let mut mapping = realms_node::mapping::Mapping::new(id, c);
         let (mut sum, mut n) = (0.0, 0);
         realms_mission::replay_slam(&mut mapping, input, |c, m| {
@@ -247,7 +256,9 @@ fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     };
     let (mut worst_deskewed, mut worst_at_once) = (0.0f64, 0.0f64);
     for (id, input) in ids.iter().zip(&capture) {
-        let (deskewed, at_once) = (rms(*id, input, true), rms(*id, input, false));
+        let rovers = rms(*id, input, true, true);
+        assert!(rovers < 0.05, "{id}: de-skewed {rovers} m with the margin");
+        let (deskewed, at_once) = (rms(*id, input, true, false), rms(*id, input, false, false));
         assert!(deskewed < 0.05, "{id}: de-skewed {deskewed} m");
         assert!(
             at_once > deskewed,
@@ -256,7 +267,8 @@ fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
         worst_deskewed = worst_deskewed.max(deskewed);
         worst_at_once = worst_at_once.max(at_once);
     }
-    // Measured: 0.013 m against 0.080 m for the rover that turned most.
+    // Measured: 0.013 m against 0.106 m for the rover that turned most (with the margin
+    // 0.017 m de-skewed and 0.015 m at once).
     assert!(
         worst_at_once > 3.0 * worst_deskewed,
         "worst rover taken at once {worst_at_once} m, de-skewed {worst_deskewed} m"
