@@ -856,6 +856,15 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "wheel-scale-from-0.92",
+        what: "the wheels' travel scaled by 0.92 until the rover has learnt its own scale (five segments of well-pinned travel), not taken at their word: the first metres from the start, beside the lander, are pinned weakly along the travel",
+        apply: |c| {
+            if let Some(s) = &mut c.mapper.slip_calibration {
+                s.initial_scale = 0.92;
+            }
+        },
+    },
+    Variant {
         name: "setup-89",
         what: "the rovers' setup before the ninetieth session: beams that returned nothing dropped, and every beam clearing cells up to its hit in the grids scans are matched against too",
         apply: |c| {

@@ -40,6 +40,10 @@ pub struct SlipCalibration {
     pub min_scale: f64,
     /// Upper bound of the scale.
     pub max_scale: f64,
+    /// The scale until enough segments are in: 1 takes the wheels at their word; a scale
+    /// measured on the same ground beforehand (a calibration drive) spares the first metres
+    /// the wheels' over-report, where the map is young and may pin the travel weakly.
+    pub initial_scale: f64,
 }
 
 impl Default for SlipCalibration {
@@ -53,6 +57,7 @@ impl Default for SlipCalibration {
             min_information_ratio: 10.0,
             min_scale: 0.6,
             max_scale: 1.05,
+            initial_scale: 1.0,
         }
     }
 }
@@ -68,13 +73,13 @@ pub struct WheelScale {
 }
 
 impl WheelScale {
-    /// No segments yet: the wheels are taken at their word.
+    /// No segments yet: the wheels are taken at the configured initial scale.
     pub fn new(cfg: SlipCalibration) -> Self {
         WheelScale {
             cfg,
             anchor: None,
             ratios: VecDeque::with_capacity(cfg.segments),
-            scale: 1.0,
+            scale: cfg.initial_scale,
         }
     }
 
@@ -240,6 +245,20 @@ mod tests {
         let mut v = WheelScale::new(SlipCalibration::default());
         drive(&mut v, 40, 1.5, 0.0);
         assert_eq!(v.scale(), 1.05);
+    }
+
+    #[test]
+    fn an_initial_scale_holds_until_the_rover_has_learnt_its_own() {
+        let cfg = SlipCalibration {
+            initial_scale: 0.92,
+            ..SlipCalibration::default()
+        };
+        let mut w = WheelScale::new(cfg);
+        assert!((w.apply(Pose2::new(1.0, 0.0, 0.0)).x_m - 0.92).abs() < 1e-12);
+        drive(&mut w, 10, 0.8, 0.0);
+        assert_eq!(w.scale(), 0.92, "three segments are not enough");
+        drive(&mut w, 40, 0.8, 0.0);
+        assert!((w.scale() - 0.8).abs() < 1e-9, "{}", w.scale());
     }
 
     #[test]
