@@ -1218,8 +1218,11 @@ pub fn weakest_direction_share(points: &[Point2]) -> f64 {
 /// their hits or leave out the beams that returned nothing (see [`Submap::published`]).
 fn published_grid(cfg: &MapperConfig) -> Option<OccupancyGrid> {
     let f = &cfg.frontend;
-    (f.miss_margin.is_some() || cfg.clear_rays_published_only)
-        .then(|| OccupancyGrid::new(f.resolution_m).with_miss_rule(f.miss_rule))
+    (f.miss_margin.is_some() || cfg.clear_rays_published_only).then(|| {
+        OccupancyGrid::new(f.resolution_m)
+            .with_miss_rule(f.miss_rule)
+            .without_probabilities()
+    })
 }
 
 impl Mapper {

@@ -96,8 +96,8 @@ pub struct OccupancyGrid {
     /// holds 0.
     log_odds: Vec<f32>,
     /// Each kept cell's occupancy probability, [`probability`] of its log-odds, for the
-    /// matcher's lookups; empty once the grid was cut, when each is worked out from its
-    /// log-odds as it is read.
+    /// matcher's lookups; empty once the grid was cut, or in a grid that keeps none, when
+    /// each is worked out from its log-odds as it is read.
     prob: Vec<f32>,
     /// The cells kept in memory, if not all.
     window: Option<CellWindow>,
@@ -109,6 +109,9 @@ pub struct OccupancyGrid {
     content: Option<(Point2, Point2)>,
     miss_rule: MissRule,
     miss_margin: Option<MissMargin>,
+    /// Whether `prob` is kept up to date while the grid is whole
+    /// ([`OccupancyGrid::without_probabilities`]).
+    keeps_probabilities: bool,
 }
 
 /// A rectangle of a grid's cells: columns `x0..x0 + width`, rows `y0..y0 + height`.
@@ -154,6 +157,7 @@ impl OccupancyGrid {
             content: None,
             miss_rule: MissRule::default(),
             miss_margin: None,
+            keeps_probabilities: true,
         }
     }
 
@@ -167,6 +171,17 @@ impl OccupancyGrid {
     /// clears every cell up to its hit's).
     pub fn with_miss_margin(mut self, margin: Option<MissMargin>) -> Self {
         self.miss_margin = margin;
+        self
+    }
+
+    /// The grid keeping no probabilities: one that is only rendered or read cell by cell,
+    /// never matched against. Every update then writes one value instead of two, and the
+    /// grid takes half the memory; a lookup works each probability out as it reads it, and
+    /// every answer stays the same.
+    pub fn without_probabilities(mut self) -> Self {
+        self.keeps_probabilities = false;
+        self.prob = Vec::new();
+        self.set_lookup_limits();
         self
     }
 
@@ -193,6 +208,7 @@ impl OccupancyGrid {
             content: Some((geometry.origin, max)),
             miss_rule: MissRule::default(),
             miss_margin: None,
+            keeps_probabilities: true,
         })
     }
 
@@ -285,13 +301,13 @@ impl OccupancyGrid {
         self.set_lookup_limits();
     }
 
-    /// Keeps every cell and its probability in memory again (undoes
+    /// Keeps every cell in memory again, and its probability if the grid keeps them (undoes
     /// [`cut_to_content`](Self::cut_to_content); nothing to do for a whole grid).
     pub fn make_whole(&mut self) {
         if let Some(w) = self.window.take() {
             self.log_odds = self.spread_out(w);
         }
-        if self.prob.is_empty() {
+        if self.prob.is_empty() && self.keeps_probabilities {
             self.prob = probabilities_of(&self.log_odds);
         }
         self.set_lookup_limits();
@@ -303,10 +319,10 @@ impl OccupancyGrid {
         self.lookup_limits = lookup_limits(self.width, self.height, !self.prob.is_empty());
     }
 
-    /// Whether every cell and its probability are kept in memory (see
-    /// [`cut_to_content`](Self::cut_to_content)).
+    /// Whether every cell is kept in memory, and its probability if the grid keeps them
+    /// (see [`cut_to_content`](Self::cut_to_content)).
     pub fn is_whole(&self) -> bool {
-        self.window.is_none() && !self.prob.is_empty()
+        self.window.is_none() && (!self.prob.is_empty() || !self.keeps_probabilities)
     }
 
     /// The log-odds of cell (`x`, `y`), inside the grid.
@@ -366,7 +382,9 @@ impl OccupancyGrid {
             return;
         };
         self.log_odds = regrow(&self.log_odds, w, h, g, 0.0);
-        self.prob = regrow(&self.prob, w, h, g, 0.5);
+        if self.keeps_probabilities {
+            self.prob = regrow(&self.prob, w, h, g, 0.5);
+        }
         let r = self.resolution_m;
         self.origin = Point2::new(
             self.origin.x_m - g[0] as f64 * r,
@@ -385,7 +403,9 @@ impl OccupancyGrid {
         // and its probability need not be worked out again.
         if l != old {
             self.log_odds[i] = l;
-            self.prob[i] = probabilities.of(l);
+            if self.keeps_probabilities {
+                self.prob[i] = probabilities.of(l);
+            }
         }
     }
 
@@ -514,7 +534,11 @@ impl OccupancyGrid {
         self.width = 1;
         self.height = 1;
         self.log_odds = vec![0.0];
-        self.prob = vec![0.5];
+        self.prob = if self.keeps_probabilities {
+            vec![0.5]
+        } else {
+            Vec::new()
+        };
         self.window = None;
         self.set_lookup_limits();
         self.content = None;
@@ -1242,25 +1266,81 @@ mod tests {
         }
     }
 
+    /// Scan `k` of a sensor moving diagonally: 90 beams of ranges 2-3.8 m, every
+    /// eleventh a miss.
+    fn scan(k: usize) -> (Point2, Vec<(Point2, bool)>) {
+        let sensor = Point2::new(0.3 * k as f64, 0.1 * k as f64);
+        let ends = (0..90)
+            .map(|b| {
+                let a = b as f64 * 4f64.to_radians();
+                let r = 2.0 + (b % 7) as f64 * 0.3;
+                (
+                    Point2::new(sensor.x_m + r * a.cos(), sensor.y_m + r * a.sin()),
+                    b % 11 != 0,
+                )
+            })
+            .collect();
+        (sensor, ends)
+    }
+
+    /// A grid's answers to lookups across its content's edge and far outside it, on and
+    /// off cell centres, as bits.
+    fn probe(g: &OccupancyGrid) -> Vec<u64> {
+        (0..6400)
+            .flat_map(|i| {
+                let p = Point2::new(
+                    -7.0 + (i % 80) as f64 * 0.1913,
+                    -7.0 + (i / 80) as f64 * 0.1717,
+                );
+                let (v, [gx, gy]) = g.probability_and_gradient(p);
+                [
+                    v.to_bits(),
+                    gx.to_bits(),
+                    gy.to_bits(),
+                    g.log_odds_at(p).to_bits() as u64,
+                ]
+            })
+            .collect()
+    }
+
+    /// A grid that keeps no probabilities answers every lookup as one that does, through
+    /// growth, cuts and being made whole: only the cost differs.
+    #[test]
+    fn a_grid_without_probabilities_answers_as_one_with_them() {
+        let mut with = OccupancyGrid::new(0.05).with_miss_rule(MissRule::OncePerScan);
+        let mut without = with.clone().without_probabilities();
+        for k in 0..6 {
+            let (sensor, ends) = scan(k);
+            with.insert(sensor, &ends);
+            without.insert(sensor, &ends);
+            assert!(without.is_whole());
+            assert_eq!(probe(&without), probe(&with), "after scan {k}");
+            if k == 3 {
+                with.cut_to_content();
+                without.cut_to_content();
+                assert_eq!(probe(&without), probe(&with));
+            }
+        }
+        without.observe_cells(&[(Point2::new(9.0, 9.0), true)]);
+        with.observe_cells(&[(Point2::new(9.0, 9.0), true)]);
+        without.make_whole();
+        assert!(without.is_whole());
+        assert_eq!(without.geometry(), with.geometry());
+        assert_eq!(without.log_odds(), with.log_odds());
+        assert_eq!(without.probabilities(), with.probabilities());
+        assert_eq!(probe(&without), probe(&with));
+        // It keeps one value a cell, not two.
+        assert!(without.prob.is_empty());
+        without.release();
+        with.release();
+        assert_eq!(probe(&without), probe(&with));
+    }
+
     /// A finished submap's grid is cut to its content: every lookup must give the same bits
     /// as before, a grid updated meanwhile must end as one that stayed whole, and the grid
     /// made whole again must hold the same cells and probabilities.
     #[test]
     fn a_grid_cut_to_its_content_answers_as_the_whole_grid() {
-        let scan = |k: usize| -> (Point2, Vec<(Point2, bool)>) {
-            let sensor = Point2::new(0.3 * k as f64, 0.1 * k as f64);
-            let ends = (0..90)
-                .map(|b| {
-                    let a = b as f64 * 4f64.to_radians();
-                    let r = 2.0 + (b % 7) as f64 * 0.3;
-                    (
-                        Point2::new(sensor.x_m + r * a.cos(), sensor.y_m + r * a.sin()),
-                        b % 11 != 0,
-                    )
-                })
-                .collect();
-            (sensor, ends)
-        };
         let mut whole = OccupancyGrid::new(0.05).with_miss_rule(MissRule::OncePerScan);
         for k in 0..3 {
             let (sensor, ends) = scan(k);
@@ -1269,24 +1349,6 @@ mod tests {
         let mut cut = whole.clone();
         cut.cut_to_content();
         assert!(!cut.is_whole());
-        // Lookups across the content's edge and far outside it, on and off cell centres.
-        let probe = |g: &OccupancyGrid| -> Vec<u64> {
-            (0..6400)
-                .flat_map(|i| {
-                    let p = Point2::new(
-                        -7.0 + (i % 80) as f64 * 0.1913,
-                        -7.0 + (i / 80) as f64 * 0.1717,
-                    );
-                    let (v, [gx, gy]) = g.probability_and_gradient(p);
-                    [
-                        v.to_bits(),
-                        gx.to_bits(),
-                        gy.to_bits(),
-                        g.log_odds_at(p).to_bits() as u64,
-                    ]
-                })
-                .collect()
-        };
         assert_eq!(probe(&cut), probe(&whole));
         assert_eq!(cut.geometry(), whole.geometry());
         assert_eq!(cut.log_odds(), whole.log_odds());
