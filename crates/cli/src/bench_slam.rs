@@ -856,22 +856,25 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
-        name: "wheel-scale-from-0.92",
-        what: "the wheels' travel scaled by 0.92 until the rover has learnt its own scale (five segments of well-pinned travel), not taken at their word: the first metres from the start, beside the lander, are pinned weakly along the travel",
+        name: "wheel-scale-from-1",
+        what: "the wheels taken at their word until the rover has learnt its own scale (five segments of well-pinned travel), as before the ninety-first session, not at 0.92 of it",
         apply: |c| {
             if let Some(s) = &mut c.mapper.slip_calibration {
-                s.initial_scale = 0.92;
+                s.initial_scale = 1.0;
             }
         },
     },
     Variant {
         name: "setup-89",
-        what: "the rovers' setup before the ninetieth session: beams that returned nothing dropped, and every beam clearing cells up to its hit in the grids scans are matched against too",
+        what: "the rovers' setup before the ninetieth session: beams that returned nothing dropped, every beam clearing cells up to its hit in the grids scans are matched against too, and the wheels taken at their word until the rover has learnt its scale",
         apply: |c| {
             c.clear_rays_m = None;
             c.mapper.frontend.miss_margin = None;
             c.mapper.clear_rays_published_only = false;
             c.mapper.clear_rays_spacing_m = None;
+            if let Some(s) = &mut c.mapper.slip_calibration {
+                s.initial_scale = 1.0;
+            }
         },
     },
     Variant {

@@ -224,8 +224,9 @@ fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
 /// A sweeping lidar (each beam 0.28 ms after the one before) on rovers that turn and drive:
 /// de-skewed, the scans track the truth; taken as if measured at once, the same scans put
 /// the rovers off by far more (the turns smear every wall a scan sees). The rovers' miss
-/// margin leaves the cells round each hit to the hits, which forgives the smear of this
-/// minute's turns (both within 2 cm), so the two are compared without it.
+/// margin leaves the cells round each hit to the hits, which can forgive the smear (this
+/// minute's, with the wheels taken at their word: 0.017 m de-skewed, 0.015 m at once;
+/// taken at 0.92 of it: 0.014 against 0.080 m), so the two are compared without it.
 #[test]
 fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     let mut s = small();
@@ -260,15 +261,13 @@ fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
         assert!(rovers < 0.05, "{id}: de-skewed {rovers} m with the margin");
         let (deskewed, at_once) = (rms(*id, input, true, false), rms(*id, input, false, false));
         assert!(deskewed < 0.05, "{id}: de-skewed {deskewed} m");
-        assert!(
-            at_once > deskewed,
-            "{id}: taken at once {at_once} m against de-skewed {deskewed} m"
-        );
+        // A rover that barely turns smears nothing: its two errors are alike (rover2: 0.010
+        // m de-skewed, 0.008 m at once), so only the worst rovers are compared.
         worst_deskewed = worst_deskewed.max(deskewed);
         worst_at_once = worst_at_once.max(at_once);
     }
-    // Measured: 0.013 m against 0.106 m for the rover that turned most (with the margin
-    // 0.017 m de-skewed and 0.015 m at once).
+    // Measured: 0.011 m against 0.114 m for the rover that turned most (with the margin
+    // 0.014 m de-skewed).
     assert!(
         worst_at_once > 3.0 * worst_deskewed,
         "worst rover taken at once {worst_at_once} m, de-skewed {worst_deskewed} m"
