@@ -292,7 +292,8 @@ pub struct BenchSlamArgs {
     #[arg(long)]
     pub radio: bool,
     /// Replace the wheels' odometry by the truth's motion before the replays (wheels that
-    /// neither slip nor drift), to see what the wheels' errors cost.
+    /// neither slip nor drift, taken at their word from the start), to see what the wheels'
+    /// errors cost.
     #[arg(long)]
     pub perfect_wheels: bool,
     /// Remove what the rovers' start-up calibration leaves of each gyro's bias before the
