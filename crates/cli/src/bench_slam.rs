@@ -1050,6 +1050,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.silent_pixels = true,
     },
     Variant {
+        name: "cells-2.5cm",
+        what: "the submaps' grids (matching and published) of 2.5 cm cells, not 5 cm: four times the memory and twice the walk per beam, to see what the cells' size does to the maps' stretch",
+        apply: |c| c.mapper.frontend.resolution_m = 0.025,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,
