@@ -858,11 +858,7 @@ const VARIANTS: &[Variant] = &[
     Variant {
         name: "wheel-scale-from-1",
         what: "the wheels taken at their word until the rover has learnt its own scale (five segments of well-pinned travel), as before the ninety-first session, not at 0.92 of it",
-        apply: |c| {
-            if let Some(s) = &mut c.mapper.slip_calibration {
-                s.initial_scale = 1.0;
-            }
-        },
+        apply: |c| c.mapper.take_wheels_at_their_word(),
     },
     Variant {
         name: "setup-89",
@@ -872,9 +868,7 @@ const VARIANTS: &[Variant] = &[
             c.mapper.frontend.miss_margin = None;
             c.mapper.clear_rays_published_only = false;
             c.mapper.clear_rays_spacing_m = None;
-            if let Some(s) = &mut c.mapper.slip_calibration {
-                s.initial_scale = 1.0;
-            }
+            c.mapper.take_wheels_at_their_word();
         },
     },
     Variant {
@@ -1511,12 +1505,10 @@ pub(crate) fn run(args: BenchSlamArgs) -> Result<()> {
                 .collect(),
         };
         let mut cfg = rover_mapping_config(&world, &options);
-        if args.perfect_wheels
-            && let Some(s) = &mut cfg.mapper.slip_calibration
-        {
+        if args.perfect_wheels {
             // Wheels that report the travel exactly: a calibration drive would find their
             // scale 1, and the analogue's 0.92 would shrink the first metres by 8 %.
-            s.initial_scale = 1.0;
+            cfg.mapper.take_wheels_at_their_word();
         }
         let ids: Vec<RoverId> = world.rovers().map(|b| b.id).collect();
         let biases: Vec<f64> = world.rovers().map(|b| b.gyro_bias_rad_s).collect();

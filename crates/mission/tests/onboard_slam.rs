@@ -257,8 +257,11 @@ fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     };
     let (mut worst_deskewed, mut worst_at_once) = (0.0f64, 0.0f64);
     for (id, input) in ids.iter().zip(&capture) {
-        let rovers = rms(*id, input, true, true);
-        assert!(rovers < 0.05, "{id}: de-skewed {rovers} m with the margin");
+        let with_margin = rms(*id, input, true, true);
+        assert!(
+            with_margin < 0.05,
+            "{id}: de-skewed {with_margin} m with the margin"
+        );
         let (deskewed, at_once) = (rms(*id, input, true, false), rms(*id, input, false, false));
         assert!(deskewed < 0.05, "{id}: de-skewed {deskewed} m");
         // A rover that barely turns smears nothing: its two errors are alike (rover2: 0.010

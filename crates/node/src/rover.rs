@@ -524,12 +524,9 @@ mod tests {
 
     /// The rovers' SLAM for the tests' wheels, which report the travel exactly: a
     /// calibration drive on their ground would find a scale of 1, not the analogue's 0.92.
-    fn exact_wheels(
-        mut mapper: realms_slam::mapper::MapperConfig,
-    ) -> realms_slam::mapper::MapperConfig {
-        if let Some(s) = &mut mapper.slip_calibration {
-            s.initial_scale = 1.0;
-        }
+    fn rover_mapper_config_for_exact_wheels() -> realms_slam::mapper::MapperConfig {
+        let mut mapper = rover_mapper_config();
+        mapper.take_wheels_at_their_word();
         mapper
     }
 
@@ -551,7 +548,7 @@ mod tests {
                     hazards_follow_keyframes: None,
                     hazards_redrawn_while_mapping: false,
                     clear_rays_m: None,
-                    mapper: exact_wheels(rover_mapper_config()),
+                    mapper: rover_mapper_config_for_exact_wheels(),
                     map_period: Duration::from_secs(60),
                     delta_period: Duration::from_secs(60),
                     gyro_calibration: Duration::from_secs(1),

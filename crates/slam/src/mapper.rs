@@ -851,6 +851,17 @@ pub struct MotionFilter {
     pub rotation_rad: f64,
 }
 
+impl MapperConfig {
+    /// Until the wheel scale is learnt, the wheels taken at their word (an initial scale
+    /// of 1), if the mapper learns one: for wheels that report the travel exactly, or the
+    /// setup before the rovers' initial scale.
+    pub fn take_wheels_at_their_word(&mut self) {
+        if let Some(s) = &mut self.slip_calibration {
+            s.initial_scale = 1.0;
+        }
+    }
+}
+
 impl Default for MapperConfig {
     fn default() -> Self {
         MapperConfig {
