@@ -1049,6 +1049,11 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.frontend.resolution_m = 0.025,
     },
     Variant {
+        name: "grids-traced-apart",
+        what: "each keyframe traced into a submap's matching grid and its published grid by walks of their own, as before the ninety-second session, not by one walk along each beam marking both",
+        apply: |c| c.mapper.grids_traced_apart = true,
+    },
+    Variant {
         name: "three-levels",
         what: "scans matched coarse to fine on three grids (5, 10, 20 cm)",
         apply: |c| c.mapper.frontend.levels = 3,

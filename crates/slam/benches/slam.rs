@@ -32,7 +32,7 @@ use realms_slam::hollows::{HazardHollows, HollowFinder};
 use realms_slam::mapper::{Mapper, MapperConfig};
 use realms_slam::matcher::{MatcherConfig, MultiResMap, match_scan};
 use realms_slam::ndt::{NdtConfig, NdtMap};
-use realms_slam::occupancy::{CellState, MissRule};
+use realms_slam::occupancy::{CellState, MissMargin, MissRule};
 use realms_slam::posegraph::{Edge, GraphSolver, PoseGraph};
 use realms_slam::traversability::{TraversabilityConfig, judge_frame};
 use std::hint::black_box;
@@ -234,6 +234,47 @@ fn benches(c: &mut Criterion) {
                 BatchSize::LargeInput,
             )
         });
+        if s.name == "sim_hall" {
+            // The rovers' keyframe: its beams clear a matching grid up to a margin short of
+            // their hits, and a published grid beside it up to them, filled-in points hits only.
+            let margin = Some(MissMargin {
+                base_m: 0.03,
+                per_m: 0.006,
+            });
+            let matched = s.map.finest().clone().with_miss_margin(margin);
+            let published = s.map.finest().clone().without_probabilities();
+            let rays: Vec<Point2> = s.beams.iter().map(|p| s.pose.transform_point(*p)).collect();
+            let counts = (world.len(), rays.len());
+            c.bench_function(&format!("map_update_two_grids/{}", s.name), |b| {
+                b.iter_batched_ref(
+                    || (published.clone(), matched.clone()),
+                    |(published, matched)| {
+                        published.insert_with_rays_beside(
+                            matched,
+                            s.pose.position(),
+                            black_box(&world),
+                            Some(&rays),
+                            counts,
+                        )
+                    },
+                    BatchSize::LargeInput,
+                )
+            });
+            c.bench_function(&format!("map_update_two_grids_apart/{}", s.name), |b| {
+                b.iter_batched_ref(
+                    || (published.clone(), matched.clone()),
+                    |(published, matched)| {
+                        published.insert_with_rays(
+                            s.pose.position(),
+                            black_box(&world),
+                            Some(&rays),
+                        );
+                        matched.insert_with_rays(s.pose.position(), black_box(&world), Some(&rays));
+                    },
+                    BatchSize::LargeInput,
+                )
+            });
+        }
         // As the rovers search: blocks up to 64 cells, and a margin as wide as the window.
         c.bench_function(&format!("closure_precompute/{}", s.name), |b| {
             b.iter(|| PrecomputedMap::with_margin(black_box(s.map.finest()), 6, 50))

@@ -541,6 +541,13 @@ pub struct MapperConfig {
     /// off reported itself lost there (BENCHMARKS.md, "Lidar beams that return nothing over
     /// 48 missions").
     pub clear_rays_published_only: bool,
+    /// Each keyframe is traced into a submap's matching grid and its published grid
+    /// ([`Submap::published`]) by walks of their own, not by one walk along each beam
+    /// marking both ([`OccupancyGrid::insert_with_rays_beside`]). The shared walk runs to
+    /// where the matching beam stops and on from there, so the published beam bends by up
+    /// to a cell there; the matching grid is the same either way. Kept to measure what the
+    /// sharing saves.
+    pub grids_traced_apart: bool,
     /// Beams that returned nothing are drawn only from keyframes at least this far (metres)
     /// from the last keyframe whose rays were (`None`: from every keyframe). Two in three
     /// keyframes are made for turning on the spot, and each would clear the same ground
@@ -941,6 +948,7 @@ impl Default for MapperConfig {
             optimize_every_keyframes: 20,
             precomputed_kept: 8,
             clear_rays_published_only: false,
+            grids_traced_apart: false,
             clear_rays_spacing_m: None,
             graph_iterations: 3,
             graph_later_cap: None,
@@ -1364,14 +1372,28 @@ impl Mapper {
             .as_ref()
             .map_or((&world, &world_rays), |(w, r)| (w, r));
         let s = &mut self.submaps[submap];
-        s.map
-            .insert_with_rays(local.position(), &world, world_rays.as_deref());
-        if let Some(published) = &mut s.published {
-            published.insert_with_rays(
-                local.position(),
-                published_world,
-                published_rays.as_deref(),
-            );
+        match (&mut s.published, s.map.single_level_mut()) {
+            (Some(published), Some(matched)) if !self.cfg.grids_traced_apart => {
+                // The matching grid's beams are the published grid's, stopped short.
+                published.insert_with_rays_beside(
+                    matched,
+                    local.position(),
+                    published_world,
+                    published_rays.as_deref(),
+                    (world.len(), world_rays.as_ref().map_or(0, Vec::len)),
+                );
+            }
+            _ => {
+                s.map
+                    .insert_with_rays(local.position(), &world, world_rays.as_deref());
+                if let Some(published) = &mut s.published {
+                    published.insert_with_rays(
+                        local.position(),
+                        published_world,
+                        published_rays.as_deref(),
+                    );
+                }
+            }
         }
         s.keyframes += 1;
         s.drawn.push(local);

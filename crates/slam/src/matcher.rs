@@ -93,6 +93,14 @@ impl MultiResMap {
         &self.levels[0]
     }
 
+    /// The map, if there is only one level.
+    pub fn single_level_mut(&mut self) -> Option<&mut OccupancyGrid> {
+        match &mut self.levels[..] {
+            [only] => Some(only),
+            _ => None,
+        }
+    }
+
     /// The coarsest map.
     pub fn coarsest(&self) -> &OccupancyGrid {
         self.levels.last().expect("at least one level")

@@ -446,6 +446,78 @@ impl OccupancyGrid {
         );
     }
 
+    /// [`insert_with_rays`](Self::insert_with_rays) into this grid, and into `matched` the
+    /// same scan's first `matched_endpoints` endpoints and first `matched_rays` rays, each
+    /// stopped short by its own margin. Where both grids clear cells once a scan on the same
+    /// cells, and this one stops no beam short, one walk along each beam marks both (see
+    /// [`trace_once_per_scan`]): `matched` comes out as traced on its own, and this grid with
+    /// each of those beams bent by up to a cell where the matching beam stops. Otherwise
+    /// each grid is traced on its own.
+    pub fn insert_with_rays_beside(
+        &mut self,
+        matched: &mut OccupancyGrid,
+        sensor: Point2,
+        endpoints: &[(Point2, bool)],
+        rays: Option<&[Point2]>,
+        (matched_endpoints, matched_rays): (usize, usize),
+    ) {
+        let (matched_endpoints, matched_rays) = (
+            matched_endpoints.min(endpoints.len()),
+            rays.map_or(0, |r| matched_rays.min(r.len())),
+        );
+        let r = self.resolution_m;
+        let shares_walks = self.miss_rule == MissRule::OncePerScan
+            && matched.miss_rule == MissRule::OncePerScan
+            && self.miss_margin.is_none()
+            && matched.resolution_m == r
+            && matched_endpoints > 0;
+        if !shares_walks {
+            self.insert_with_rays(sensor, endpoints, rays);
+            matched.insert_with_rays(
+                sensor,
+                &endpoints[..matched_endpoints],
+                rays.map(|r| &r[..matched_rays]),
+            );
+            return;
+        }
+        let (min, max) = beams_box(sensor, endpoints);
+        self.ensure(min, max);
+        self.touch(min, max);
+        let (matched_min, matched_max) = beams_box(sensor, &endpoints[..matched_endpoints]);
+        matched.ensure(matched_min, matched_max);
+        matched.touch(matched_min, matched_max);
+        let lattice = Lattice {
+            origin: self.origin,
+            resolution_m: r,
+            width: self.width,
+        };
+        // Both grids started on one lattice and grow by whole cells.
+        let second = SecondGrid {
+            offset: (
+                ((self.origin.x_m - matched.origin.x_m) / r).round() as i64,
+                ((self.origin.y_m - matched.origin.y_m) / r).round() as i64,
+            ),
+            width: matched.width,
+            height: matched.height,
+            margin: matched.miss_margin,
+            endpoints: matched_endpoints,
+            rays: matched_rays,
+        };
+        let (mut own, mut theirs) = (ProbabilityCache::new(), ProbabilityCache::new());
+        trace_once_per_scan(
+            &lattice,
+            sensor,
+            endpoints,
+            rays,
+            None,
+            Some(second),
+            |layer, i, delta| match layer {
+                Layer::First => self.update(i, delta, &mut own),
+                Layer::Second => matched.update(i, delta, &mut theirs),
+            },
+        );
+    }
+
     /// The log-odds of the cell holding `p`; 0 (no evidence) outside the grid.
     pub fn log_odds_at(&self, p: Point2) -> f32 {
         let r = self.resolution_m;
@@ -790,93 +862,213 @@ pub(crate) fn trace_beams(
                 update((end.1 * w + end.0) as usize, if *hit { HIT } else { MISS });
             }
         }
-        MissRule::OncePerScan => {
-            // The scan's box of cells as one byte each: the beams only mark the cells they
-            // cross (the box fits in the cache where the grid does not), and the misses are
-            // then applied row by row, in the grid's own order. Each cell's update depends
-            // on that cell alone, so the order changes nothing but the cost.
-            let (min, max) = beams_box(sensor, endpoints);
-            let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
-            let (box_w, rows) = ((tx - bx + 1) as usize, (ty - by + 1) as usize);
-            let mark_of = |(x, y): (i64, i64)| (y - by) * box_w as i64 + (x - bx);
-            let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
-            for (&end, (_, hit)) in ends.iter().zip(endpoints) {
-                if *hit {
-                    update((end.1 * w + end.0) as usize, HIT);
-                }
-            }
-            SCAN_MARKS.with_borrow_mut(|marks| {
-                if marks.len() < box_w * rows {
-                    marks.resize(box_w * rows, 0);
-                }
-                let marks = &mut marks[..box_w * rows];
-                let from = mark_of(start);
-                let ray_ends: Vec<(i64, i64)>;
-                let traced = match (rays, margin) {
-                    (None, None) => &ends,
-                    (None, Some(_)) => {
-                        ray_ends = endpoints
-                            .iter()
-                            .map(|(p, hit)| to_cell(stop(*p, *hit)))
-                            .collect();
-                        &ray_ends
-                    }
-                    (Some(rays), _) => {
-                        ray_ends = rays.iter().map(|p| to_cell(stop(*p, true))).collect();
-                        &ray_ends
-                    }
-                };
-                for &end in traced {
-                    // A walk depends only on its two cells, so a second beam ending in a
-                    // cell a walk already ended in would cross the same cells again: filled-in
-                    // scans end two or three beams in many cells.
-                    let at = mark_of(end) as usize;
-                    if marks[at] == WALKED_TO {
-                        continue;
-                    }
-                    walk_marking(start, end, from, box_w as i64, marks);
-                    if marks[at] == 0 {
-                        marks[at] = WALKED_TO;
-                    }
-                }
-                for &end in &ends {
-                    marks[mark_of(end) as usize] = CROSSED;
-                }
-                for (&end, (_, hit)) in ends.iter().zip(endpoints) {
-                    if *hit {
-                        marks[mark_of(end) as usize] = ENDS_A_HIT;
-                    }
-                }
-                // The sweep leaves every mark at zero again for the next scan. Most of the
-                // box is outside the scan's fan: eight marks at a time are passed over.
-                for (row, marks) in marks.chunks_exact_mut(box_w).enumerate() {
-                    let first = (by + row as i64) * w + bx;
-                    for (chunk, eight) in marks.chunks_mut(8).enumerate() {
-                        if let Ok(word) = <[u8; 8]>::try_from(&*eight)
-                            && u64::from_ne_bytes(word) == 0
-                        {
-                            continue;
-                        }
-                        for (x, mark) in eight.iter_mut().enumerate() {
-                            if *mark == CROSSED {
-                                update((first + (chunk * 8 + x) as i64) as usize, MISS);
-                            }
-                            *mark = 0;
-                        }
-                    }
-                }
-            });
-        }
+        MissRule::OncePerScan => trace_once_per_scan(
+            lattice,
+            sensor,
+            endpoints,
+            rays,
+            margin,
+            None,
+            |_, i, delta| update(i, delta),
+        ),
     }
 }
 
-/// A cell of the scan being traced that a beam crosses or a clipped beam ends in.
+/// A second grid traced on the walks of another's ([`trace_once_per_scan`]): its beams are
+/// the first `endpoints` endpoints and the first `rays` rays of the first grid's, each
+/// stopped where its own `margin` stops it, which must be no farther than the first grid's
+/// stop.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SecondGrid {
+    /// The lattice's cell (x, y) is its cell (x + offset.0, y + offset.1).
+    pub offset: (i64, i64),
+    /// Its columns.
+    pub width: usize,
+    /// Its rows.
+    pub height: usize,
+    /// Where its beams stop short of their hits.
+    pub margin: Option<MissMargin>,
+    /// How many of the endpoints are its own, from the first.
+    pub endpoints: usize,
+    /// How many of the rays are its own, from the first.
+    pub rays: usize,
+}
+
+/// A cell of a lattice: column and row.
+type Cell = (i64, i64);
+
+/// The grid an update of [`trace_once_per_scan`] is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Layer {
+    First,
+    Second,
+}
+
+/// [`trace_beams`] by the once-a-scan rule, into the grid of `lattice` and, if given, a
+/// `second` grid whose beams are the first's cut shorter. One walk serves both: a beam of
+/// both grids is walked from the sensor to where the second grid's stops, marking both,
+/// and on from there to where the first grid's stops, marking the first. The second grid
+/// gets the cells a walk of its own would give it; the first, a beam bent by up to a cell
+/// where the second's stops.
+pub(crate) fn trace_once_per_scan(
+    lattice: &Lattice,
+    sensor: Point2,
+    endpoints: &[(Point2, bool)],
+    rays: Option<&[Point2]>,
+    margin: Option<MissMargin>,
+    second: Option<SecondGrid>,
+    mut update: impl FnMut(Layer, usize, f32),
+) {
+    let r = lattice.resolution_m;
+    let origin = lattice.origin;
+    let to_cell = |p: Point2| {
+        (
+            floor_to_i64((p.x_m - origin.x_m) / r),
+            floor_to_i64((p.y_m - origin.y_m) / r),
+        )
+    };
+    let start = to_cell(sensor);
+    let w = lattice.width as i64;
+    let stop = |margin: Option<MissMargin>, p: Point2, hit: bool| match margin {
+        Some(m) if hit => m.short_of(sensor, p),
+        _ => p,
+    };
+    let (second_endpoints, second_rays) = second.map_or((0, 0), |g| (g.endpoints, g.rays));
+    let ((ox, oy), (second_w, second_h)) =
+        second.map_or(((0, 0), (0, 0)), |g| (g.offset, (g.width, g.height)));
+    // The second grid's cells are found on the first's lattice, which may put a point on a
+    // cell's very edge on the other side of it: a cell its own walk would have kept within
+    // its bounds might then lie outside them, and is left alone.
+    let second_index = |(x, y): (i64, i64)| {
+        let (x, y) = ((x + ox) as usize, (y + oy) as usize);
+        (x < second_w && y < second_h).then(|| y * second_w + x)
+    };
+    // The scan's box of cells as one byte each: the beams only mark the cells they cross
+    // (the box fits in the cache where the grid does not), and the misses are then applied
+    // row by row, in the grid's own order. Each cell's update depends on that cell alone,
+    // so the order changes nothing but the cost.
+    let (min, max) = beams_box(sensor, endpoints);
+    let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
+    let (box_w, rows) = ((tx - bx + 1) as usize, (ty - by + 1) as usize);
+    let mark_of = |(x, y): (i64, i64)| (y - by) * box_w as i64 + (x - bx);
+    let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
+    for (k, (&end, (_, hit))) in ends.iter().zip(endpoints).enumerate() {
+        if *hit {
+            update(Layer::First, (end.1 * w + end.0) as usize, HIT);
+            if k < second_endpoints
+                && let Some(i) = second_index(end)
+            {
+                update(Layer::Second, i, HIT);
+            }
+        }
+    }
+    SCAN_MARKS.with_borrow_mut(|marks| {
+        if marks.len() < box_w * rows {
+            marks.resize(box_w * rows, 0);
+        }
+        let marks = &mut marks[..box_w * rows];
+        let from = mark_of(start);
+        // Each walk's end, and where the second grid's beam along it stops, if it has one.
+        let walks: Vec<(Cell, Option<Cell>)> = match rays {
+            None => endpoints
+                .iter()
+                .enumerate()
+                .map(|(k, (p, hit))| {
+                    let second_stop = second
+                        .filter(|_| k < second_endpoints)
+                        .map(|g| to_cell(stop(g.margin, *p, *hit)));
+                    (to_cell(stop(margin, *p, *hit)), second_stop)
+                })
+                .collect(),
+            Some(rays) => rays
+                .iter()
+                .enumerate()
+                .map(|(k, p)| {
+                    let second_stop = second
+                        .filter(|_| k < second_rays)
+                        .map(|g| to_cell(stop(g.margin, *p, true)));
+                    (to_cell(stop(margin, *p, true)), second_stop)
+                })
+                .collect(),
+        };
+        // A walk depends only on its two cells, so a second beam ending in a cell a walk
+        // from the sensor already ended in would cross the same cells again: filled-in
+        // scans end two or three beams in many cells.
+        let walk_once = |marks: &mut [u8], end: (i64, i64), mark: u8, walked: u8| {
+            let at = mark_of(end) as usize;
+            if marks[at] & walked != walked {
+                walk_marking(start, end, from, box_w as i64, marks, mark);
+                marks[at] |= walked;
+            }
+        };
+        for (end, second_stop) in walks {
+            match second_stop {
+                None => walk_once(marks, end, CROSSED, WALKED),
+                Some(stop) => {
+                    walk_once(marks, stop, CROSSED | CROSSED_SECOND, WALKED_BOTH);
+                    if stop != end {
+                        walk_marking(stop, end, mark_of(stop), box_w as i64, marks, CROSSED);
+                    }
+                }
+            }
+        }
+        for (k, &end) in ends.iter().enumerate() {
+            marks[mark_of(end) as usize] |= if k < second_endpoints {
+                CROSSED | CROSSED_SECOND
+            } else {
+                CROSSED
+            };
+        }
+        for (k, (&end, (_, hit))) in ends.iter().zip(endpoints).enumerate() {
+            if *hit {
+                marks[mark_of(end) as usize] |= if k < second_endpoints {
+                    ENDS_A_HIT | ENDS_A_HIT_SECOND
+                } else {
+                    ENDS_A_HIT
+                };
+            }
+        }
+        // The sweep leaves every mark at zero again for the next scan. Most of the box is
+        // outside the scan's fan: eight marks at a time are passed over.
+        for (row, marks) in marks.chunks_exact_mut(box_w).enumerate() {
+            let y = by + row as i64;
+            let first = y * w + bx;
+            for (chunk, eight) in marks.chunks_mut(8).enumerate() {
+                if let Ok(word) = <[u8; 8]>::try_from(&*eight)
+                    && u64::from_ne_bytes(word) == 0
+                {
+                    continue;
+                }
+                for (x, mark) in eight.iter_mut().enumerate() {
+                    let column = (chunk * 8 + x) as i64;
+                    if *mark & (CROSSED | ENDS_A_HIT) == CROSSED {
+                        update(Layer::First, (first + column) as usize, MISS);
+                    }
+                    if *mark & (CROSSED_SECOND | ENDS_A_HIT_SECOND) == CROSSED_SECOND
+                        && let Some(i) = second_index((bx + column, y))
+                    {
+                        update(Layer::Second, i, MISS);
+                    }
+                    *mark = 0;
+                }
+            }
+        }
+    });
+}
+
+/// A mark of the scan being traced: a beam crosses the cell, or a clipped beam ends in it.
 const CROSSED: u8 = 1;
-/// A cell of the scan being traced that a hit ends in (whatever beams cross it).
+/// A mark: a hit ends in the cell (whatever beams cross it).
 const ENDS_A_HIT: u8 = 2;
-/// A cell of the scan being traced that a walk ended in and no beam has yet crossed: not a
-/// miss for that alone (a walk stops before its last cell), and never walked to again.
-const WALKED_TO: u8 = 3;
+/// A mark: a walk ended in the cell (a walk stops before its last cell, so that alone is no
+/// miss), and need not be walked to again.
+const WALKED: u8 = 4;
+/// [`CROSSED`] for the second grid of [`trace_once_per_scan`].
+const CROSSED_SECOND: u8 = 8;
+/// [`ENDS_A_HIT`] for the second grid.
+const ENDS_A_HIT_SECOND: u8 = 16;
+/// [`WALKED`] by a walk that marked the second grid too.
+const WALKED_BOTH: u8 = WALKED | 32;
 
 std::thread_local! {
     /// Scratch marks for [`trace_beams`]'s once-a-scan rule, all zero between scans: kept
@@ -885,12 +1077,19 @@ std::thread_local! {
     static SCAN_MARKS: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// [`walk`], marking each cell [`CROSSED`] in `marks` instead of calling a visitor, where a
-/// cell's mark lies at `at` plus its column's offset from `from`'s plus `row` per row. The
-/// steps are counted and taken by arithmetic rather than branches: along a diagonal beam
-/// which axis a step moves on is a coin toss to a branch predictor, and a keyframe's beams
-/// cross a hundred thousand cells.
-fn walk_marking(from: (i64, i64), (ex, ey): (i64, i64), at: i64, row: i64, marks: &mut [u8]) {
+/// [`walk`], adding `mark` to each cell's mark in `marks` instead of calling a visitor,
+/// where a cell's mark lies at `at` plus its column's offset from `from`'s plus `row` per
+/// row. The steps are counted and taken by arithmetic rather than branches: along a
+/// diagonal beam which axis a step moves on is a coin toss to a branch predictor, and a
+/// keyframe's beams cross a hundred thousand cells.
+fn walk_marking(
+    from: (i64, i64),
+    (ex, ey): (i64, i64),
+    at: i64,
+    row: i64,
+    marks: &mut [u8],
+    mark: u8,
+) {
     let (sx, sy) = from;
     let (dx, dy) = ((ex - sx).abs(), -(ey - sy).abs());
     let (stx, row_step) = ((ex - sx).signum(), (ey - sy).signum() * row);
@@ -898,7 +1097,7 @@ fn walk_marking(from: (i64, i64), (ex, ey): (i64, i64), at: i64, row: i64, marks
     let mut k = at;
     // Every step moves along the longer axis, so the walk takes that many steps.
     for _ in 0..dx.max(-dy) {
-        marks[k as usize] = CROSSED;
+        marks[k as usize] |= mark;
         let e2 = 2 * err;
         let (step_x, step_y) = (i64::from(e2 >= dy), i64::from(e2 <= dx));
         err += step_x * dy + step_y * dx;
@@ -1205,7 +1404,14 @@ mod tests {
                     expected[(y * row + x) as usize] = CROSSED
                 });
                 let mut marks = vec![0u8; 64 * 64];
-                walk_marking(start, (ex, ey), start.1 * row + start.0, row, &mut marks);
+                walk_marking(
+                    start,
+                    (ex, ey),
+                    start.1 * row + start.0,
+                    row,
+                    &mut marks,
+                    CROSSED,
+                );
                 assert_eq!(marks, expected, "to ({ex}, {ey})");
             }
         }
@@ -1301,6 +1507,122 @@ mod tests {
                 ]
             })
             .collect()
+    }
+
+    /// A scan of [`scan`] with beams that returned nothing too, cut at 5 m, after its hits
+    /// (returned as the count of hits and the rays: every other hit's beam, then those).
+    fn scan_with_clear_rays(k: usize) -> (Point2, Vec<(Point2, bool)>, usize, Vec<Point2>) {
+        let (sensor, mut ends) = scan(k);
+        let hits = ends.len();
+        ends.extend((0..45).map(|b| {
+            let a = (2.0 + b as f64 * 8.0).to_radians();
+            (
+                Point2::new(sensor.x_m + 5.0 * a.cos(), sensor.y_m + 5.0 * a.sin()),
+                false,
+            )
+        }));
+        let rays = ends
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i >= hits || i % 2 == 0)
+            .map(|(_, (p, _))| *p)
+            .collect();
+        (sensor, ends, hits, rays)
+    }
+
+    /// One walk along each beam marking a published grid and the matching grid beside it:
+    /// the matching grid, whose beams stop short of their hits, comes out as traced alone,
+    /// and the published grid as traced alone but for cells at the side of its beams, each
+    /// bent by up to a cell where the matching beam stops.
+    #[test]
+    fn grids_traced_on_shared_walks_answer_as_each_traced_alone() {
+        let margin = Some(MissMargin {
+            base_m: 0.03,
+            per_m: 0.006,
+        });
+        let (mut free, mut free_shared) = (0, 0);
+        for with_rays in [false, true] {
+            let published = OccupancyGrid::new(0.05)
+                .with_miss_rule(MissRule::OncePerScan)
+                .without_probabilities();
+            let matched = OccupancyGrid::new(0.05)
+                .with_miss_rule(MissRule::OncePerScan)
+                .with_miss_margin(margin);
+            let (mut published_shared, mut matched_shared) = (published.clone(), matched.clone());
+            let mut matched_all_apart = matched.clone();
+            for k in 0..6 {
+                // Each scan alone into fresh grids, and all of them into grids that grow.
+                let (mut published_apart, mut matched_apart) = (published.clone(), matched.clone());
+                let (mut published_once, mut matched_once) = (published.clone(), matched.clone());
+                let (sensor, ends, hits, rays) = scan_with_clear_rays(k);
+                let rays = with_rays.then_some(&rays[..]);
+                let matched_rays = hits.div_ceil(2);
+                published_apart.insert_with_rays(sensor, &ends, rays);
+                for matched in [&mut matched_apart, &mut matched_all_apart] {
+                    matched.insert_with_rays(
+                        sensor,
+                        &ends[..hits],
+                        rays.map(|r| &r[..matched_rays]),
+                    );
+                }
+                for (published, matched) in [
+                    (&mut published_once, &mut matched_once),
+                    (&mut published_shared, &mut matched_shared),
+                ] {
+                    published.insert_with_rays_beside(
+                        matched,
+                        sensor,
+                        &ends,
+                        rays,
+                        (hits, matched_rays),
+                    );
+                }
+                assert_eq!(matched_once.geometry(), matched_apart.geometry());
+                assert_eq!(matched_once.log_odds(), matched_apart.log_odds());
+                assert_eq!(matched_once.probabilities(), matched_apart.probabilities());
+                assert_eq!(published_once.geometry(), published_apart.geometry());
+                let cell =
+                    |x: i64, y: i64| Point2::new(x as f64 * 0.05 + 0.025, y as f64 * 0.05 + 0.025);
+                let free_in = |g: &OccupancyGrid, x: i64, y: i64| g.log_odds_at(cell(x, y)) < 0.0;
+                for (x, y) in (-200..200).flat_map(|y| (-200..200).map(move |x| (x, y))) {
+                    let (apart, once) = (
+                        published_apart.log_odds_at(cell(x, y)),
+                        published_once.log_odds_at(cell(x, y)),
+                    );
+                    assert_eq!(
+                        apart > 0.0,
+                        once > 0.0,
+                        "scan {k}, rays {with_rays}: cell ({x}, {y}) a hit in one grid only"
+                    );
+                    free += usize::from(apart < 0.0);
+                    free_shared += usize::from(once < 0.0);
+                    if (apart < 0.0) == (once < 0.0) {
+                        continue;
+                    }
+                    // Free in one grid only: a cell of a beam that bends, free in the other
+                    // grid next to it.
+                    let (this, other) = if apart < 0.0 {
+                        (&published_apart, &published_once)
+                    } else {
+                        (&published_once, &published_apart)
+                    };
+                    assert!(free_in(this, x, y));
+                    assert!(
+                        (-1..=1).any(|dy| (-1..=1).any(|dx| free_in(other, x + dx, y + dy))),
+                        "scan {k}, rays {with_rays}: cell ({x}, {y}) free in one grid, nothing free next to it in the other"
+                    );
+                }
+            }
+            // Grown over six scans, the matching grid is still the one traced alone.
+            assert_eq!(matched_shared.geometry(), matched_all_apart.geometry());
+            assert_eq!(matched_shared.log_odds(), matched_all_apart.log_odds());
+        }
+        // A bend trades a cell for its neighbour: about as many cells are cleared.
+        assert!(
+            free_shared.abs_diff(free) * 100 < free,
+            "{free_shared} free cells against {free}"
+        );
+        println!("{free_shared} free cells against {free}");
     }
 
     /// A grid that keeps no probabilities answers every lookup as one that does, through
