@@ -812,6 +812,26 @@ pub(crate) struct Lattice {
     pub width: usize,
 }
 
+impl Lattice {
+    /// The cell holding `p`.
+    fn cell_of(&self, p: Point2) -> Cell {
+        let r = self.resolution_m;
+        (
+            floor_to_i64((p.x_m - self.origin.x_m) / r),
+            floor_to_i64((p.y_m - self.origin.y_m) / r),
+        )
+    }
+}
+
+/// Where a beam from `sensor` to `p` stops clearing cells under `margin` (`hit`: `p` is a
+/// hit; a beam that returned nothing clears all the way).
+fn beam_stop(margin: Option<MissMargin>, sensor: Point2, p: Point2, hit: bool) -> Point2 {
+    match margin {
+        Some(m) if hit => m.short_of(sensor, p),
+        _ => p,
+    }
+}
+
 /// Traces beams from `sensor` to each endpoint over the cells of `lattice` (which must hold
 /// them all), calling `update(cell index, log-odds evidence)`: a hit for each endpoint
 /// marked `hit`, and misses for the cells the beams cross (and the ends of clipped
@@ -828,21 +848,10 @@ pub(crate) fn trace_beams(
     (rule, margin): (MissRule, Option<MissMargin>),
     mut update: impl FnMut(usize, f32),
 ) {
-    let r = lattice.resolution_m;
-    let origin = lattice.origin;
-    let to_cell = |p: Point2| {
-        (
-            floor_to_i64((p.x_m - origin.x_m) / r),
-            floor_to_i64((p.y_m - origin.y_m) / r),
-        )
-    };
+    let to_cell = |p: Point2| lattice.cell_of(p);
     let start = to_cell(sensor);
     let w = lattice.width as i64;
-    // Where a beam to `p` stops clearing cells (`hit`: `p` is a hit).
-    let stop = |p: Point2, hit: bool| match margin {
-        Some(m) if hit => m.short_of(sensor, p),
-        _ => p,
-    };
+    let stop = |p: Point2, hit: bool| beam_stop(margin, sensor, p, hit);
     match rule {
         MissRule::EveryBeam => {
             if let Some(rays) = rays {
@@ -919,20 +928,10 @@ pub(crate) fn trace_once_per_scan(
     second: Option<SecondGrid>,
     mut update: impl FnMut(Layer, usize, f32),
 ) {
-    let r = lattice.resolution_m;
-    let origin = lattice.origin;
-    let to_cell = |p: Point2| {
-        (
-            floor_to_i64((p.x_m - origin.x_m) / r),
-            floor_to_i64((p.y_m - origin.y_m) / r),
-        )
-    };
+    let to_cell = |p: Point2| lattice.cell_of(p);
     let start = to_cell(sensor);
     let w = lattice.width as i64;
-    let stop = |margin: Option<MissMargin>, p: Point2, hit: bool| match margin {
-        Some(m) if hit => m.short_of(sensor, p),
-        _ => p,
-    };
+    let stop = |margin: Option<MissMargin>, p: Point2, hit: bool| beam_stop(margin, sensor, p, hit);
     let (second_endpoints, second_rays) = second.map_or((0, 0), |g| (g.endpoints, g.rays));
     let ((ox, oy), (second_w, second_h)) =
         second.map_or(((0, 0), (0, 0)), |g| (g.offset, (g.width, g.height)));
