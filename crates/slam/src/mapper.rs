@@ -541,8 +541,8 @@ pub struct MapperConfig {
     /// off reported itself lost there (BENCHMARKS.md, "Lidar beams that return nothing over
     /// 48 missions").
     pub clear_rays_published_only: bool,
-    /// Each keyframe is traced into a submap's matching grid and its published grid
-    /// ([`Submap::published`]) by walks of their own, not by one walk along each beam
+    /// Each keyframe is traced into a submap's matching grid and the grid its published map
+    /// is drawn from by walks of their own, not by one walk along each beam
     /// marking both ([`OccupancyGrid::insert_with_rays_beside`]). The shared walk runs to
     /// where the matching beam stops and on from there, so the published beam bends by up
     /// to a cell there; the matching grid is the same either way. Kept to measure what the

@@ -449,8 +449,9 @@ impl OccupancyGrid {
     /// [`insert_with_rays`](Self::insert_with_rays) into this grid, and into `matched` the
     /// same scan's first `matched_endpoints` endpoints and first `matched_rays` rays, each
     /// stopped short by its own margin. Where both grids clear cells once a scan on the same
-    /// cells, and this one stops no beam short, one walk along each beam marks both (see
-    /// [`trace_once_per_scan`]): `matched` comes out as traced on its own, and this grid with
+    /// cells, and this one stops no beam short, one walk along each beam marks both: it runs
+    /// from the sensor to where the matching beam stops, marking both grids, and on to the
+    /// hit, marking this one. `matched` comes out as traced on its own, and this grid with
     /// each of those beams bent by up to a cell where the matching beam stops. Otherwise
     /// each grid is traced on its own.
     pub fn insert_with_rays_beside(
