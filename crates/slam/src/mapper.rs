@@ -1334,64 +1334,60 @@ impl Mapper {
             }
         };
         let clear = self.keyframe_clear.get(node).map_or(&[][..], |c| &c[..]);
-        let beams = |clear: &[Point2]| -> Vec<(Point2, bool)> {
-            dense
-                .iter()
-                .map(|p| {
-                    let (p, hit) = within(*p);
-                    (local.transform_point(p), hit)
-                })
-                .chain(
-                    clear
-                        .iter()
-                        .map(|p| (local.transform_point(within(*p).0), false)),
-                )
-                .collect()
-        };
+        // Every beam, as the published grid takes them: the points, then the rays that
+        // returned nothing.
+        let world: Vec<(Point2, bool)> = dense
+            .iter()
+            .map(|p| {
+                let (p, hit) = within(*p);
+                (local.transform_point(p), hit)
+            })
+            .chain(
+                clear
+                    .iter()
+                    .map(|p| (local.transform_point(within(*p).0), false)),
+            )
+            .collect();
         // Filled-in points are hits only: free space along the beams themselves, cut to the
         // same range.
-        let rays = |clear: &[Point2]| -> Option<Vec<Point2>> {
+        let world_rays: Option<Vec<Point2>> =
             (!self.cfg.frontend.trace_filled && self.cfg.frontend.densify.is_some()).then(|| {
                 self.keyframe_points[node]
                     .iter()
                     .chain(clear)
                     .map(|p| local.transform_point(within(*p).0))
                     .collect()
-            })
-        };
+            });
+        // The matching grid's beams are the first of them: all but the rays that returned
+        // nothing, if only the published grid takes those.
         let matched_clear = if self.cfg.clear_rays_published_only {
-            &[][..]
+            0
         } else {
-            clear
+            clear.len()
         };
-        let (world, world_rays) = (beams(matched_clear), rays(matched_clear));
-        let published_own = (self.cfg.clear_rays_published_only
-            && self.submaps[submap].published.is_some())
-        .then(|| (beams(clear), rays(clear)));
-        let (published_world, published_rays) = published_own
-            .as_ref()
-            .map_or((&world, &world_rays), |(w, r)| (w, r));
+        let matched = (
+            dense.len() + matched_clear,
+            self.keyframe_points[node].len() + matched_clear,
+        );
         let s = &mut self.submaps[submap];
         match (&mut s.published, s.map.single_level_mut()) {
-            (Some(published), Some(matched)) if !self.cfg.grids_traced_apart => {
-                // The matching grid's beams are the published grid's, stopped short.
+            (Some(published), Some(grid)) if !self.cfg.grids_traced_apart => {
                 published.insert_with_rays_beside(
-                    matched,
+                    grid,
                     local.position(),
-                    published_world,
-                    published_rays.as_deref(),
-                    (world.len(), world_rays.as_ref().map_or(0, Vec::len)),
+                    &world,
+                    world_rays.as_deref(),
+                    matched,
                 );
             }
-            _ => {
-                s.map
-                    .insert_with_rays(local.position(), &world, world_rays.as_deref());
-                if let Some(published) = &mut s.published {
-                    published.insert_with_rays(
-                        local.position(),
-                        published_world,
-                        published_rays.as_deref(),
-                    );
+            (published, _) => {
+                s.map.insert_with_rays(
+                    local.position(),
+                    &world[..matched.0],
+                    world_rays.as_deref().map(|r| &r[..matched.1]),
+                );
+                if let Some(published) = published {
+                    published.insert_with_rays(local.position(), &world, world_rays.as_deref());
                 }
             }
         }

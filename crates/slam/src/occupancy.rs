@@ -939,7 +939,7 @@ pub(crate) fn trace_once_per_scan(
     // The second grid's cells are found on the first's lattice, which may put a point on a
     // cell's very edge on the other side of it: a cell its own walk would have kept within
     // its bounds might then lie outside them, and is left alone.
-    let second_index = |(x, y): (i64, i64)| {
+    let second_index = |(x, y): Cell| {
         let (x, y) = ((x + ox) as usize, (y + oy) as usize);
         (x < second_w && y < second_h).then(|| y * second_w + x)
     };
@@ -950,18 +950,7 @@ pub(crate) fn trace_once_per_scan(
     let (min, max) = beams_box(sensor, endpoints);
     let ((bx, by), (tx, ty)) = (to_cell(min), to_cell(max));
     let (box_w, rows) = ((tx - bx + 1) as usize, (ty - by + 1) as usize);
-    let mark_of = |(x, y): (i64, i64)| (y - by) * box_w as i64 + (x - bx);
-    let ends: Vec<(i64, i64)> = endpoints.iter().map(|(p, _)| to_cell(*p)).collect();
-    for (k, (&end, (_, hit))) in ends.iter().zip(endpoints).enumerate() {
-        if *hit {
-            update(Layer::First, (end.1 * w + end.0) as usize, HIT);
-            if k < second_endpoints
-                && let Some(i) = second_index(end)
-            {
-                update(Layer::Second, i, HIT);
-            }
-        }
-    }
+    let mark_of = |(x, y): Cell| (y - by) * box_w as i64 + (x - bx);
     SCAN_MARKS.with_borrow_mut(|marks| {
         if marks.len() < box_w * rows {
             marks.resize(box_w * rows, 0);
@@ -994,7 +983,7 @@ pub(crate) fn trace_once_per_scan(
         // A walk depends only on its two cells, so a second beam ending in a cell a walk
         // from the sensor already ended in would cross the same cells again: filled-in
         // scans end two or three beams in many cells.
-        let walk_once = |marks: &mut [u8], end: (i64, i64), mark: u8, walked: u8| {
+        let walk_once = |marks: &mut [u8], end: Cell, mark: u8, walked: u8| {
             let at = mark_of(end) as usize;
             if marks[at] & walked != walked {
                 walk_marking(start, end, from, box_w as i64, marks, mark);
@@ -1012,21 +1001,28 @@ pub(crate) fn trace_once_per_scan(
                 }
             }
         }
-        for (k, &end) in ends.iter().enumerate() {
-            marks[mark_of(end) as usize] |= if k < second_endpoints {
+        // Each endpoint's own cell: a hit, or a miss unless some hit ends there too (the
+        // marks are bits, so the order of the endpoints does not matter).
+        for (k, (p, hit)) in endpoints.iter().enumerate() {
+            let end = to_cell(*p);
+            let both = k < second_endpoints;
+            let mut mark = if both {
                 CROSSED | CROSSED_SECOND
             } else {
                 CROSSED
             };
-        }
-        for (k, (&end, (_, hit))) in ends.iter().zip(endpoints).enumerate() {
             if *hit {
-                marks[mark_of(end) as usize] |= if k < second_endpoints {
+                mark |= if both {
                     ENDS_A_HIT | ENDS_A_HIT_SECOND
                 } else {
                     ENDS_A_HIT
                 };
+                update(Layer::First, (end.1 * w + end.0) as usize, HIT);
+                if both && let Some(i) = second_index(end) {
+                    update(Layer::Second, i, HIT);
+                }
             }
+            marks[mark_of(end) as usize] |= mark;
         }
         // The sweep leaves every mark at zero again for the next scan. Most of the box is
         // outside the scan's fan: eight marks at a time are passed over.
@@ -1622,7 +1618,6 @@ mod tests {
             free_shared.abs_diff(free) * 100 < free,
             "{free_shared} free cells against {free}"
         );
-        println!("{free_shared} free cells against {free}");
     }
 
     /// A grid that keeps no probabilities answers every lookup as one that does, through
