@@ -702,6 +702,16 @@ const VARIANTS: &[Variant] = &[
         },
     },
     Variant {
+        name: "wall-heading-optimizes-2",
+        what: "a keyframe whose heading the walls measure more than 2 standard deviations off the tracked one has the graph optimised at the next batch, as a closure would",
+        apply: |c| c.mapper.optimize_on_wall_heading_sigmas = Some(2.0),
+    },
+    Variant {
+        name: "wall-heading-optimizes-3",
+        what: "wall-heading-optimizes-2 at 3 standard deviations",
+        apply: |c| c.mapper.optimize_on_wall_heading_sigmas = Some(3.0),
+    },
+    Variant {
         name: "walls-square",
         what: "the walls at right angles to those the first scan saw hold the heading too (a hall's walls meet square)",
         apply: |c| {

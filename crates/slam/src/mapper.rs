@@ -586,6 +586,12 @@ pub struct MapperConfig {
     /// [`HeadingPrior`] in the graph ([`crate::walls`]; `None`: no such measurement). In a
     /// hall the maps' errors are mostly a slow turn of the whole map.
     pub wall_headings: Option<WallHeadingConfig>,
+    /// A keyframe whose heading the walls measure more than this many of the measurement's
+    /// standard deviations off the tracked heading has the graph optimised at the next
+    /// batch ([`MapperConfig::optimize_every_keyframes`]) as a closure would, so the
+    /// published pose turns back to the walls then rather than at the next closure
+    /// (`None`: the walls' priors wait for a closure).
+    pub optimize_on_wall_heading_sigmas: Option<f64>,
     /// Loop closures whose refined match pins the position less firmly than this in some
     /// direction (the smaller eigenvalue of the match's translation information) are not
     /// taken (`None`: no such floor). See [`ClosureWeighting`] for what the weak ones were.
@@ -963,6 +969,7 @@ impl Default for MapperConfig {
             closure_from_nearest_drawn: false,
             closure_share_span: None,
             wall_headings: None,
+            optimize_on_wall_heading_sigmas: None,
         }
     }
 }
@@ -1119,6 +1126,8 @@ pub struct Mapper {
     odometry: OdomPredictor,
     /// Odometry at the last scan that was matched (for the motion filter).
     last_matched_odom: Option<Pose2>,
+    /// An optimisation is due at the next batch: a closure was accepted (or the walls
+    /// measured the heading far off, [`MapperConfig::optimize_on_wall_heading_sigmas`]).
     pending_closures: bool,
     /// Closures found in the last few keyframes.
     recent_closures: Vec<ProposedClosure>,
@@ -2227,6 +2236,15 @@ impl Mapper {
             if node == 0 {
                 walls.set_references(self.pose.yaw_rad, &points);
             } else if let Some((yaw_rad, information)) = walls.measure(self.pose.yaw_rad, &points) {
+                let off_sigmas =
+                    normalize_angle_rad(self.pose.yaw_rad - yaw_rad).abs() * information.sqrt();
+                if self
+                    .cfg
+                    .optimize_on_wall_heading_sigmas
+                    .is_some_and(|k| off_sigmas > k)
+                {
+                    self.pending_closures = true;
+                }
                 self.graph.heading_priors.push(HeadingPrior {
                     node,
                     yaw_rad,
@@ -4013,6 +4031,50 @@ mod tests {
             let off = normalize_angle_rad(prior.yaw_rad).to_degrees();
             assert!(off.abs() < 0.05, "node {}: {off:.3} deg", prior.node);
         }
+    }
+
+    /// Drives east 3 m off the sparse hall's south wall, no closures searched; after 30
+    /// scans every keyframe from the third on and the pose are turned 1.5 degrees about
+    /// the third, as if tracking had carried a wrong heading into the submaps, and the
+    /// drive goes on. Returns the tracked heading's error at the end, degrees.
+    fn heading_error_after_a_turned_stretch(optimize_on_sigmas: Option<f64>) -> f64 {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        cfg.loop_candidates = 0;
+        // Small submaps: by the turn, those still being built start after it.
+        cfg.submap_keyframes = 6;
+        cfg.wall_headings = Some(WallHeadingConfig::default());
+        cfg.optimize_on_wall_heading_sigmas = optimize_on_sigmas;
+        let mut mapper = Mapper::new(cfg);
+        let mut tracked = Pose2::default();
+        for k in 0..120 {
+            if k == 30 {
+                let pivot = mapper.graph.nodes[2];
+                let turn = pivot * Pose2::new(0.0, 0.0, 1.5f64.to_radians()) * pivot.inverse();
+                for node in &mut mapper.graph.nodes[2..] {
+                    *node = turn * *node;
+                }
+                mapper.pose = turn * mapper.pose;
+            }
+            let truth = Pose2::new(-6.0 + 0.1 * k as f64, -7.0, 0.0);
+            tracked = mapper
+                .add_points(0.1 * k as f64, truth, sparse_hall_scan(truth))
+                .pose;
+        }
+        normalize_angle_rad(tracked.yaw_rad).to_degrees()
+    }
+
+    #[test]
+    fn a_heading_the_walls_measure_far_off_turns_the_pose_back_at_the_next_batch_if_so_asked() {
+        // The submaps hold the turned heading: without a closure nothing turns it back ...
+        let waiting = heading_error_after_a_turned_stretch(None);
+        assert!((waiting - 1.5).abs() < 0.3, "{waiting:.3} deg");
+        // ... unless the walls' measurements, some 3 standard deviations off, ask for the
+        // graph at 2.
+        let applied = heading_error_after_a_turned_stretch(Some(2.0));
+        assert!(applied.abs() < 0.3, "{applied:.3} deg");
     }
 
     /// Drives east 20 m through the sparse hall with exact odometry, a path 3 m off the
