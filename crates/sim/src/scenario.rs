@@ -77,6 +77,9 @@ pub const MOST_SMALL_BOULDERS: u64 = 100_000;
 pub const MOST_LARGE_BOULDERS: u64 = 10_000;
 /// Most resource targets a scenario may ask for.
 pub const MOST_TARGETS: u64 = 1_000;
+/// The largest size of anything in a scenario (a wall, the lander, a crater, a rock), metres:
+/// far beyond any hall, and small enough for the terrain's cell arithmetic.
+pub const MOST_LENGTH_M: f64 = 1_000.0;
 
 /// Craters: bowls with raised rims, placed by the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -633,6 +636,13 @@ impl Scenario {
                 Err(err(key, "must be zero or more", v.to_string()))
             }
         };
+        // Every number first: a key no rule below names (a mount offset, the sun's azimuth,
+        // a radio constant) must still be a number the simulation can compute with.
+        if let Ok(value) = toml::Value::try_from(self)
+            && let Some((key, v)) = first_non_finite(&value, "")
+        {
+            return Err(err(&key, "must be a finite number", v.to_string()));
+        }
         let a = &self.arena;
         positive("duration_s", self.duration_s)?;
         let net = &self.network;
@@ -762,6 +772,30 @@ impl Scenario {
             ));
         }
         positive("boulders.height_ratio", b.height_ratio)?;
+        // Sizes far beyond any hall: a rock or crater 1e300 m across overflows the terrain's
+        // cell arithmetic.
+        for (key, length_m) in [
+            ("arena.wall_height_m", a.wall_height_m),
+            ("arena.wall_thickness_m", a.wall_thickness_m),
+            ("arena.undulation_m", a.undulation_m),
+            ("arena.undulation_wavelength_m", a.undulation_wavelength_m),
+            ("lander.size_m", l.size_m),
+            ("lander.height_m", l.height_m),
+            ("craters.small_diameter_m", c.small_diameter_m),
+            ("craters.small_depth_m", c.small_depth_m),
+            ("craters.large_diameter_m", c.large_diameter_m),
+            ("craters.large_depth_m", c.large_depth_m),
+            ("boulders.small_max_diameter_m", b.small_max_diameter_m),
+            ("boulders.large_max_diameter_m", b.large_max_diameter_m),
+        ] {
+            if length_m > MOST_LENGTH_M {
+                return Err(err(
+                    key,
+                    &format!("must be at most {MOST_LENGTH_M} m"),
+                    length_m.to_string(),
+                ));
+            }
+        }
         if !(0.0..=90.0).contains(&self.sun.elevation_deg) {
             return Err(err(
                 "sun.elevation_deg",
@@ -955,6 +989,29 @@ impl Scenario {
     }
 }
 
+/// The first float in `value` (a scenario as TOML) that is not finite, with its key (dotted
+/// from `prefix`, arrays indexed).
+fn first_non_finite(value: &toml::Value, prefix: &str) -> Option<(String, f64)> {
+    let join = |key: &str| {
+        if prefix.is_empty() {
+            key.to_string()
+        } else {
+            format!("{prefix}.{key}")
+        }
+    };
+    match value {
+        toml::Value::Float(v) if !v.is_finite() => Some((prefix.to_string(), *v)),
+        toml::Value::Table(table) => table
+            .iter()
+            .find_map(|(key, v)| first_non_finite(v, &join(key))),
+        toml::Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .find_map(|(i, v)| first_non_finite(v, &format!("{prefix}[{i}]"))),
+        _ => None,
+    }
+}
+
 /// Any scenario as TOML, in the layout `--print-default` uses: tables, one key a line,
 /// arrays on their key's line.
 pub fn to_toml(s: &Scenario) -> String {
@@ -1065,6 +1122,30 @@ mod tests {
                 "boulders.small_count",
             ),
             ("[boulders]\nlarge_count = 10001\n", "boulders.large_count"),
+            // Numbers no other rule names, and sizes the arena cannot hold (found by
+            // mutating the default; each made the mission panic).
+            (
+                "[boulders]\nlarge_max_diameter_m = inf\n",
+                "boulders.large_max_diameter_m",
+            ),
+            (
+                "[boulders]\nlarge_min_diameter_m = 1e300\nlarge_max_diameter_m = 1e300\n",
+                "boulders.large_max_diameter_m",
+            ),
+            ("[sun]\nazimuth_deg = nan\n", "sun.azimuth_deg"),
+            (
+                "[rovers.lidar]\nmount_x_m = -inf\n",
+                "rovers.lidar.mount_x_m",
+            ),
+            (
+                "[craters]\nlarge_diameter_m = 1e5\n",
+                "craters.large_diameter_m",
+            ),
+            ("[arena]\nwall_height_m = 1e300\n", "arena.wall_height_m"),
+            (
+                "[network.radio]\nmcs = [[4.0, nan]]\n",
+                "network.radio.mcs[0][1]",
+            ),
             (
                 "[craters]\nsmall_count = 4000000000\nlarge_count = 4000000000\n",
                 "craters.small_count + craters.large_count",

@@ -214,6 +214,27 @@ fn num(fields: &[&str], i: usize, name: &str) -> Result<f64, String> {
     }
 }
 
+/// The farthest a logged position may lie from the log's origin, metres: a robot's log
+/// spans a building or a campus, and a position 1e20 m off (a corrupt digit string still
+/// parses) would ask the map for more cells than memory holds.
+pub const MAX_POSITION_M: f64 = 1e5;
+
+/// The longest maximum range a laser line may claim, metres (the longest lidars reach a few
+/// hundred).
+pub const MAX_LASER_RANGE_M: f64 = 1e4;
+
+/// [`num`] for a position or offset, at most [`MAX_POSITION_M`] from zero.
+fn position(fields: &[&str], i: usize, name: &str) -> Result<f64, String> {
+    let v = num(fields, i, name)?;
+    if v.abs() <= MAX_POSITION_M {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{name} {v:e} m is implausibly far (at most {MAX_POSITION_M:e} m from the origin)"
+        ))
+    }
+}
+
 fn count(fields: &[&str], i: usize, name: &str) -> Result<usize, String> {
     let s = fields.get(i).ok_or_else(|| format!("missing {name}"))?;
     let n: usize = s
@@ -247,8 +268,8 @@ fn parse_flaser(f: &[&str]) -> Result<LaserReading, String> {
     let ranges_m = ranges(f, 1, n)?;
     let o = 1 + n;
     let odom = Pose2::new(
-        num(f, o + 3, "odom_x")?,
-        num(f, o + 4, "odom_y")?,
+        position(f, o + 3, "odom_x")?,
+        position(f, o + 4, "odom_y")?,
         num(f, o + 5, "odom_theta")?,
     );
     let timestamp_s = num(f, o + 6, "ipc_timestamp")?;
@@ -277,18 +298,23 @@ fn parse_robotlaser(f: &[&str]) -> Result<LaserReading, String> {
     let start = num(f, 1, "start_angle")?;
     let res = num(f, 3, "angular_resolution")?;
     let max_range = num(f, 4, "maximum_range")?;
+    if !(max_range > 0.0 && max_range <= MAX_LASER_RANGE_M) {
+        return Err(format!(
+            "maximum_range {max_range:e} m is implausible (above 0, at most {MAX_LASER_RANGE_M:e} m)"
+        ));
+    }
     let n = count(f, 7, "number of readings")?;
     let ranges_m = ranges(f, 8, n)?;
     let m = count(f, 8 + n, "number of remissions")?;
     let o = 9 + n + m;
     let laser = Pose2::new(
-        num(f, o, "laser_x")?,
-        num(f, o + 1, "laser_y")?,
+        position(f, o, "laser_x")?,
+        position(f, o + 1, "laser_y")?,
         num(f, o + 2, "laser_theta")?,
     );
     let robot = Pose2::new(
-        num(f, o + 3, "robot_x")?,
-        num(f, o + 4, "robot_y")?,
+        position(f, o + 3, "robot_x")?,
+        position(f, o + 4, "robot_y")?,
         num(f, o + 5, "robot_theta")?,
     );
     let timestamp_s = num(f, o + 11, "ipc_timestamp")?;
@@ -306,7 +332,11 @@ fn parse_robotlaser(f: &[&str]) -> Result<LaserReading, String> {
 /// `ODOM x y theta tv rv accel ipc_timestamp host logger_timestamp`
 fn parse_odom(f: &[&str]) -> Result<OdomReading, String> {
     Ok(OdomReading {
-        pose: Pose2::new(num(f, 0, "x")?, num(f, 1, "y")?, num(f, 2, "theta")?),
+        pose: Pose2::new(
+            position(f, 0, "x")?,
+            position(f, 1, "y")?,
+            num(f, 2, "theta")?,
+        ),
         timestamp_s: num(f, 6, "ipc_timestamp")?,
     })
 }
@@ -404,6 +434,18 @@ ROBOTLASER1 0 -1.5 3.0 1.0 30.0 0.01 0 4 1 2 3 4 0 1.08775825619 2.04794255386 0
             ("FLASER 99999999999 1\n", 1, "implausibly large"),
             ("FLASER 2 1 -2 0 0 0 0 0 0 1 h 1\n", 1, "negative"),
             ("ODOM 1 2 nan 0 0 0 1 h 1\n", 1, "not finite"),
+            // A corrupt digit string that still parses: 1e20 m would overflow the map.
+            (
+                "ODOM 0 0 0 0 0 0 1 h 1\nODOM 99999999999999999999 0 0 0 0 0 2 h 2\n",
+                2,
+                "implausibly far",
+            ),
+            ("FLASER 2 1 1 0 0 0 0 -1e20 0 1 h 1\n", 1, "odom_y"),
+            (
+                "ROBOTLASER1 0 -1.5 3.0 1.0 1e30 0.01 0 2 1 2 0 0 0 0 0 0 0 0 0 0 0 0 1.0 h 1.0\n",
+                1,
+                "maximum_range",
+            ),
         ] {
             match CarmenLog::read(text.as_bytes()) {
                 Err(CarmenError::Line { line: l, what }) => {
