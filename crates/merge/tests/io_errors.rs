@@ -105,7 +105,7 @@ fn a_rovers_map_keeps_its_hazards_through_a_file() {
 
 #[test]
 fn bad_yaml_names_file_field_and_expectation() {
-    let cases: [(&str, &str, &[&str]); 10] = [
+    let cases: [(&str, &str, &[&str]); 12] = [
         (
             "resolution: 0.05\norigin: [0, 0, 0]\n",
             "no-image",
@@ -119,7 +119,19 @@ fn bad_yaml_names_file_field_and_expectation() {
         (
             "image: m.pgm\nresolution: -0.05\norigin: [0, 0, 0]\n",
             "negative-resolution",
-            &["`resolution`", "positive"],
+            &["`resolution`", "0.001 to 100 metres per cell", "-0.05"],
+        ),
+        // Corrupt digits that still parse (found by mutating a rover's map file): the
+        // merge asked for more cells than memory holds.
+        (
+            "image: m.pgm\nresolution: 1e308\norigin: [0, 0, 0]\n",
+            "huge-resolution",
+            &["`resolution`", "line 2", "0.001 to 100 metres per cell"],
+        ),
+        (
+            "image: m.pgm\nresolution: 0.05\norigin: [0, 1e300, 0]\n",
+            "far-origin",
+            &["`origin`", "line 3", "at most 1e6 m"],
         ),
         (
             "image: m.pgm\nresolution: 0.05\norigin: [0, 0]\n",

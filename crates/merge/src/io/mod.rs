@@ -62,6 +62,13 @@ pub enum MapFileError {
     Write(#[from] GridExportError),
 }
 
+/// The finest and coarsest cells a map may claim, metres (ROS maps use 1 cm to 1 m).
+pub const MIN_RESOLUTION_M: f64 = 1e-3;
+/// See [`MIN_RESOLUTION_M`].
+pub const MAX_RESOLUTION_M: f64 = 100.0;
+/// The farthest a map's origin may lie from its frame's, metres.
+pub const MAX_ORIGIN_M: f64 = 1e6;
+
 /// The fields a map file may have: map_server's, and realms' `hazard_value`.
 const KNOWN_FIELDS: [&str; 8] = [
     "image",
@@ -186,15 +193,18 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
         None => return Err(f.error("image", "is missing: expected the image file name".into())),
     };
     let (line, resolution_m) = f.required_number("resolution", "metres per cell")?;
-    if resolution_m <= 0.0 {
+    // A corrupt digit string still parses: 1e308 m a cell would ask the merge for more
+    // cells than memory holds.
+    if !(MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&resolution_m) {
         return Err(f.error(
             "resolution",
             format!(
-                "(line {line}): expected a positive number of metres per cell, found {resolution_m}"
+                "(line {line}): expected {MIN_RESOLUTION_M} to {MAX_RESOLUTION_M} metres per cell, found {resolution_m}"
             ),
         ));
     }
-    let origin_expected = "[x, y, yaw]: three numbers (metres, metres, radians)";
+    let origin_expected =
+        "[x, y, yaw]: three numbers (metres, metres, radians), x and y at most 1e6 m from zero";
     let origin = match f.doc.get("origin") {
         None => {
             return Err(f.error("origin", format!("is missing: expected {origin_expected}")));
@@ -211,7 +221,11 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
                 .map(|s| s.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
                 .collect();
             match nums.as_slice() {
-                [Some(x), Some(y), Some(yaw)] => [*x, *y, *yaw],
+                [Some(x), Some(y), Some(yaw)]
+                    if x.abs() <= MAX_ORIGIN_M && y.abs() <= MAX_ORIGIN_M =>
+                {
+                    [*x, *y, *yaw]
+                }
                 _ => {
                     return Err(f.error(
                         "origin",
