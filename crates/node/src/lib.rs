@@ -21,6 +21,7 @@ pub mod lander_merge;
 pub mod layers;
 pub mod mapping;
 pub mod navigation;
+pub mod plausible;
 pub mod rover;
 pub mod station;
 pub mod sweep;

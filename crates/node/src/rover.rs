@@ -96,6 +96,9 @@ pub struct RoverNode {
     cost_clock: CostClock,
     /// Wall time spent in SLAM, to report what it costs (see [`CostClock`]).
     slam_wall: std::time::Duration,
+    /// Own sensor messages dropped for holding numbers no sensor gives
+    /// ([`crate::plausible`]).
+    rejected_inputs: u64,
 }
 
 impl RoverNode {
@@ -122,6 +125,7 @@ impl RoverNode {
             outbox: Vec::new(),
             cost_clock: cfg.cost_clock,
             slam_wall: std::time::Duration::ZERO,
+            rejected_inputs: 0,
         }
     }
 
@@ -135,6 +139,12 @@ impl RoverNode {
     /// run.
     pub fn slam_wall_s(&self) -> f64 {
         self.slam_wall.as_secs_f64()
+    }
+
+    /// How many of its own sensor messages the rover dropped for holding numbers no sensor
+    /// gives (a driver's glitch; [`crate::plausible`]).
+    pub fn rejected_inputs(&self) -> u64 {
+        self.rejected_inputs
     }
 
     /// The rover's on-board SLAM.
@@ -453,6 +463,10 @@ impl Node for RoverNode {
             }
             return;
         }
+        if crate::plausible::implausible(message).is_some() {
+            self.rejected_inputs += 1;
+            return;
+        }
         let (clock, mapping, spent) = (self.cost_clock, &mut self.mapping, &mut self.slam_wall);
         match message {
             Message::LaserScan(scan) => {
@@ -625,6 +639,66 @@ mod tests {
             }
         }
         (cmd, statuses)
+    }
+
+    #[test]
+    fn numbers_no_sensor_gives_from_a_driver_never_panic_the_rover() {
+        // A driver's glitch on a real rover can send any number a message holds: a pose
+        // 1e20 m out (a corrupt field still decodes), NaN, infinities, a scan claiming a
+        // reach of 1e20 m. The rover goes on, and maps the room again once they stop.
+        let mut node = node();
+        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        let id = node.id();
+        for k in 1..=30 {
+            step(&mut node, at(k), Some(true));
+        }
+        for (k, bad) in [
+            1e20,
+            -1e20,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e300,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let t = at(31 + k as i64);
+            let mut odom = Odometry::default();
+            odom.header.stamp = t;
+            odom.pose.pose.position.x = bad;
+            odom.pose.pose.position.y = -bad;
+            odom.pose.pose.orientation = Quaternion::IDENTITY;
+            odom.twist.twist.linear.x = bad;
+            node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+            let mut imu = Imu::default();
+            imu.header.stamp = t;
+            imu.angular_velocity.z = bad;
+            imu.linear_acceleration.x = bad;
+            imu.linear_acceleration.z = bad;
+            node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            let mut wild = scan(t, true);
+            wild.range_max_m = bad as f32;
+            wild.range_min_m = -(bad as f32);
+            wild.angle_increment_rad = bad as f32;
+            for (i, r) in wild.ranges_m.iter_mut().enumerate() {
+                if i % 3 == 0 {
+                    *r = bad as f32;
+                }
+            }
+            node.on_message(t, &id.topic("scan"), &Message::LaserScan(wild));
+            node.drain_outbox();
+        }
+        // Odometry, IMU and scan of each of the six instants.
+        assert_eq!(node.rejected_inputs(), 18);
+        for k in 40..=100 {
+            step(&mut node, at(k), Some(true));
+        }
+        node.on_tick(at(101));
+        node.drain_outbox();
+        assert_ne!(node.mapping().state(), LocalisationState::Lost);
+        let pose = node.mapping().pose();
+        assert!(pose.x_m.hypot(pose.y_m) < 0.1, "{pose:?}");
     }
 
     #[test]
