@@ -13,6 +13,12 @@ use std::borrow::Cow;
 
 /// The unknown cell value (ROS `nav_msgs/OccupancyGrid`).
 pub const UNKNOWN: i8 = -1;
+/// The finest and coarsest cells an update may carry, metres (the rovers' are 5 cm).
+pub const MIN_RESOLUTION_M: f64 = 1e-3;
+/// See [`MIN_RESOLUTION_M`].
+pub const MAX_RESOLUTION_M: f64 = 100.0;
+/// The farthest an update's origin may lie from its map frame's, metres.
+pub const MAX_ORIGIN_M: f64 = 1e6;
 
 pub use realms_core::msgs::{MapUpdate, Run};
 
@@ -221,10 +227,15 @@ impl Decoder {
             .width
             .checked_mul(g.height)
             .ok_or_else(|| malformed("size overflows"))?;
-        let finite =
-            g.resolution_m.is_finite() && g.origin.x_m.is_finite() && g.origin.y_m.is_finite();
-        if !finite || g.resolution_m <= 0.0 {
-            return Err(malformed("bad resolution or origin"));
+        // A corrupt field that still decodes: cells of 1e-300 or 1e300 m, or a map 1e300 m
+        // out, would send the merges that read the map past their grids.
+        let plausible = (MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&g.resolution_m)
+            && g.origin.x_m.abs() <= MAX_ORIGIN_M
+            && g.origin.y_m.abs() <= MAX_ORIGIN_M;
+        if !plausible {
+            return Err(malformed(
+                "resolution outside 1 mm to 100 m, or origin beyond 1e6 m",
+            ));
         }
         // Refuse absurd sizes before allocating: 100 million cells is a 500 km^2 map at 5 cm.
         if cells > 100_000_000 {
@@ -392,6 +403,27 @@ mod tests {
             if dec.apply(&update).is_err() {
                 prop_assert_eq!(dec.map().cloned(), before);
             }
+        }
+    }
+
+    #[test]
+    fn an_update_with_cells_or_an_origin_no_rover_draws_is_refused() {
+        let mut dec = Decoder::new();
+        for (resolution_m, x_m) in [(1e-300, 0.0), (1e300, 0.0), (0.05, 1e300), (0.05, -2e6)] {
+            let update = MapUpdate {
+                seq: 1,
+                base: None,
+                width: 6,
+                height: 4,
+                resolution_m,
+                origin: Point2::new(x_m, 0.0),
+                runs: Vec::new(),
+            };
+            assert!(
+                matches!(dec.apply(&update), Err(DeltaError::Malformed { .. })),
+                "{resolution_m} {x_m}"
+            );
+            assert_eq!(dec.map(), None);
         }
     }
 

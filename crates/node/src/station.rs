@@ -373,6 +373,44 @@ mod tests {
     }
 
     #[test]
+    fn a_rover_map_with_a_geometry_no_rover_draws_never_panics_the_lander() {
+        // A corrupt update that still decodes: the lander keeps merging what it has.
+        let rovers = [RoverId(1), RoverId(2)];
+        let mut lander = StationNode::new(StationRole::Lander, rovers.to_vec());
+        let map = room();
+        let t = Time::ZERO;
+        let mut good = Encoder::new();
+        lander.on_message(
+            t,
+            &rovers[0].topic("map/delta"),
+            &delta(t, good.update(&map, true)),
+        );
+        for (resolution_m, origin_m) in [
+            (1e-300, 0.0),
+            (1e300, 0.0),
+            (0.05, 1e300),
+            (0.05, -1e18),
+            (1e-9, 1e9),
+            // Odd but possible: taken in and merged.
+            (0.5, 1e5),
+            (0.001, -9e5),
+        ] {
+            let mut odd = map.clone();
+            let geo = GridGeometry {
+                resolution_m,
+                origin: realms_core::Point2::new(origin_m, -origin_m),
+                ..*map.geometry()
+            };
+            odd = Grid::from_cells(geo, odd.cells().to_vec()).expect("same cells");
+            let update = Encoder::new().update(&odd, true);
+            lander.on_message(t, &rovers[1].topic("map/delta"), &delta(t, update));
+            lander.on_shutdown(t);
+            lander.drain_outbox();
+        }
+        assert!(lander.map(rovers[0]).is_some());
+    }
+
+    #[test]
     fn the_lander_merges_when_a_map_changed_and_the_ground_draws_the_merge_from_its_transforms() {
         let rovers = [RoverId(1), RoverId(2)];
         let mut lander = StationNode::new(StationRole::Lander, rovers.to_vec());
