@@ -97,7 +97,7 @@ pub struct RoverNode {
     /// Wall time spent in SLAM, to report what it costs (see [`CostClock`]).
     slam_wall: std::time::Duration,
     /// Own sensor messages dropped for holding numbers no sensor gives
-    /// ([`crate::plausible`]).
+    /// ([`crate::plausible`]), and operator goals at no place on any map.
     rejected_inputs: u64,
 }
 
@@ -142,7 +142,8 @@ impl RoverNode {
     }
 
     /// How many of its own sensor messages the rover dropped for holding numbers no sensor
-    /// gives (a driver's glitch; [`crate::plausible`]).
+    /// gives (a driver's glitch; [`crate::plausible`]), and how many operator goals it
+    /// refused for coordinates that are not numbers.
     pub fn rejected_inputs(&self) -> u64 {
         self.rejected_inputs
     }
@@ -485,7 +486,17 @@ impl Node for RoverNode {
                 clock.time(spent, || mapping.on_depth(cloud));
                 self.guard.on_depth(now, cloud);
             }
-            Message::NavGoal(goal) => self.navigator.set_operator_goal(now, goal.target),
+            Message::NavGoal(goal) => match goal.target {
+                // A goal at no place on any map (a corrupt command): refused, and said so.
+                Some(p) if !(p.x_m.is_finite() && p.y_m.is_finite()) => {
+                    self.rejected_inputs += 1;
+                    self.reason = "operator goal refused: its coordinates are not numbers".into();
+                    // Said now, not at the next status due.
+                    self.last_status = None;
+                    self.publish_status(now);
+                }
+                target => self.navigator.set_operator_goal(now, target),
+            },
             Message::MapRequest(_) => self.mapping.request_snapshot(),
             _ => {}
         }
@@ -642,7 +653,7 @@ mod tests {
     }
 
     #[test]
-    fn numbers_no_sensor_gives_from_a_driver_never_panic_the_rover() {
+    fn numbers_no_sensor_or_operator_gives_never_panic_the_rover() {
         // A driver's glitch on a real rover can send any number a message holds: a pose
         // 1e20 m out (a corrupt field still decodes), NaN, infinities, a scan claiming a
         // reach of 1e20 m. The rover goes on, and maps the room again once they stop.
@@ -691,6 +702,36 @@ mod tests {
         }
         // Odometry, IMU and scan of each of the six instants.
         assert_eq!(node.rejected_inputs(), 18);
+        // An operator's goal nowhere a rover can drive is no reason to panic either.
+        for (k, target) in [
+            Point2::new(f64::NAN, 0.0),
+            Point2::new(1e20, -1e20),
+            Point2::new(f64::INFINITY, 1.0),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let t = at(37 + k as i64);
+            node.on_message(
+                t,
+                &id.topic("nav/goal"),
+                &Message::NavGoal(NavGoal {
+                    header: Header {
+                        stamp: t,
+                        frame_id: "map".into(),
+                    },
+                    target: Some(target),
+                }),
+            );
+            let refused = node.drain_outbox().iter().any(
+                |o| matches!(&o.message, Message::NavStatus(s) if s.reason.contains("refused")),
+            );
+            assert_eq!(refused, !target.x_m.is_finite(), "{target:?}");
+            step(&mut node, t, Some(true));
+        }
+        // The two goals with a coordinate that is no number are refused; the one 1e20 m
+        // off is a place, which the planner finds no way to.
+        assert_eq!(node.rejected_inputs(), 20);
         for k in 40..=100 {
             step(&mut node, at(k), Some(true));
         }
