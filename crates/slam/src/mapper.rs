@@ -4077,6 +4077,33 @@ mod tests {
         assert!(applied.abs() < 0.3, "{applied:.3} deg");
     }
 
+    #[test]
+    fn a_wheel_odometry_that_jumps_a_hundred_kilometres_is_no_motion_and_grows_no_map() {
+        // Driving east 3 m off the sparse hall's south wall, the odometry's frame jumps
+        // 1e5 m at the twentieth scan (a driver restarted, or a corrupt reading) and goes
+        // on from there.
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        let mut mapper = Mapper::new(cfg);
+        let jump = Pose2::new(1e5, -1e5, 0.0);
+        let mut tracked = Pose2::default();
+        let mut truth = Pose2::default();
+        for k in 0..60 {
+            truth = Pose2::new(-6.0 + 0.1 * k as f64, -7.0, 0.0);
+            let odom = if k >= 20 { jump * truth } else { truth };
+            tracked = mapper
+                .add_points(0.1 * k as f64, odom, sparse_hall_scan(truth))
+                .pose;
+        }
+        let off = tracked.position().distance_m(truth.position());
+        assert!(off < 0.1, "{off:.3} m");
+        let map = mapper.render_map();
+        let cells = map.geometry().len();
+        assert!(cells < 2_000_000, "{cells} cells");
+    }
+
     /// Drives east 20 m through the sparse hall with exact odometry, a path 3 m off the
     /// south wall, past the boulders and the lander (further on, with the south wall alone in
     /// view, nothing pins the pose along it); returns the largest position error of the

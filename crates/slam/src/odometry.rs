@@ -23,6 +23,13 @@ const STALL_FOLLOWED_M: f64 = 0.05;
 /// the matcher's noise alone, and the latest is as good a start as the anchor's.
 const STALL_FOLLOWED_RAD: f64 = 0.035;
 
+/// Travel the wheels may report since the reading the last scan settled on, beyond which
+/// it is no motion but a jump of the odometry's own frame (a driver restarted, or a corrupt
+/// reading that still decoded), metres: no ground robot covers it between two scans. Only
+/// the turn is predicted then, and the matcher finds the pose; taken as motion, a jump of
+/// kilometres grew the map's grids past memory.
+pub const MAX_WHEEL_STEP_M: f64 = 100.0;
+
 /// The odometry reading as it last changed, and the pose of the scan it first came with.
 #[derive(Clone, Copy, Debug)]
 struct Anchor {
@@ -101,6 +108,12 @@ impl OdomPredictor {
             return self.turn_only(odom, last, false);
         }
         let since = a.odom.inverse() * odom;
+        let jumped = self
+            .last_odom
+            .is_some_and(|l| l.position().distance_m(odom.position()) > MAX_WHEEL_STEP_M);
+        if jumped {
+            return self.turn_only(odom, last, false);
+        }
         let followed = a.pose.inverse() * last;
         let stood_still = followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
             && followed.yaw_rad.abs() < STALL_FOLLOWED_RAD;
@@ -179,6 +192,32 @@ mod tests {
         assert!(close(next.step, Pose2::new(0.2, 0.01, 0.05)));
         assert!(close(next.pose, matched * Pose2::new(0.2, 0.01, 0.05)));
         assert!(!next.stalled);
+    }
+
+    #[test]
+    fn a_jump_of_the_odometry_frame_is_no_motion() {
+        let mut p = OdomPredictor::default();
+        let odom0 = Pose2::new(5.0, 1.0, 0.3);
+        let first = p.predict(OdomSample::wheels(odom0), Pose2::IDENTITY, |d| d);
+        let matched = Pose2::new(0.1, 0.0, 0.3);
+        p.settle(odom0, matched, &first, false);
+        // 1e5 m in one step, turning 0.05 rad: only the turn is predicted ...
+        let jumped = Pose2::new(1e5, -3.0, 0.35);
+        let next = p.predict(OdomSample::wheels(jumped), matched, |d| d);
+        assert!(
+            close(next.pose, Pose2::new(0.1, 0.0, 0.35)),
+            "{:?}",
+            next.pose
+        );
+        // ... and the wheels' steps from the new frame on are motion again.
+        p.settle(jumped, next.pose, &next, false);
+        let on = jumped * Pose2::new(0.2, 0.0, 0.0);
+        let after = p.predict(OdomSample::wheels(on), next.pose, |d| d);
+        assert!(
+            close(after.pose, next.pose * Pose2::new(0.2, 0.0, 0.0)),
+            "{:?}",
+            after.pose
+        );
     }
 
     #[test]
