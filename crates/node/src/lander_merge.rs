@@ -109,11 +109,21 @@ pub fn compose_with_transforms(
                     .iter()
                     .find(|t| t.child_frame_id == map_frame(*rover))?;
                 let p = t.pose?;
-                Some((to_merge_map(g), Some(Pose2::new(p.x_m, p.y_m, t.yaw_rad))))
+                // A corrupt message that still decodes may place a map anywhere; drawn 1e300 m
+                // off, the merged grid's loops would not end. Such a map is left out.
+                let plausible = p.x_m.abs() <= MAX_TRANSFORM_M
+                    && p.y_m.abs() <= MAX_TRANSFORM_M
+                    && t.yaw_rad.is_finite();
+                plausible.then(|| (to_merge_map(g), Some(Pose2::new(p.x_m, p.y_m, t.yaw_rad))))
             }))
             .unzip();
     Some(realms_merge::compose::compose(&converted, &poses).0)
 }
+
+/// The farthest a transform may place a rover's map from the reference's frame, metres: the
+/// fleet maps one site, and a map placed farther would make the merged grid span more cells
+/// than memory holds.
+pub const MAX_TRANSFORM_M: f64 = 1e4;
 
 /// A rover's map frame in [`MapTransforms`] (`rover2/map`).
 fn map_frame(rover: RoverId) -> String {

@@ -411,6 +411,62 @@ mod tests {
     }
 
     #[test]
+    fn transforms_no_merge_gives_never_hang_the_ground() {
+        // A corrupt transforms message that still decodes: the ground draws what it can (a
+        // map placed 1e300 m off made its drawing loop without end).
+        let rovers = [RoverId(1), RoverId(2)];
+        let mut ground = StationNode::new(StationRole::Ground, rovers.to_vec());
+        let map = room();
+        for r in rovers {
+            let update = Encoder::new().update(&map, true);
+            ground.on_message(
+                Time::ZERO,
+                &r.topic("map/delta"),
+                &delta(Time::ZERO, update),
+            );
+        }
+        for (x_m, yaw_rad) in [
+            (f64::NAN, 0.0),
+            (1e300, 0.0),
+            (1e6, 0.0),
+            (0.0, f64::INFINITY),
+            (0.0, 1e300),
+            (0.5, 0.1),
+        ] {
+            let transforms = MapTransforms {
+                header: Header {
+                    stamp: Time::ZERO,
+                    frame_id: "rover1/map".into(),
+                },
+                maps: vec![realms_core::msgs::MapTransform {
+                    child_frame_id: "rover2/map".into(),
+                    pose: Some(realms_core::Point2::new(x_m, -x_m)),
+                    yaw_rad,
+                    confidence: 1.0,
+                    confirmed: true,
+                }],
+            };
+            ground.on_message(
+                Time::ZERO,
+                &Topic::new(MAP_TRANSFORMS_TOPIC),
+                &Message::MapTransforms(transforms),
+            );
+            let drawn = ground
+                .merged_from_transforms()
+                .expect("the reference is drawn");
+            // A map placed where no merge puts one is left out: the reference alone.
+            let alone = x_m.abs() > 1e4 || !x_m.is_finite() || !yaw_rad.is_finite();
+            let (cells, reference) = (drawn.geometry().len(), map.geometry().len());
+            if alone {
+                assert_eq!(cells, reference, "{x_m} {yaw_rad}");
+            } else {
+                // Placed beside the reference, shifted or turned: the merge spans more.
+                assert!(cells > reference, "{x_m} {yaw_rad}: {cells} cells");
+            }
+        }
+    }
+
+    #[test]
     fn the_lander_merges_when_a_map_changed_and_the_ground_draws_the_merge_from_its_transforms() {
         let rovers = [RoverId(1), RoverId(2)];
         let mut lander = StationNode::new(StationRole::Lander, rovers.to_vec());
