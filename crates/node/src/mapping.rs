@@ -23,7 +23,7 @@ use realms_net::mapdelta::Encoder;
 use realms_slam::health::LocalisationState;
 use realms_slam::mapper::{Mapper, MapperConfig, SubmapBend};
 use realms_slam::occupancy::CellState;
-use realms_slam::odometry::OdomSample;
+use realms_slam::odometry::{OdomSample, wheel_step_bound_m};
 use realms_slam::relief::{self, ElevationPatch, Registration, ReliefConfig};
 use realms_slam::traversability::{
     PinholeDepth, SubmapHazards, TraversabilityConfig, judge_frame, shadow_gaps,
@@ -732,9 +732,18 @@ impl Mapping {
         let stamp = odom.header.stamp;
         let back_from_silence = self.wheels_silent_at(stamp);
         let fused = match (self.last_wheel, self.odometry.last()) {
-            (Some(prev), Some((_, fused_prev))) if self.gyro_heard => {
-                // The wheel motion in the wheel frame, replayed along the gyro's heading.
-                let step = prev.inverse() * wheel;
+            (Some(prev), Some((t_prev, fused_prev))) if self.gyro_heard => {
+                // The wheel motion in the wheel frame, replayed along the gyro's heading. A
+                // step no robot drives in the time since the last reading is a jump of the
+                // wheels' own frame (a driver restarted), and no motion.
+                let dt_s = if stamp > *t_prev {
+                    (stamp - *t_prev).as_secs_f64()
+                } else {
+                    0.0
+                };
+                let step = Some(prev.inverse() * wheel)
+                    .filter(|s| s.x_m.hypot(s.y_m) <= wheel_step_bound_m(dt_s))
+                    .unwrap_or(Pose2::IDENTITY);
                 let yaw = self.gyro_yaw_at(stamp);
                 let (dx, dy) = if back_from_silence {
                     // The whole travel of a dropout in one reading, along a curve: its chord

@@ -653,6 +653,70 @@ mod tests {
     }
 
     #[test]
+    fn wheels_faster_than_any_robot_and_odd_but_possible_readings_never_exhaust_the_rover() {
+        // Twelve rovers fed 20 s of readings each within what `plausible` passes, from a
+        // seeded generator: wheel steps of up to 900 km every 50 ms (each a jump no robot
+        // drives), stamps 2 s stale, turns of 100 rad a reading, yaw rates of 999 rad/s,
+        // accelerations of 1e4 m/s^2, scans of 1 to 4096 beams with ranges at and past the
+        // limits and sweeps of any length. Before the wheels' steps were bounded by what a
+        // robot drives in the time (`odometry::wheel_step_bound_m`), the de-skewed beams
+        // and the pose followed them and the map's grids ran out of memory.
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let pick = |v: &[f64], r: u64| v[(r % v.len() as u64) as usize];
+        for _ in 0..12 {
+            let mut node = node();
+            let id = node.id();
+            let at = |k: i64| Time::ZERO + Duration::from_millis(50 * k);
+            let (mut x, mut yaw) = (0.0f64, 0.0f64);
+            for k in 1..400 {
+                let t = at(k);
+                let r = next();
+                // The wheels start where a driver's odometry starts, near zero.
+                if k > 10 {
+                    let step = pick(&[0.0, 1e-9, 0.1, 5.0, 99.0, 500.0, 9e5, -9e5, 1e3], r >> 3);
+                    x += step * if r & 1 == 0 { 0.001 } else { 1.0 };
+                }
+                yaw += pick(&[0.0, 0.1, 3.0, 100.0, -50.0], r >> 9);
+                let mut odom = Odometry::default();
+                odom.header.stamp = if r % 17 == 0 { at(k - 40) } else { t };
+                odom.pose.pose.position.x = x.clamp(-9e5, 9e5);
+                odom.pose.pose.position.y = (x * 0.3).clamp(-9e5, 9e5);
+                odom.pose.pose.orientation = Quaternion::from_roll_pitch_yaw(0.0, 0.0, yaw);
+                node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+                let mut imu = Imu::default();
+                imu.header.stamp = t;
+                imu.angular_velocity.z = pick(&[0.0, 0.5, 999.0, -999.0, 1e-300], r >> 13);
+                imu.linear_acceleration.z = pick(&[9.81, 0.0, -9.81, 9999.0, 1e-300], r >> 17);
+                imu.linear_acceleration.x = pick(&[0.0, 9.81, -9999.0], r >> 21);
+                node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+                if k % 2 == 0 {
+                    let n = pick(&[360.0, 1.0, 2.0, 3.0, 4096.0], r >> 25) as usize;
+                    let reach = [0.0, 0.2, 3.0, 11.9, 12.0, 1e4, f64::INFINITY, f64::NAN];
+                    let ranges = (0..n)
+                        .map(|i| pick(&reach, next() >> (i % 7)) as f32)
+                        .collect();
+                    let mut scan = crate::test_scan(t, ranges);
+                    scan.range_max_m = pick(&[12.0, 1e4, 0.16], r >> 29) as f32;
+                    scan.time_increment_s = pick(&[0.0, 1e-4, 1.0, -1.0, 1e9], r >> 33) as f32;
+                    node.on_message(t, &id.topic("scan"), &Message::LaserScan(scan));
+                }
+                if k % 50 == 0 {
+                    node.on_tick(t);
+                }
+                node.drain_outbox();
+            }
+            let pose = node.mapping().pose();
+            assert!(pose.x_m.hypot(pose.y_m) < 1e4, "{pose:?}");
+        }
+    }
+
+    #[test]
     fn numbers_no_sensor_or_operator_gives_never_panic_the_rover() {
         // A driver's glitch on a real rover can send any number a message holds: a pose
         // 1e20 m out (a corrupt field still decodes), NaN, infinities, a scan claiming a

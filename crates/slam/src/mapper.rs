@@ -1124,6 +1124,9 @@ pub struct Mapper {
     pose: Pose2,
     /// Where the next scan is predicted from (odometry that stalls is applied once).
     odometry: OdomPredictor,
+    /// When the last scan with a fresh wheel reading was settled on, seconds (for the
+    /// wheels' plausible travel to the next).
+    last_fresh_wheels_s: Option<f64>,
     /// Odometry at the last scan that was matched (for the motion filter).
     last_matched_odom: Option<Pose2>,
     /// An optimisation is due at the next batch: a closure was accepted (or the walls
@@ -1276,6 +1279,7 @@ impl Mapper {
             scans: Vec::new(),
             pose: Pose2::IDENTITY,
             odometry: OdomPredictor::default(),
+            last_fresh_wheels_s: None,
             last_matched_odom: None,
             pending_closures: false,
             recent_closures: Vec::new(),
@@ -1480,13 +1484,20 @@ impl Mapper {
         } else {
             None
         };
-        let prediction = self.odometry.predict(sample, self.pose, |d| {
-            let d = self.wheel_scale.as_ref().map_or(d, |w| w.apply(d));
-            match turn_share {
-                Some(share) => Pose2::new(share * d.x_m, share * d.y_m, d.yaw_rad),
-                None => d,
-            }
-        });
+        let max_step_m = self
+            .last_fresh_wheels_s
+            .map_or(crate::odometry::MAX_WHEEL_STEP_M, |t0| {
+                crate::odometry::wheel_step_bound_m(time_s - t0)
+            });
+        let prediction = self
+            .odometry
+            .predict_within(sample, self.pose, max_step_m, |d| {
+                let d = self.wheel_scale.as_ref().map_or(d, |w| w.apply(d));
+                match turn_share {
+                    Some(share) => Pose2::new(share * d.x_m, share * d.y_m, d.yaw_rad),
+                    None => d,
+                }
+            });
         let (odom_delta, predicted) = (prediction.step, prediction.pose);
         let before = self.pose;
         if let (None, Some(odom_yaw)) = (self.heading_anchor, self.last_odom_yaw) {
@@ -1888,6 +1899,11 @@ impl Mapper {
         });
         self.odometry
             .settle(odom, self.pose, &prediction, relocalised);
+        // Silent wheels bring their whole travel in their next reading: its time counts from
+        // their last fresh one.
+        if !sample.wheels_silent {
+            self.last_fresh_wheels_s = Some(time_s);
+        }
         if lost {
             self.forget_heading_references();
             self.last_odom_yaw = None;

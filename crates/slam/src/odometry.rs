@@ -23,12 +23,24 @@ const STALL_FOLLOWED_M: f64 = 0.05;
 /// the matcher's noise alone, and the latest is as good a start as the anchor's.
 const STALL_FOLLOWED_RAD: f64 = 0.035;
 
-/// Travel the wheels may report since the reading the last scan settled on, beyond which
-/// it is no motion but a jump of the odometry's own frame (a driver restarted, or a corrupt
+/// How far the wheels may move the pose from one scan's to the next, beyond which it is no
+/// motion but a jump of the odometry's own frame (a driver restarted, or a corrupt
 /// reading that still decoded), metres: no ground robot covers it between two scans. Only
 /// the turn is predicted then, and the matcher finds the pose; taken as motion, a jump of
-/// kilometres grew the map's grids past memory.
+/// kilometres grew the map's grids past memory. [`OdomPredictor::predict_within`] takes a
+/// bound from the time between the scans instead ([`wheel_step_bound_m`]).
 pub const MAX_WHEEL_STEP_M: f64 = 100.0;
+
+/// The fastest a ground robot drives, with a wide margin, metres a second ...
+pub const MAX_WHEEL_SPEED_M_S: f64 = 20.0;
+/// ... and the travel allowed however short the time, metres.
+const MIN_WHEEL_STEP_M: f64 = 1.0;
+
+/// The travel the wheels may report over `dt_s` seconds between two scans before it counts
+/// as a jump of their frame: at most [`MAX_WHEEL_STEP_M`].
+pub fn wheel_step_bound_m(dt_s: f64) -> f64 {
+    (MIN_WHEEL_STEP_M + MAX_WHEEL_SPEED_M_S * dt_s.max(0.0)).min(MAX_WHEEL_STEP_M)
+}
 
 /// The odometry reading as it last changed, and the pose of the scan it first came with.
 #[derive(Clone, Copy, Debug)]
@@ -89,6 +101,18 @@ impl OdomPredictor {
         last: Pose2,
         scale: impl Fn(Pose2) -> Pose2,
     ) -> Prediction {
+        self.predict_within(sample, last, MAX_WHEEL_STEP_M, scale)
+    }
+
+    /// [`predict`](Self::predict), taking wheels that would move the pose more than
+    /// `max_step_m` from the last scan's as a jump of their frame.
+    pub fn predict_within(
+        &self,
+        sample: OdomSample,
+        last: Pose2,
+        max_step_m: f64,
+        scale: impl Fn(Pose2) -> Pose2,
+    ) -> Prediction {
         let odom = sample.pose;
         let Some(a) = self.anchor else {
             return Prediction {
@@ -108,12 +132,6 @@ impl OdomPredictor {
             return self.turn_only(odom, last, false);
         }
         let since = a.odom.inverse() * odom;
-        let jumped = self
-            .last_odom
-            .is_some_and(|l| l.position().distance_m(odom.position()) > MAX_WHEEL_STEP_M);
-        if jumped {
-            return self.turn_only(odom, last, false);
-        }
         let followed = a.pose.inverse() * last;
         let stood_still = followed.x_m.hypot(followed.y_m) < STALL_FOLLOWED_M
             && followed.yaw_rad.abs() < STALL_FOLLOWED_RAD;
@@ -122,6 +140,9 @@ impl OdomPredictor {
         } else {
             (last.inverse() * (a.pose * since), a.pose * scale(since))
         };
+        if pose.position().distance_m(last.position()) > max_step_m {
+            return self.turn_only(odom, last, false);
+        }
         Prediction {
             step,
             pose,
