@@ -25,6 +25,25 @@ pub enum Trinary {
 /// (`p = 254 / 255`), and no other cell is written with it.
 pub const HAZARD_PIXEL: u8 = 1;
 
+/// The finest and coarsest cells a map read from outside may claim, metres (ROS maps use 1 cm
+/// to 1 m, the rovers' are 5 cm): a corrupt field that still parses (1e308) would ask for
+/// more cells than memory holds.
+pub const MIN_RESOLUTION_M: f64 = 1e-3;
+/// See [`MIN_RESOLUTION_M`].
+pub const MAX_RESOLUTION_M: f64 = 100.0;
+/// The farthest such a map's origin may lie from its frame's, metres.
+pub const MAX_ORIGIN_M: f64 = 1e6;
+
+/// Whether `resolution_m` lies within [`MIN_RESOLUTION_M`] ..= [`MAX_RESOLUTION_M`].
+pub fn plausible_resolution(resolution_m: f64) -> bool {
+    (MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&resolution_m)
+}
+
+/// Whether an origin at (`x_m`, `y_m`) lies within [`MAX_ORIGIN_M`] of its frame's.
+pub fn plausible_origin(x_m: f64, y_m: f64) -> bool {
+    x_m.abs() <= MAX_ORIGIN_M && y_m.abs() <= MAX_ORIGIN_M
+}
+
 /// Writes `stem.pgm` and `stem.yaml` into `dir`; returns the YAML path.
 pub fn write(
     grid: &Grid<Trinary>,

@@ -8,17 +8,12 @@
 //! applying the changes. Origins stay on the same lattice of cells as the map grows, so
 //! re-laying is a shift by whole cells.
 
+use realms_core::map_server::{plausible_origin, plausible_resolution};
 use realms_core::{Grid, GridGeometry};
 use std::borrow::Cow;
 
 /// The unknown cell value (ROS `nav_msgs/OccupancyGrid`).
 pub const UNKNOWN: i8 = -1;
-/// The finest and coarsest cells an update may carry, metres (the rovers' are 5 cm).
-pub const MIN_RESOLUTION_M: f64 = 1e-3;
-/// See [`MIN_RESOLUTION_M`].
-pub const MAX_RESOLUTION_M: f64 = 100.0;
-/// The farthest an update's origin may lie from its map frame's, metres.
-pub const MAX_ORIGIN_M: f64 = 1e6;
 
 pub use realms_core::msgs::{MapUpdate, Run};
 
@@ -229,10 +224,7 @@ impl Decoder {
             .ok_or_else(|| malformed("size overflows"))?;
         // A corrupt field that still decodes: cells of 1e-300 or 1e300 m, or a map 1e300 m
         // out, would send the merges that read the map past their grids.
-        let plausible = (MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&g.resolution_m)
-            && g.origin.x_m.abs() <= MAX_ORIGIN_M
-            && g.origin.y_m.abs() <= MAX_ORIGIN_M;
-        if !plausible {
+        if !(plausible_resolution(g.resolution_m) && plausible_origin(g.origin.x_m, g.origin.y_m)) {
             return Err(malformed(
                 "resolution outside 1 mm to 100 m, or origin beyond 1e6 m",
             ));

@@ -521,8 +521,17 @@ impl Navigator {
         now >= self.next_map || self.replan_now
     }
 
-    /// The operator's goal (pre-empts exploration), or `None` to cancel it.
-    pub fn set_operator_goal(&mut self, now: Time, goal: Option<Point2>) {
+    /// The operator's goal (pre-empts exploration), or `None` to cancel it. Returns whether
+    /// it was taken: a goal whose coordinates are not numbers is refused with an event.
+    pub fn set_operator_goal(&mut self, now: Time, goal: Option<Point2>) -> bool {
+        // A goal at no place on any map (a corrupt command) is refused, and said so.
+        if goal.is_some_and(|p| !(p.x_m.is_finite() && p.y_m.is_finite())) {
+            self.event(
+                now,
+                "operator goal refused: its coordinates are not numbers".into(),
+            );
+            return false;
+        }
         self.operator_goal = goal;
         self.done = false;
         // A lost rover's drive to find itself goes on: the goal is taken once it knows
@@ -533,6 +542,7 @@ impl Navigator {
             self.drop_goal(now, "operator goal changed", false);
         }
         self.replan_now = true;
+        true
     }
 
     /// A peer said where it is going (`None`: nowhere).

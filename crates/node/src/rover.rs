@@ -148,6 +148,15 @@ impl RoverNode {
         self.rejected_inputs
     }
 
+    /// Hands an operator's goal to the navigator; one it refuses is counted and said at
+    /// once, not at the next status due.
+    fn take_operator_goal(&mut self, now: Time, target: Option<realms_core::Point2>) {
+        if !self.navigator.set_operator_goal(now, target) {
+            self.rejected_inputs += 1;
+            self.publish_status(now);
+        }
+    }
+
     /// The rover's on-board SLAM.
     pub fn mapping(&self) -> &Mapping {
         &self.mapping
@@ -486,17 +495,7 @@ impl Node for RoverNode {
                 clock.time(spent, || mapping.on_depth(cloud));
                 self.guard.on_depth(now, cloud);
             }
-            Message::NavGoal(goal) => match goal.target {
-                // A goal at no place on any map (a corrupt command): refused, and said so.
-                Some(p) if !(p.x_m.is_finite() && p.y_m.is_finite()) => {
-                    self.rejected_inputs += 1;
-                    self.reason = "operator goal refused: its coordinates are not numbers".into();
-                    // Said now, not at the next status due.
-                    self.last_status = None;
-                    self.publish_status(now);
-                }
-                target => self.navigator.set_operator_goal(now, target),
-            },
+            Message::NavGoal(goal) => self.take_operator_goal(now, goal.target),
             Message::MapRequest(_) => self.mapping.request_snapshot(),
             _ => {}
         }

@@ -391,7 +391,7 @@ mod tests {
             (0.05, 1e300),
             (0.05, -1e18),
             (1e-9, 1e9),
-            // Odd but possible: taken in and merged.
+            // Odd but possible: taken in, and the merge runs on them.
             (0.5, 1e5),
             (0.001, -9e5),
         ] {

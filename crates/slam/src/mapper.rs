@@ -2253,11 +2253,11 @@ impl Mapper {
                 walls.set_references(self.pose.yaw_rad, &points);
             } else if let Some((yaw_rad, information)) = walls.measure(self.pose.yaw_rad, &points) {
                 let off_sigmas =
-                    normalize_angle_rad(self.pose.yaw_rad - yaw_rad).abs() * information.sqrt();
+                    || normalize_angle_rad(self.pose.yaw_rad - yaw_rad).abs() * information.sqrt();
                 if self
                     .cfg
                     .optimize_on_wall_heading_sigmas
-                    .is_some_and(|k| off_sigmas > k)
+                    .is_some_and(|k| off_sigmas() > k)
                 {
                     self.pending_closures = true;
                 }
@@ -3633,6 +3633,16 @@ mod tests {
         );
     }
 
+    /// The mapper as the sparse-hall tests drive it: the rovers' 12 m reach, one grid
+    /// level, keyframes 0.3 m apart.
+    fn sparse_hall_config() -> MapperConfig {
+        let mut cfg = MapperConfig::default();
+        cfg.frontend.max_range_m = 12.0;
+        cfg.frontend.levels = 1;
+        cfg.keyframe_translation_m = 0.3;
+        cfg
+    }
+
     /// A noise-free 1-degree, 12 m scan from `pose` in a sparse hall like the simulated
     /// one: two walls 9-10 m off, a 2 m square lander near by and a few round boulders.
     fn sparse_hall_scan(pose: Pose2) -> Vec<Point2> {
@@ -3903,10 +3913,7 @@ mod tests {
     /// The heading error after 40 scans whose matches each stray 0.3 degrees from the
     /// gyro's, the rovers' gyro and gate set, then `configure` applied, degrees.
     fn heading_error_with_matches_straying_under(configure: impl FnOnce(&mut MapperConfig)) -> f64 {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.levels = 1;
-        cfg.keyframe_translation_m = 0.3;
+        let mut cfg = sparse_hall_config();
         cfg.gyro_heading = Some(GyroHeading {
             rad_per_sqrt_s: 1e-3,
             bias_rad_s: 2e-4,
@@ -4022,10 +4029,7 @@ mod tests {
     fn keyframes_that_see_the_start_walls_measure_their_heading_against_them() {
         // Driving east 3 m off the south wall, tracked from odometry that turns 0.2
         // degrees a scan the rover does not: each keyframe's walls say where it truly faces.
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.levels = 1;
-        cfg.keyframe_translation_m = 0.3;
+        let mut cfg = sparse_hall_config();
         cfg.wall_headings = Some(WallHeadingConfig::default());
         let mut mapper = Mapper::new(cfg);
         for k in 0..60 {
@@ -4054,10 +4058,7 @@ mod tests {
     /// the third, as if tracking had carried a wrong heading into the submaps, and the
     /// drive goes on. Returns the tracked heading's error at the end, degrees.
     fn heading_error_after_a_turned_stretch(optimize_on_sigmas: Option<f64>) -> f64 {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.levels = 1;
-        cfg.keyframe_translation_m = 0.3;
+        let mut cfg = sparse_hall_config();
         cfg.loop_candidates = 0;
         // Small submaps: by the turn, those still being built start after it.
         cfg.submap_keyframes = 6;
@@ -4098,11 +4099,7 @@ mod tests {
         // Driving east 3 m off the sparse hall's south wall, the odometry's frame jumps
         // 1e5 m at the twentieth scan (a driver restarted, or a corrupt reading) and goes
         // on from there.
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.levels = 1;
-        cfg.keyframe_translation_m = 0.3;
-        let mut mapper = Mapper::new(cfg);
+        let mut mapper = Mapper::new(sparse_hall_config());
         let jump = Pose2::new(1e5, -1e5, 0.0);
         let mut tracked = Pose2::default();
         let mut truth = Pose2::default();
@@ -4125,10 +4122,7 @@ mod tests {
     /// view, nothing pins the pose along it); returns the largest position error of the
     /// tracked pose, metres.
     fn worst_error_driving_with_exact_odometry(refine: Option<NdtConfig>) -> f64 {
-        let mut cfg = MapperConfig::default();
-        cfg.frontend.max_range_m = 12.0;
-        cfg.frontend.levels = 1;
-        cfg.keyframe_translation_m = 0.3;
+        let mut cfg = sparse_hall_config();
         cfg.ndt_refine = refine;
         let mut mapper = Mapper::new(cfg);
         let mut worst: f64 = 0.0;

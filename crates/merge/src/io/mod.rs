@@ -13,7 +13,9 @@ pub mod yaml;
 
 use crate::map::{Map, MapCell};
 use realms_core::grid::GridExportError;
-use realms_core::map_server::Trinary;
+use realms_core::map_server::{
+    MAX_RESOLUTION_M, MIN_RESOLUTION_M, Trinary, plausible_origin, plausible_resolution,
+};
 use realms_core::{Grid, GridGeometry, Point2};
 use std::path::{Path, PathBuf};
 use yaml::Value;
@@ -61,13 +63,6 @@ pub enum MapFileError {
     #[error("cannot write the map")]
     Write(#[from] GridExportError),
 }
-
-/// The finest and coarsest cells a map may claim, metres (ROS maps use 1 cm to 1 m).
-pub const MIN_RESOLUTION_M: f64 = 1e-3;
-/// See [`MIN_RESOLUTION_M`].
-pub const MAX_RESOLUTION_M: f64 = 100.0;
-/// The farthest a map's origin may lie from its frame's, metres.
-pub const MAX_ORIGIN_M: f64 = 1e6;
 
 /// The fields a map file may have: map_server's, and realms' `hazard_value`.
 const KNOWN_FIELDS: [&str; 8] = [
@@ -195,7 +190,7 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
     let (line, resolution_m) = f.required_number("resolution", "metres per cell")?;
     // A corrupt digit string still parses: 1e308 m a cell would ask the merge for more
     // cells than memory holds.
-    if !(MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&resolution_m) {
+    if !plausible_resolution(resolution_m) {
         return Err(f.error(
             "resolution",
             format!(
@@ -221,11 +216,7 @@ pub fn read_metadata(yaml_path: &Path) -> Result<MapMetadata, MapFileError> {
                 .map(|s| s.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
                 .collect();
             match nums.as_slice() {
-                [Some(x), Some(y), Some(yaw)]
-                    if x.abs() <= MAX_ORIGIN_M && y.abs() <= MAX_ORIGIN_M =>
-                {
-                    [*x, *y, *yaw]
-                }
+                [Some(x), Some(y), Some(yaw)] if plausible_origin(*x, *y) => [*x, *y, *yaw],
                 _ => {
                     return Err(f.error(
                         "origin",
