@@ -652,6 +652,60 @@ mod tests {
     }
 
     #[test]
+    fn a_rover_whose_wheels_count_from_800_km_out_maps_where_it_is() {
+        // Odometry whose frame starts far from zero (a driver that counts on from an
+        // earlier run, or a fused source in a projected grid), and a map asked for before
+        // the first scan: the map's placeholder once stretched to the first scan, 800 km
+        // off, and the rover ran out of memory. It drives 1 m along its 6 m x 4 m room,
+        // the wheels falling silent for its first 3 s.
+        let mut node = node();
+        let id = node.id();
+        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        let start = (8e5, 3e5);
+        for k in 1..=600 {
+            let t = at(k);
+            node.on_tick(t);
+            let _ = node.mapping.map(t);
+            let dx = (k as f64 * 0.002).min(1.0);
+            if k > 30 {
+                let mut odom = Odometry::default();
+                odom.header.stamp = t;
+                odom.pose.pose.position.x = start.0 + dx;
+                odom.pose.pose.position.y = start.1;
+                odom.pose.pose.orientation = Quaternion::IDENTITY;
+                node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+            }
+            let mut imu = Imu::default();
+            imu.header.stamp = t;
+            imu.linear_acceleration.z = 9.81;
+            node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            let ranges = (0..360)
+                .map(|i| {
+                    let a = -std::f64::consts::PI + i as f64 * std::f64::consts::TAU / 360.0;
+                    let (s, c) = a.sin_cos();
+                    let ahead = if c > 0.0 { 3.0 - dx } else { 3.0 + dx };
+                    (ahead / c.abs()).min(2.0 / s.abs()) as f32
+                })
+                .collect();
+            let scan = crate::test_scan(t, ranges);
+            node.on_message(t, &id.topic("scan"), &Message::LaserScan(scan));
+            node.drain_outbox();
+        }
+        let pose = node.mapping().pose();
+        assert!(
+            (pose.x_m - start.0 - 1.0).abs() < 0.05 && (pose.y_m - start.1).abs() < 0.05,
+            "{pose:?}"
+        );
+        let map = node.mapping.map(at(601));
+        let (w, h) = (map.info.width as f64, map.info.height as f64);
+        assert!(w * h < 400.0 * 400.0, "{:?}", map.info);
+        // The room's walls, 2 m from the rover's path on either side, lie on the map.
+        let origin = &map.info.origin.position;
+        assert!(origin.x < start.0 - 2.0 && origin.x + w * 0.05 > start.0 + 4.0);
+        assert!(origin.y < start.1 - 2.0 && origin.y + h * 0.05 > start.1 + 2.0);
+    }
+
+    #[test]
     fn wheels_faster_than_any_robot_and_odd_but_possible_readings_never_exhaust_the_rover() {
         // Twelve rovers fed 20 s of readings each within what `plausible` passes, from a
         // seeded generator: wheel steps of up to 900 km every 50 ms (each a jump no robot

@@ -17,8 +17,8 @@
 //! replaced by the exact drawing when the submap is finished.
 
 use crate::occupancy::{
-    CellState, Lattice, MissRule, OccupancyGrid, beams_box, growth, regrow, trace_beams,
-    updated_log_odds,
+    CellState, Lattice, MissRule, OccupancyGrid, beams_box, corner_before, far_off, growth, regrow,
+    trace_beams, updated_log_odds,
 };
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
 
@@ -64,6 +64,11 @@ pub struct Assembly {
     /// [`Assembly::states`]' scratch: each cell's sum with the active submaps added, where
     /// they reach (NaN elsewhere, between calls everywhere).
     with_active: Vec<f32>,
+    /// The grid is only the unknown cells put at the origin when a map was asked for before
+    /// anything was drawn. It moves to where content first lands if that lies far off
+    /// (`occupancy::MAX_STRETCH_M`) instead of stretching to it: a rover whose wheels count
+    /// from 800 km out would otherwise grow a grid spanning the 800 km.
+    placeholder: bool,
 }
 
 /// What a submap cell's log-odds contribute to an assembly's sum.
@@ -240,6 +245,7 @@ impl Assembly {
             live: None,
             summed: None,
             with_active: Vec::new(),
+            placeholder: false,
         }
     }
 
@@ -260,11 +266,16 @@ impl Assembly {
     /// Grows the grid so the world box `[min, max]` lies inside it.
     fn ensure(&mut self, min: Point2, max: Point2) {
         let r = self.resolution_m;
-        if self.width == 0 {
-            self.origin = Point2::new(
-                (min.x_m / r).floor() * r - GROW_MARGIN_CELLS as f64 * r,
-                (min.y_m / r).floor() * r - GROW_MARGIN_CELLS as f64 * r,
-            );
+        // The placeholder holds nothing (no evidence, unknown): moved, it is still that.
+        // Content near it grows it as any grid.
+        let moved = std::mem::take(&mut self.placeholder)
+            && far_off(self.origin, r, self.width, self.height, min, max);
+        if self.width == 0 || moved {
+            self.origin = corner_before(min, r, GROW_MARGIN_CELLS);
+        }
+        if moved && let Some(live) = &mut self.live {
+            // A new geometry: every tile counts as changed.
+            live.tile_version.fill(live.version);
         }
         let (w, h) = (self.width, self.height);
         let Some(g) = growth(self.origin, r, w, h, min, max, GROW_MARGIN_CELLS) else {
@@ -564,8 +575,9 @@ impl Assembly {
             self.grow_for(grid, *pose);
         }
         if self.width == 0 {
-            // Nothing drawn yet: one unknown cell.
+            // Nothing drawn yet: one unknown cell, until something is.
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
+            self.placeholder = true;
         }
         if self.live.is_none() {
             self.live = Some(Live::new(
@@ -623,8 +635,9 @@ impl Assembly {
             self.grow_for(grid, *pose);
         }
         if self.width == 0 {
-            // Nothing drawn yet: one unknown cell.
+            // Nothing drawn yet: one unknown cell, until something is.
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
+            self.placeholder = true;
         }
         let occupied_above = self.occupied_above;
         let sum = &self.sum;
@@ -773,6 +786,55 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_map_asked_for_before_anything_was_drawn_moves_to_where_content_lands() {
+        // A rover whose wheels count from 800 km out: its submaps lie there, and the few
+        // unknown cells the live map and the states showed before them must not stretch to
+        // them (a grid 800 km across). The room is drawn there too: an empty occupancy grid
+        // moves to its first scan the same way.
+        let far = Point2::new(8e5, 3e5);
+        let sub = room(far);
+        let mut live = Assembly::new(0.05);
+        let placeholder = live.live_states(&[]).states;
+        assert!(placeholder.iter().all(|s| *s == CellState::Unknown));
+        let view = live.live_states(&[(0, &sub, Pose2::IDENTITY)]);
+        let g = view.geometry;
+        assert!(g.width * g.height < 300 * 300, "{g:?}");
+        // The room's walls, drawn where they lie: 360 beams end in some 220 of the 320
+        // cells along its 16 m of wall.
+        let walls = |g: &GridGeometry, states: &[CellState]| {
+            let mut n = 0;
+            for (i, s) in states.iter().enumerate() {
+                if *s == CellState::Occupied {
+                    let p = g.cell_center(realms_core::Cell {
+                        x: i % g.width,
+                        y: i / g.width,
+                    });
+                    assert!((p.x_m - far.x_m).abs() < 2.1 && (p.y_m - far.y_m).abs() < 2.1);
+                    n += 1;
+                }
+            }
+            n
+        };
+        let n = walls(&g, view.states);
+        assert!(n > 200, "{n}");
+        let mut states = Assembly::new(0.05);
+        let placeholder = states.states(&[]);
+        assert!(placeholder.cells().iter().all(|s| *s == CellState::Unknown));
+        states.place(0, &sub, Pose2::IDENTITY);
+        let whole = states.states(&[]);
+        assert!(whole.cells().len() < 300 * 300, "{:?}", whole.geometry());
+        assert!(walls(whole.geometry(), whole.cells()) > 200);
+        // Content 30 m off, as a rover starts in the default arena, still stretches the
+        // grid to the zero: the maps keep the geometry the missions were measured with.
+        let mut near = Assembly::new(0.05);
+        near.live_states(&[]);
+        let g = near
+            .live_states(&[(0, &room(Point2::new(0.0, 0.0)), Pose2::new(30.0, 0.0, 0.0))])
+            .geometry;
+        assert!(g.origin.x_m <= 0.0 && g.origin.x_m + g.width_m() >= 32.0, "{g:?}");
     }
 
     #[test]
