@@ -834,7 +834,10 @@ mod tests {
         let g = near
             .live_states(&[(0, &room(Point2::new(0.0, 0.0)), Pose2::new(30.0, 0.0, 0.0))])
             .geometry;
-        assert!(g.origin.x_m <= 0.0 && g.origin.x_m + g.width_m() >= 32.0, "{g:?}");
+        assert!(
+            g.origin.x_m <= 0.0 && g.origin.x_m + g.width_m() >= 32.0,
+            "{g:?}"
+        );
     }
 
     #[test]
