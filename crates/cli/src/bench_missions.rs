@@ -246,9 +246,10 @@ fn nav_variant(name: &str) -> Result<NavigationChange> {
                 ..RevisitConfig::default()
             })
         }),
+        "plan-margin-10m" => Ok(|n| n.plan_margin_m = Some(10.0)),
         _ => bail!(
             "unknown navigation variant `{name}`; known: unjudged-must-pay, endgame-must-pay, \
-             revisit, revisit-0.4m (several joined with `+`)"
+             revisit, revisit-0.4m, plan-margin-10m (several joined with `+`)"
         ),
     }
 }

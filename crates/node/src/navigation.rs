@@ -78,6 +78,11 @@ pub struct NavigationConfig {
     /// the scraps of unjudged ground that turn up afterwards (a wall's foot after a closure
     /// redrew the map) are left unless they are near. Off in the rovers' setup.
     pub endgame_unjudged_must_pay: bool,
+    /// Unknown ground the planner may plan through beyond the map's edge, metres: the map is
+    /// padded by this much unknown on every side before planning. `None` plans within the
+    /// map's grid only, whose edge lies a few metres past what the rover saw (and, for a
+    /// rover starting near its frame's zero, reaches back to it). Off in the rovers' setup.
+    pub plan_margin_m: Option<f64>,
 }
 
 /// When a rover breaks off exploring to tie its pose back to ground it mapped while it knew
@@ -136,6 +141,7 @@ impl NavigationConfig {
             stall_growth_m2: 2.0,
             revisit: None,
             endgame_unjudged_must_pay: false,
+            plan_margin_m: None,
         }
     }
 }
@@ -708,6 +714,14 @@ impl Navigator {
         self.next_map = now + self.cfg.replan_period;
         self.replan_now = false;
         self.bumps.retain(|(_, t)| now - *t < BUMP_LIFETIME);
+        let padded;
+        let map = match self.cfg.plan_margin_m {
+            Some(margin_m) if margin_m > 0.0 => {
+                padded = padded_with_unknown(map, margin_m);
+                &padded
+            }
+            _ => map,
+        };
         let bumped;
         let map = if self.bumps.is_empty() {
             map
@@ -1144,10 +1158,55 @@ fn seen_by(areas: &[&ExploredArea], map: &Grid<i8>) -> Option<Vec<bool>> {
     Some(seen)
 }
 
+/// `map` with `margin_m` of unknown cells (-1) added on every side, on the same lattice.
+fn padded_with_unknown(map: &Grid<i8>, margin_m: f64) -> Grid<i8> {
+    let g = *map.geometry();
+    let n = (margin_m / g.resolution_m).ceil() as usize;
+    let geometry = GridGeometry {
+        width: g.width + 2 * n,
+        height: g.height + 2 * n,
+        resolution_m: g.resolution_m,
+        origin: Point2::new(
+            g.origin.x_m - n as f64 * g.resolution_m,
+            g.origin.y_m - n as f64 * g.resolution_m,
+        ),
+    };
+    let mut cells = vec![-1i8; geometry.width * geometry.height];
+    for (y, row) in map.cells().chunks_exact(g.width.max(1)).enumerate() {
+        let start = (y + n) * geometry.width + n;
+        cells[start..start + g.width].copy_from_slice(row);
+    }
+    Grid::from_cells(geometry, cells).expect("one cell per place")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use realms_core::GridGeometry;
+
+    #[test]
+    fn a_map_padded_for_planning_keeps_every_cell_where_it_lies() {
+        let g = GridGeometry {
+            width: 3,
+            height: 2,
+            resolution_m: 0.1,
+            origin: Point2::new(1.0, -2.0),
+        };
+        let map = Grid::from_cells(g, vec![0, 100, 90, 1, -1, 0]).expect("6 cells");
+        // 0.25 m of margin is 3 cells of 0.1 m.
+        let padded = padded_with_unknown(&map, 0.25);
+        let p = padded.geometry();
+        assert_eq!((p.width, p.height), (9, 8));
+        for y in 0..8 {
+            for x in 0..9 {
+                let centre = p.cell_center(Cell { x, y });
+                let want = g
+                    .world_to_cell(centre)
+                    .map_or(-1, |c| map.cells()[c.y * 3 + c.x]);
+                assert_eq!(padded.cells()[y * 9 + x], want, "({x}, {y})");
+            }
+        }
+    }
 
     /// A 10 x 10 m room (walls round it), known in its west half, unknown in its east half;
     /// `walled` adds a closed box of wall around (2.5, 8.5).
