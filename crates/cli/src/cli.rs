@@ -251,7 +251,8 @@ pub struct BenchMissionsArgs {
     /// beside ground only the lidar saw is driven to only where it is worth the drive),
     /// `revisit` (a rover whose position grew uncertain past 0.25 m drives back to ground it
     /// mapped while it knew where it was, to close the loop), `revisit-0.4m` (past 0.4 m),
-    /// `endgame-must-pay` (as `unjudged-must-pay`, once a rover has found no frontier left);
+    /// `endgame-must-pay` (as `unjudged-must-pay`, once a rover has found no frontier left),
+    /// `plan-margin-10m` (the planner may plan through 10 m of unknown past the map's edge);
     /// join several with `+`, e.g. `revisit+endgame-must-pay`.
     #[arg(long)]
     pub nav_variant: Option<String>,
