@@ -620,6 +620,24 @@ mod tests {
         crate::test_scan(t, ranges)
     }
 
+    /// Feeds the node a level IMU sample at `t` and, if given, wheels reading the position
+    /// `wheels` (x, y) heading along x.
+    fn wheels_and_gyro(node: &mut RoverNode, t: Time, wheels: Option<(f64, f64)>) {
+        let id = node.id();
+        if let Some((x, y)) = wheels {
+            let mut odom = Odometry::default();
+            odom.header.stamp = t;
+            odom.pose.pose.position.x = x;
+            odom.pose.pose.position.y = y;
+            odom.pose.pose.orientation = Quaternion::IDENTITY;
+            node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+        }
+        let mut imu = Imu::default();
+        imu.header.stamp = t;
+        imu.linear_acceleration.z = 9.81;
+        node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+    }
+
     /// Feeds the node 0.1 s of standing still ending at `t`, with a scan if `lidar`; returns
     /// the speed and yaw rate it commanded last and the navigation statuses it sent.
     fn step(
@@ -628,14 +646,7 @@ mod tests {
         lidar: Option<bool>,
     ) -> (Option<(f64, f64)>, Vec<NavStatus>) {
         let id = node.id();
-        let mut odom = Odometry::default();
-        odom.header.stamp = t;
-        odom.pose.pose.orientation = Quaternion::IDENTITY;
-        node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
-        let mut imu = Imu::default();
-        imu.header.stamp = t;
-        imu.linear_acceleration.z = 9.81;
-        node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+        wheels_and_gyro(node, t, Some((0.0, 0.0)));
         if let Some(walls) = lidar {
             let topic = id.topic("scan");
             node.on_message(t, &topic, &Message::LaserScan(scan(t, walls)));
@@ -667,18 +678,7 @@ mod tests {
             node.on_tick(t);
             let _ = node.mapping.map(t);
             let dx = (k as f64 * 0.002).min(1.0);
-            if k > 30 {
-                let mut odom = Odometry::default();
-                odom.header.stamp = t;
-                odom.pose.pose.position.x = start.0 + dx;
-                odom.pose.pose.position.y = start.1;
-                odom.pose.pose.orientation = Quaternion::IDENTITY;
-                node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
-            }
-            let mut imu = Imu::default();
-            imu.header.stamp = t;
-            imu.linear_acceleration.z = 9.81;
-            node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            wheels_and_gyro(&mut node, t, (k > 30).then_some((start.0 + dx, start.1)));
             let ranges = (0..360)
                 .map(|i| {
                     let a = -std::f64::consts::PI + i as f64 * std::f64::consts::TAU / 360.0;

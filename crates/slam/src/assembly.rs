@@ -17,7 +17,7 @@
 //! replaced by the exact drawing when the submap is finished.
 
 use crate::occupancy::{
-    CellState, Lattice, MissRule, OccupancyGrid, apart, beams_box, corner_before, growth, regrow,
+    CellState, Lattice, MissRule, OccupancyGrid, beams_box, corner_before, far_off, growth, regrow,
     trace_beams, updated_log_odds,
 };
 use realms_core::{Grid, GridGeometry, Point2, Pose2};
@@ -65,9 +65,9 @@ pub struct Assembly {
     /// they reach (NaN elsewhere, between calls everywhere).
     with_active: Vec<f32>,
     /// The grid is only the unknown cells put at the origin when a map was asked for before
-    /// anything was drawn. It moves to where content first lands instead of stretching to
-    /// it: a rover's map holds what it saw, not the way to its frame's zero (a rover whose
-    /// wheels count from 800 km out would otherwise grow a grid spanning the 800 km).
+    /// anything was drawn. It moves to where content first lands if that lies far off
+    /// (`occupancy::MAX_STRETCH_M`) instead of stretching to it: a rover whose wheels count
+    /// from 800 km out would otherwise grow a grid spanning the 800 km.
     placeholder: bool,
 }
 
@@ -267,9 +267,8 @@ impl Assembly {
     fn ensure(&mut self, min: Point2, max: Point2) {
         let r = self.resolution_m;
         // The placeholder holds nothing (no evidence, unknown): moved, it is still that.
-        // Content that reaches it grows it as any grid.
-        let moved = std::mem::take(&mut self.placeholder)
-            && apart(self.origin, r, self.width, self.height, min, max);
+        // Content near it grows it as any grid.
+        let moved = std::mem::take(&mut self.placeholder) && far_off(&self.geometry(), min, max);
         if self.width == 0 || moved {
             self.origin = corner_before(min, r, GROW_MARGIN_CELLS);
         }
@@ -827,20 +826,16 @@ mod tests {
         let whole = states.states(&[]);
         assert!(whole.cells().len() < 300 * 300, "{:?}", whole.geometry());
         assert!(walls(whole.geometry(), whole.cells()) > 200);
-        // Content 30 m off, as a rover starts in the default arena, moves it too; content
-        // that reaches it grows it as any grid.
-        let placed_at = |x_m: f64| {
-            let mut asm = Assembly::new(0.05);
-            asm.live_states(&[]);
-            let room = room(Point2::new(0.0, 0.0));
-            asm.live_states(&[(0, &room, Pose2::new(x_m, 0.0, 0.0))])
-                .geometry
-        };
-        let g = placed_at(30.0);
-        assert!(g.origin.x_m > 20.0 && g.width_m() < 20.0, "{g:?}");
-        let g = placed_at(1.0);
+        // Content 30 m off, as a rover starts in the default arena, still stretches the
+        // grid to the zero: the maps keep the geometry the missions were measured with.
+        let mut near = Assembly::new(0.05);
+        near.live_states(&[]);
+        let room = room(Point2::new(0.0, 0.0));
+        let g = near
+            .live_states(&[(0, &room, Pose2::new(30.0, 0.0, 0.0))])
+            .geometry;
         assert!(
-            g.origin.x_m < -3.0 && g.origin.x_m + g.width_m() > 3.0,
+            g.origin.x_m <= 0.0 && g.origin.x_m + g.width_m() >= 32.0,
             "{g:?}"
         );
     }

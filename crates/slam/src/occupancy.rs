@@ -370,10 +370,10 @@ impl OccupancyGrid {
         // Updates index every cell.
         self.make_whole();
         let (w, h) = (self.width, self.height);
-        if self.content.is_none() && apart(self.origin, self.resolution_m, w, h, min, max) {
-            // Nothing written yet, and the first content lies off the grid: the empty grid
-            // moves to it instead of stretching to it (content 800 km from the world's
-            // origin would otherwise ask for a grid 800 km across).
+        if self.content.is_none() && far_off(&self.geometry(), min, max) {
+            // Nothing written yet, and the first content lies far off: the empty grid moves
+            // to it instead of stretching to it (content 800 km from the world's origin
+            // would otherwise ask for a grid 800 km across).
             self.origin = corner_before(min, self.resolution_m, GROW_MARGIN_CELLS);
         }
         let Some(g) = growth(
@@ -1127,20 +1127,20 @@ fn walk(from: (i64, i64), (ex, ey): (i64, i64), mut visit: impl FnMut(i64, i64))
     }
 }
 
-/// Whether the world box `[min, max]` lies wholly off a `width` x `height` grid of `r`-metre
-/// cells with its corner at `origin`.
-pub(crate) fn apart(
-    origin: Point2,
-    r: f64,
-    width: usize,
-    height: usize,
-    min: Point2,
-    max: Point2,
-) -> bool {
-    max.x_m < origin.x_m
-        || max.y_m < origin.y_m
-        || min.x_m >= origin.x_m + width as f64 * r
-        || min.y_m >= origin.y_m + height as f64 * r
+/// How far off an empty grid its first content may lie and the grid still stretch to it,
+/// metres; farther, the grid moves to it instead. 100 m of 5 cm cells is 2,000 cells a side,
+/// while a wheel frame that starts 800 km out would ask for 16 million. Within it the grids
+/// keep the geometry they always had (a rover's maps stretch to the frame's zero): moving
+/// them too changed every default mission and gained nothing over 48 of them (BENCHMARKS.md,
+/// ninety-fourth session).
+pub(crate) const MAX_STRETCH_M: f64 = 100.0;
+
+/// Whether the world box `[min, max]` lies more than [`MAX_STRETCH_M`] off the grid `g`
+/// along either axis.
+pub(crate) fn far_off(g: &GridGeometry, min: Point2, max: Point2) -> bool {
+    let gap_x = (g.origin.x_m - max.x_m).max(min.x_m - (g.origin.x_m + g.width_m()));
+    let gap_y = (g.origin.y_m - max.y_m).max(min.y_m - (g.origin.y_m + g.height_m()));
+    gap_x.max(gap_y) > MAX_STRETCH_M
 }
 
 /// The corner of a grid of `r`-metre cells (on the lattice of the world origin) that holds
