@@ -574,7 +574,8 @@ impl Assembly {
             self.grow_for(grid, *pose);
         }
         if self.width == 0 {
-            // Nothing drawn yet: one unknown cell, until something is.
+            // Nothing drawn yet: a patch of unknown cells about the frame's zero, until
+            // something is.
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
             self.placeholder = true;
         }
@@ -634,7 +635,8 @@ impl Assembly {
             self.grow_for(grid, *pose);
         }
         if self.width == 0 {
-            // Nothing drawn yet: one unknown cell, until something is.
+            // Nothing drawn yet: a patch of unknown cells about the frame's zero, until
+            // something is.
             self.ensure(Point2::new(0.0, 0.0), Point2::new(0.0, 0.0));
             self.placeholder = true;
         }
