@@ -736,11 +736,8 @@ impl Mapping {
                 // The wheel motion in the wheel frame, replayed along the gyro's heading. A
                 // step no robot drives in the time since the last reading is a jump of the
                 // wheels' own frame (a driver restarted), and no motion.
-                let dt_s = if stamp > *t_prev {
-                    (stamp - *t_prev).as_secs_f64()
-                } else {
-                    0.0
-                };
+                // A stale stamp counts as no time (the bound takes none below zero).
+                let dt_s = (stamp - *t_prev).as_secs_f64();
                 let step = Some(prev.inverse() * wheel)
                     .filter(|s| s.x_m.hypot(s.y_m) <= wheel_step_bound_m(dt_s))
                     .unwrap_or(Pose2::IDENTITY);

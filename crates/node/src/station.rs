@@ -455,7 +455,9 @@ mod tests {
                 .merged_from_transforms()
                 .expect("the reference is drawn");
             // A map placed where no merge puts one is left out: the reference alone.
-            let alone = x_m.abs() > 1e4 || !x_m.is_finite() || !yaw_rad.is_finite();
+            let alone = x_m.abs() > crate::lander_merge::MAX_TRANSFORM_M
+                || !x_m.is_finite()
+                || !yaw_rad.is_finite();
             let (cells, reference) = (drawn.geometry().len(), map.geometry().len());
             if alone {
                 assert_eq!(cells, reference, "{x_m} {yaw_rad}");
