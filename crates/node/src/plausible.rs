@@ -11,6 +11,7 @@
 
 use realms_core::geometry::{Quaternion, Vec3};
 use realms_core::msgs::{Imu, LaserScan, Message, Odometry, PointCloud};
+use realms_core::{Duration, Time};
 
 /// The farthest a wheel pose may lie from where the wheels started, metres: a rover's
 /// odometry over a mission spans kilometres at most.
@@ -23,6 +24,28 @@ pub const MAX_ACCELERATION_M_S2: f64 = 1e4;
 pub const MAX_LIDAR_RANGE_M: f32 = 1e4;
 /// The farthest a depth point may lie from the camera, metres.
 pub const MAX_DEPTH_POINT_M: f32 = 1e4;
+
+/// The furthest a sensor message's stamp may lie from the rover's own clock, either way. Its
+/// drivers stamp readings as they take them and the rover acts on readings a few seconds old
+/// at most, so a stamp an hour off is a corrupt one or a clock set wrong. Taken in, a stamp
+/// from far in the future would make every later reading look stale.
+pub const MAX_STAMP_SKEW: Duration = Duration::from_secs(3600);
+
+/// Why the stamp of `message` cannot be right at `now` on the rover's clock, if it is one of
+/// a rover's own sensor messages stamped more than [`MAX_STAMP_SKEW`] away; `None` for any
+/// other message.
+pub fn implausible_stamp(message: &Message, now: Time) -> Option<&'static str> {
+    let stamp = match message {
+        Message::Odometry(odom) => odom.header.stamp,
+        Message::Imu(imu) => imu.header.stamp,
+        Message::LaserScan(scan) => scan.header.stamp,
+        Message::PointCloud(cloud) => cloud.header.stamp,
+        _ => return None,
+    };
+    let skew = now.since(stamp).as_ns().unsigned_abs();
+    (skew > MAX_STAMP_SKEW.as_ns().unsigned_abs())
+        .then_some("sensor stamp more than an hour from the rover's clock")
+}
 
 /// What is impossible in `message`, if it is one of a rover's own sensor messages
 /// (odometry, IMU, lidar, depth camera) and holds a number its sensor cannot give; `None`
@@ -162,5 +185,35 @@ mod tests {
         assert_eq!(implausible(&Message::PointCloud(cloud.clone())), None);
         cloud.points_in_sensor[1] = [0.0, 0.0, 1e20];
         assert!(implausible(&Message::PointCloud(cloud)).is_some());
+    }
+
+    #[test]
+    fn stamps_further_than_an_hour_from_the_clock_are_named() {
+        let now = Time::ZERO + Duration::from_secs(100);
+        let imu_at = |stamp: Time| {
+            let mut imu = Imu::default();
+            imu.header.stamp = stamp;
+            Message::Imu(Box::new(imu))
+        };
+        for fine in [now, Time::ZERO, now + MAX_STAMP_SKEW, now - MAX_STAMP_SKEW] {
+            assert_eq!(implausible_stamp(&imu_at(fine), now), None, "{fine}");
+        }
+        for off in [
+            now + MAX_STAMP_SKEW + Duration(1),
+            now - MAX_STAMP_SKEW - Duration(1),
+            Time(i64::MIN),
+            Time(i64::MAX),
+        ] {
+            assert!(implausible_stamp(&imu_at(off), now).is_some(), "{off}");
+        }
+        // Only a rover's own sensor messages carry stamps it checks.
+        let goal = Message::NavGoal(realms_core::msgs::NavGoal {
+            header: realms_core::msgs::Header {
+                stamp: Time(i64::MAX),
+                frame_id: "map".into(),
+            },
+            target: None,
+        });
+        assert_eq!(implausible_stamp(&goal, now), None);
     }
 }

@@ -473,7 +473,10 @@ impl Node for RoverNode {
             }
             return;
         }
-        if crate::plausible::implausible(message).is_some() {
+        if crate::plausible::implausible(message)
+            .or_else(|| crate::plausible::implausible_stamp(message, now))
+            .is_some()
+        {
             self.rejected_inputs += 1;
             return;
         }
@@ -767,6 +770,63 @@ mod tests {
             let pose = node.mapping().pose();
             assert!(pose.x_m.hypot(pose.y_m) < 1e4, "{pose:?}");
         }
+    }
+
+    #[test]
+    fn stamps_at_the_ends_of_the_clock_never_panic_the_rover() {
+        // A corrupt stamp still decodes: a message may say it was taken at any instant the
+        // clock holds, its first or its last nanosecond among them. Differences from such a
+        // stamp overflowed the clock's arithmetic. The rover goes on, and maps the room
+        // again once they stop.
+        let mut node = node();
+        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        let id = node.id();
+        for k in 1..=30 {
+            step(&mut node, at(k), Some(true));
+        }
+        let ends = [
+            i64::MIN,
+            i64::MAX,
+            i64::MIN + 1,
+            i64::MAX - 1,
+            -1,
+            i64::MIN / 2,
+        ];
+        for (k, stamp) in ends.into_iter().enumerate() {
+            let (t, stamp) = (at(31 + k as i64), Time::from_ns(stamp));
+            let mut odom = Odometry::default();
+            odom.header.stamp = stamp;
+            odom.pose.pose.orientation = Quaternion::IDENTITY;
+            node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
+            let mut imu = Imu::default();
+            imu.header.stamp = stamp;
+            imu.linear_acceleration.z = 9.81;
+            node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            node.on_message(t, &id.topic("scan"), &Message::LaserScan(scan(stamp, true)));
+            let cloud = realms_core::msgs::PointCloud {
+                header: Header {
+                    stamp,
+                    frame_id: "rover1/depth".into(),
+                },
+                width: 2,
+                height: 1,
+                points_in_sensor: vec![[0.0, 0.2, 1.0], [0.1, 0.2, 1.0]],
+            };
+            node.on_message(t, &id.topic("depth/points"), &Message::PointCloud(cloud));
+            node.on_tick(t);
+            node.drain_outbox();
+        }
+        // Of the six stamps only -1 ns lies within an hour of the rover's clock: the other
+        // five instants' four messages are dropped.
+        assert_eq!(node.rejected_inputs(), 20);
+        for k in 37..=100 {
+            step(&mut node, at(k), Some(true));
+        }
+        node.on_tick(at(101));
+        node.drain_outbox();
+        assert_ne!(node.mapping().state(), LocalisationState::Lost);
+        let pose = node.mapping().pose();
+        assert!(pose.x_m.hypot(pose.y_m) < 0.1, "{pose:?}");
     }
 
     #[test]
