@@ -12,6 +12,7 @@ use crate::scenario::{FaultKind, Scenario, SensorKind};
 use crate::scheduler::Scheduler;
 use crate::sensors::depth::BODY_FROM_OPTICAL;
 use crate::sensors::lidar::SweepSegment;
+use crate::sensors::shadows::SunShadows;
 use crate::sensors::{Frame3, LastCast, camera, depth, lidar, proprio};
 use crate::terrain::Terrain;
 use crate::truth::GroundTruth;
@@ -20,6 +21,7 @@ use realms_core::msgs::{LaserScan, Message, TwistStamped, beam_offset};
 use realms_core::{Duration, RoverId, Time, Topic};
 use serde::Serialize;
 use std::collections::{BTreeMap, VecDeque};
+use std::sync::OnceLock;
 
 /// Something notable that happened in the world.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -87,6 +89,8 @@ pub struct World {
     terrain: Terrain,
     truth: GroundTruth,
     pyramid: HeightPyramid,
+    /// Where the sun's shadows fall, worked out when a camera is first rendered.
+    shadows: OnceLock<SunShadows>,
     rovers: Vec<RoverSlot>,
     queue: Scheduler<Due>,
     now: Time,
@@ -171,6 +175,7 @@ impl World {
             terrain,
             truth,
             pyramid,
+            shadows: OnceLock::new(),
             rovers,
             queue,
             now: Time::ZERO,
@@ -487,12 +492,15 @@ impl World {
                 }
                 let pose = world_from_base.compose(&base_from_optical);
                 let frame = format!("{ns}/camera_optical");
+                let shadows = self
+                    .shadows
+                    .get_or_init(|| SunShadows::new(&self.terrain.heights, &self.scenario.sun));
                 let image = camera::render(
                     &self.pyramid,
                     &self.terrain,
+                    shadows,
                     &pose,
                     &spec.camera,
-                    &self.scenario.sun,
                     t,
                     &frame,
                 );

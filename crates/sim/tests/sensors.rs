@@ -415,6 +415,69 @@ fn camera_renders_only_when_wanted_and_shows_light_and_shadow() {
     assert!(shadowed > 100, "shadowed floor pixels: {shadowed}");
 }
 
+#[test]
+fn the_shadow_map_agrees_with_shadow_rays_over_the_default_arena() {
+    // The camera reads its shadows from a map of the terrain worked out once; before, each
+    // pixel cast a ray towards the sun. Over the default arena's rocks, craters and walls,
+    // from random points of the ground the sun faces, both must give the same verdict but at
+    // a shadow's very edge, under the default low sun and others.
+    use rand::{Rng, SeedableRng};
+    use realms_sim::sensors::shadows::SunShadows;
+    let mut s = scenario(1);
+    let world = World::new(&s);
+    let (terrain, pyramid) = (world.terrain(), world.pyramid());
+    let g = *terrain.heights.geometry();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    for (elevation_deg, azimuth_deg) in [
+        (s.sun.elevation_deg, s.sun.azimuth_deg),
+        (20.0, 90.0),
+        (35.0, 200.0),
+        (5.0, 315.0),
+    ] {
+        s.sun.elevation_deg = elevation_deg;
+        s.sun.azimuth_deg = azimuth_deg;
+        let shadows = SunShadows::new(&terrain.heights, &s.sun);
+        let (se, ce) = elevation_deg.to_radians().sin_cos();
+        let (sa, ca) = azimuth_deg.to_radians().sin_cos();
+        let to_sun = [ce * ca, ce * sa, se];
+        let (mut checked, mut agree, mut shaded) = (0, 0, 0);
+        while checked < 20_000 {
+            let c = realms_core::Cell {
+                x: rng.random_range(0..g.width),
+                y: rng.random_range(0..g.height),
+            };
+            let n = terrain.surface_normal(c.x, c.y);
+            if n[0] * to_sun[0] + n[1] * to_sun[1] + n[2] * to_sun[2] <= 0.0 {
+                continue;
+            }
+            // Anywhere on the cell's top, started off it as the camera starts.
+            let centre = g.cell_center(c);
+            let top = terrain.heights.cells()[g.index(c)] as f64;
+            let (dx, dy) = (rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5));
+            let start = [
+                centre.x_m + dx * g.resolution_m + 0.03 * to_sun[0],
+                centre.y_m + dy * g.resolution_m + 0.03 * to_sun[1],
+                top + 0.03 * to_sun[2] + 0.005,
+            ];
+            let by_ray = pyramid.cast(start, to_sun, 0.0, 40.0).is_none();
+            checked += 1;
+            agree += usize::from(shadows.lit(start) == by_ray);
+            shaded += usize::from(!by_ray);
+        }
+        let share = agree as f64 / checked as f64;
+        assert!(
+            share >= 0.98,
+            "sun {elevation_deg} deg up at {azimuth_deg} deg: {:.2} % agree ({shaded} shaded by the rays)",
+            100.0 * share
+        );
+        // Shadows there are, under every sun tried.
+        assert!(
+            shaded > checked / 100,
+            "sun {elevation_deg} deg: {shaded} shaded"
+        );
+    }
+}
+
 mod exactness {
     use super::*;
     use proptest::prelude::*;

@@ -1,25 +1,29 @@
 //! A small grayscale camera rendered from the terrain under a low sun: Lambertian shading,
-//! hard shadows (a shadow ray per pixel), black sky, as in a lunar analogue hall lit by one
-//! lamp. Rendered only when someone subscribes, so it costs nothing otherwise.
+//! hard shadows (read from the terrain's shadow map, [`SunShadows`]), black sky, as in a
+//! lunar analogue hall lit by one lamp. Rendered only when someone subscribes, so it costs
+//! nothing otherwise.
 
 use super::Frame3;
 use super::depth::{Intrinsics, cast_image};
+use super::shadows::SunShadows;
 use crate::raycast::HeightPyramid;
-use crate::scenario::{Camera, Sun};
+use crate::scenario::Camera;
 use crate::terrain::{SurfaceKind, Terrain};
 use realms_core::Time;
 use realms_core::msgs::{Header, Image};
 
-/// Renders one `mono8` image from `world_from_optical`.
+/// Renders one `mono8` image from `world_from_optical`, lit by the sun whose shadows over
+/// `terrain` are `shadows`.
 pub fn render(
     world: &HeightPyramid,
     terrain: &Terrain,
+    shadows: &SunShadows,
     world_from_optical: &Frame3,
     spec: &Camera,
-    sun: &Sun,
     stamp: Time,
     frame_id: &str,
 ) -> Image {
+    let sun = shadows.sun();
     let (w, h) = (spec.width, spec.height);
     let vfov_deg = 2.0
         * ((h as f64 / w as f64) * (spec.hfov_deg.to_radians() / 2.0).tan())
@@ -51,21 +55,15 @@ pub fn render(
             let normal = terrain.surface_normal(x, y);
             let lambert =
                 (normal[0] * to_sun[0] + normal[1] * to_sun[1] + normal[2] * to_sun[2]).max(0.0);
+            // Seen from just off the surface towards the sun, as a shadow ray would start, so
+            // a lit wall face is not taken for its own column and a floor rising towards the
+            // sun less steeply than its rays is not shaded by its next cell's step.
             let lit = lambert > 0.0
-                && world
-                    // Start off the surface towards the sun, so a ray from a lit wall face
-                    // does not begin inside its own column.
-                    .cast(
-                        [
-                            p[0] + 0.03 * to_sun[0],
-                            p[1] + 0.03 * to_sun[1],
-                            p[2] + 0.03 * to_sun[2] + 0.005,
-                        ],
-                        to_sun,
-                        0.0,
-                        40.0,
-                    )
-                    .is_none();
+                && shadows.lit([
+                    p[0] + 0.03 * to_sun[0],
+                    p[1] + 0.03 * to_sun[1],
+                    p[2] + 0.03 * to_sun[2] + 0.005,
+                ]);
             let albedo = match terrain.kind.cells()[g.index(cell)] {
                 SurfaceKind::Floor => 0.30 + 0.06 * texture(x, y),
                 SurfaceKind::Rock => 0.42 + 0.08 * texture(x / 2, y / 2),

@@ -6,6 +6,7 @@ pub mod camera;
 pub mod depth;
 pub mod lidar;
 pub mod proprio;
+pub mod shadows;
 
 /// A sensor's last noiseless cast and what it was cast from. The ground does not move, so a
 /// rover that stands still (parked at home, waiting for a plan, powered but idle) would cast
