@@ -158,6 +158,16 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.mapper.optimize_every_keyframes = 40,
     },
     Variant {
+        name: "optimize-every-10",
+        what: "accepted closures folded into the graph at every 10th keyframe, not every 20th",
+        apply: |c| c.mapper.optimize_every_keyframes = 10,
+    },
+    Variant {
+        name: "optimize-every-2",
+        what: "accepted closures folded into the graph at once (closures are searched at every 2nd keyframe), not at every 20th",
+        apply: |c| c.mapper.optimize_every_keyframes = 2,
+    },
+    Variant {
         name: "graph-steps-2",
         what: "the pose graph optimised by 2 Gauss-Newton steps, not 3",
         apply: |c| c.mapper.graph_iterations = 2,
