@@ -25,15 +25,17 @@ pub const MAX_LIDAR_RANGE_M: f32 = 1e4;
 /// The farthest a depth point may lie from the camera, metres.
 pub const MAX_DEPTH_POINT_M: f32 = 1e4;
 
-/// The furthest a sensor message's stamp may lie from the rover's own clock, either way. Its
-/// drivers stamp readings as they take them and the rover acts on readings a few seconds old
-/// at most, so a stamp an hour off is a corrupt one or a clock set wrong. Taken in, a stamp
-/// from far in the future would make every later reading look stale.
-pub const MAX_STAMP_SKEW: Duration = Duration::from_secs(3600);
+/// How far ahead of the rover's own clock a sensor message may be stamped. Its drivers stamp
+/// readings as they take them, on the rover's computer, so a reading from the future is a
+/// corrupt stamp or a clock set wrong; taken in, it would make every later reading look
+/// stale (the gyro's and the wheels' readings are taken in stamp order) ...
+pub const MAX_STAMP_AHEAD: Duration = Duration::from_secs(1);
+/// ... and how far behind it: the rover acts on readings a few seconds old at most.
+pub const MAX_STAMP_AGE: Duration = Duration::from_secs(3600);
 
 /// Why the stamp of `message` cannot be right at `now` on the rover's clock, if it is one of
-/// a rover's own sensor messages stamped more than [`MAX_STAMP_SKEW`] away; `None` for any
-/// other message.
+/// a rover's own sensor messages stamped more than [`MAX_STAMP_AHEAD`] ahead of it or
+/// [`MAX_STAMP_AGE`] behind; `None` for any other message.
 pub fn implausible_stamp(message: &Message, now: Time) -> Option<&'static str> {
     let stamp = match message {
         Message::Odometry(odom) => odom.header.stamp,
@@ -42,9 +44,13 @@ pub fn implausible_stamp(message: &Message, now: Time) -> Option<&'static str> {
         Message::PointCloud(cloud) => cloud.header.stamp,
         _ => return None,
     };
-    let skew = now.since(stamp).as_ns().unsigned_abs();
-    (skew > MAX_STAMP_SKEW.as_ns().unsigned_abs())
-        .then_some("sensor stamp more than an hour from the rover's clock")
+    if stamp > now + MAX_STAMP_AHEAD {
+        Some("sensor stamp more than 1 s ahead of the rover's clock")
+    } else if stamp < now - MAX_STAMP_AGE {
+        Some("sensor stamp more than an hour behind the rover's clock")
+    } else {
+        None
+    }
 }
 
 /// What is impossible in `message`, if it is one of a rover's own sensor messages
@@ -188,19 +194,20 @@ mod tests {
     }
 
     #[test]
-    fn stamps_further_than_an_hour_from_the_clock_are_named() {
+    fn stamps_ahead_of_the_clock_or_an_hour_behind_it_are_named() {
         let now = Time::ZERO + Duration::from_secs(100);
         let imu_at = |stamp: Time| {
             let mut imu = Imu::default();
             imu.header.stamp = stamp;
             Message::Imu(Box::new(imu))
         };
-        for fine in [now, Time::ZERO, now + MAX_STAMP_SKEW, now - MAX_STAMP_SKEW] {
+        for fine in [now, Time::ZERO, now + MAX_STAMP_AHEAD, now - MAX_STAMP_AGE] {
             assert_eq!(implausible_stamp(&imu_at(fine), now), None, "{fine}");
         }
         for off in [
-            now + MAX_STAMP_SKEW + Duration(1),
-            now - MAX_STAMP_SKEW - Duration(1),
+            now + MAX_STAMP_AHEAD + Duration(1),
+            now + Duration::from_secs(60),
+            now - MAX_STAMP_AGE - Duration(1),
             Time(i64::MIN),
             Time(i64::MAX),
         ] {

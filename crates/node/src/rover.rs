@@ -792,8 +792,11 @@ mod tests {
             -1,
             i64::MIN / 2,
         ];
-        for (k, stamp) in ends.into_iter().enumerate() {
-            let (t, stamp) = (at(31 + k as i64), Time::from_ns(stamp));
+        // And ten minutes ahead, which overflows nothing.
+        let ahead = at(37) + Duration::from_secs(600);
+        let stamps = ends.into_iter().map(Time::from_ns).chain([ahead]);
+        for (k, stamp) in stamps.enumerate() {
+            let t = at(31 + k as i64);
             let mut odom = Odometry::default();
             odom.header.stamp = stamp;
             odom.pose.pose.orientation = Quaternion::IDENTITY;
@@ -816,10 +819,10 @@ mod tests {
             node.on_tick(t);
             node.drain_outbox();
         }
-        // Of the six stamps only -1 ns lies within an hour of the rover's clock: the other
-        // five instants' four messages are dropped.
-        assert_eq!(node.rejected_inputs(), 20);
-        for k in 37..=100 {
+        // Of the seven stamps only -1 ns lies neither ahead of the rover's clock nor an hour
+        // behind it: the other six instants' four messages are dropped.
+        assert_eq!(node.rejected_inputs(), 24);
+        for k in 38..=100 {
             step(&mut node, at(k), Some(true));
         }
         node.on_tick(at(101));

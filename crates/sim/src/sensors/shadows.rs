@@ -1,6 +1,6 @@
 //! Where the sun's shadows fall, worked out once for the whole terrain: for every cell, the
 //! height below which a point over it lies in the shadow of the columns between it and the
-//! sun. The sun and the ground never move, so the camera reads each pixel's light from this
+//! sun (or inside its own column). The sun and the ground never move, so the camera reads each pixel's light from this
 //! map instead of casting a shadow ray across the hall for it (a long one under a low sun).
 //!
 //! The map is swept from the sun's side of the grid, one column (or row, whichever the sun's
@@ -11,17 +11,18 @@
 //! "Horizon mapping: shadows for bump-mapped surfaces", The Visual Computer 4, 1988; the
 //! single-direction sweep of e.g. Timonen and Westerholm, "Scalable height field
 //! self-shadowing", Eurographics 2010), on the terrain's columns of 5 cm cells. It is exact
-//! to about a cell at a shadow's edge, where interpolation along the sweep softens it; that
+//! to about a cell at a shadow's edge, where interpolation across the sweep softens it; that
 //! is finer than a pixel of the rovers' 160 x 120 camera a metre or more away.
 
 use crate::scenario::Sun;
 use realms_core::{Grid, GridGeometry, Point2};
 
-/// Per cell, the height (metres) below which the sun is hidden ([`SunShadows::lit`]).
+/// Per cell, the height (metres) below which a point over it is dark: in the shadow of the
+/// columns between it and the sun, or inside its own column ([`SunShadows::lit`]).
 #[derive(Clone, Debug)]
 pub struct SunShadows {
     sun: Sun,
-    /// `f32::NEG_INFINITY` where nothing stands between the cell and the sun, and
+    /// The column's own top where nothing stands between the cell and the sun, and
     /// `f32::INFINITY` everywhere for a sun at or below the horizon.
     heights: Grid<f32>,
 }
@@ -38,10 +39,12 @@ impl SunShadows {
             };
         }
         let mut heights = Grid::new(g, f32::NEG_INFINITY);
-        // Straight overhead, a ray from a column's top meets no other column.
         if ce > 1e-9 {
             let (sa, ca) = sun.azimuth_deg.to_radians().sin_cos();
             sweep(terrain, [ca, sa], se / ce, &mut heights);
+        } else {
+            // Straight overhead, a ray from a column's top meets no other column.
+            heights = terrain.clone();
         }
         SunShadows {
             sun: sun.clone(),
@@ -55,7 +58,9 @@ impl SunShadows {
     }
 
     /// Whether the sun lights the point `p` (world metres), seen from its cell: a point on
-    /// the grid above the shadow height there, or off the grid with nothing to shade it.
+    /// the grid above the shadow height there, or off the grid (taken as beyond everything
+    /// that could shade it, as a point moved towards the sun off the grid's edge is) under a
+    /// sun above the horizon.
     pub fn lit(&self, p: [f64; 3]) -> bool {
         let g = self.heights.geometry();
         match g.world_to_cell(Point2::new(p[0], p[1])) {
@@ -120,12 +125,15 @@ fn sweep(terrain: &Grid<f32>, to_sun: [f64; 2], tan_elevation: f64, shadows: &mu
             let mut shadow = f64::NEG_INFINITY;
             // Within its own column the ray from the centre drifts at most half a cell across
             // (the sweep runs along the sun's main axis), so it leaves over its own cell.
+            // What the next line holds is where a point at its cells' centres is dark, their
+            // own columns included.
             if has_next {
                 let next = next as usize;
-                // Over the next line's column from where it enters it to its centre: the ray
-                // is lowest where it enters, half a step on.
+                // Over the next line's column, from where it enters it to where it leaves
+                // (half a step either side of its centre): the ray is lowest where it enters,
+                // half a step on.
                 let half_rise = rise_m / 2.0;
-                for d in [drift / 2.0, drift] {
+                for d in [drift / 2.0, drift, 1.5 * drift] {
                     if let Some(m) = nearest(minor, d) {
                         shadow = shadow.max(tops[index(next, m)] as f64 - half_rise);
                     }
@@ -133,6 +141,8 @@ fn sweep(terrain: &Grid<f32>, to_sun: [f64; 2], tan_elevation: f64, shadows: &mu
                 // Beyond the next line's centre, what shades the ray there, interpolated
                 // across at where it crosses, less the rise from here to there.
                 let across = minor as f64 + drift;
+                // A ray that leaves the grid's side meets nothing more.
+                let on_grid = (-0.5..=minor_max as f64 + 0.5).contains(&across);
                 let below = across.floor();
                 let frac = across - below;
                 let at = |m: f64| -> Option<f64> {
@@ -142,20 +152,17 @@ fn sweep(terrain: &Grid<f32>, to_sun: [f64; 2], tan_elevation: f64, shadows: &mu
                         .then(|| cells[index(next, m as usize)] as f64)
                 };
                 let beyond = match (at(below), at(below + 1.0)) {
-                    (Some(a), _) if frac == 0.0 => Some(a),
-                    (Some(a), Some(b)) if a.is_finite() && b.is_finite() => {
-                        Some(a + frac * (b - a))
-                    }
-                    // Against nothing in the way, the shadow that is there holds.
-                    (Some(a), Some(b)) => Some(a.max(b)),
+                    (Some(a), Some(b)) => Some(a + frac * (b - a)),
                     (Some(a), None) | (None, Some(a)) => Some(a),
                     (None, None) => None,
                 };
-                if let Some(beyond) = beyond {
+                if let Some(beyond) = beyond.filter(|_| on_grid) {
                     shadow = shadow.max(beyond - rise_m);
                 }
             }
-            cells[index(major, minor)] = shadow as f32;
+            // A point below its own column's top is inside it, where no light reaches.
+            let top = tops[index(major, minor)] as f64;
+            cells[index(major, minor)] = shadow.max(top) as f32;
         }
     }
 }
@@ -178,7 +185,7 @@ mod tests {
 
     #[test]
     fn a_wall_shades_the_floor_behind_it_as_far_as_its_height_over_the_suns_slope() {
-        // A 1 m wall across x = 1.0-1.05 m; the sun 20 degrees up in each of the four
+        // A 1 m wall across the grid, 5 cm thick; the sun 20 degrees up in each of the four
         // directions along the axes and two between them.
         for azimuth_deg in [180.0f64, 0.0, 90.0, 270.0, 150.0, 200.0] {
             let mut t = flat(200, 200);
@@ -208,12 +215,13 @@ mod tests {
             let slant = if along_x { ca.abs() } else { sa.abs() };
             let length_m = 1.0 / 20f64.to_radians().tan() * slant;
             let wall_m = 5.025 + away * 0.025;
+            // Just over the floor, as the camera asks of a point it sees.
             let floor_at = |d: f64| {
                 let c = wall_m + away * d;
                 if along_x {
-                    [c, 5.0, 0.0]
+                    [c, 5.0, 1e-3]
                 } else {
-                    [5.0, c, 0.0]
+                    [5.0, c, 1e-3]
                 }
             };
             for d in [0.1, 0.5, 1.0, 2.0, length_m - 0.15] {
@@ -254,13 +262,9 @@ mod tests {
                 azimuth_deg: 0.0,
             },
         );
-        assert!(
-            overhead
-                .heights()
-                .cells()
-                .iter()
-                .all(|h| *h == f32::NEG_INFINITY)
-        );
+        // Each cell dark only inside its own column: the 3 m post at cell (20, 20), 1.0-1.05 m.
+        assert_eq!(overhead.heights().cells(), t.cells());
+        assert!(overhead.lit([0.5, 0.5, 1e-3]) && !overhead.lit([1.01, 1.01, 2.0]));
         let set = SunShadows::new(
             &t,
             &Sun {
