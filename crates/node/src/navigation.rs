@@ -245,6 +245,8 @@ pub struct Navigator {
     last_forced_replan: Option<Time>,
     /// Known cells of the map when it last grew by the stall threshold, and when.
     grown: Option<(usize, Time)>,
+    /// When the revisit under way started: its drive does not count against exploring.
+    revisit_started: Option<Time>,
     /// The position's uncertainty (metres) and the nearest place mapped while it was
     /// small, as the rover last said ([`Navigator::set_localisation`]).
     localisation: Option<(f64, Option<Point2>)>,
@@ -332,6 +334,7 @@ impl Navigator {
             home_failures: 0,
             last_forced_replan: None,
             grown: None,
+            revisit_started: None,
             localisation: None,
             revisit_above_m,
             revisits_closed_nothing: Vec::new(),
@@ -413,7 +416,7 @@ impl Navigator {
                 );
                 self.goal = None;
                 self.follower.set_path(Vec::new());
-                self.revisit_ended();
+                self.revisit_ended(now);
             }
             // A revisit under way goes on: the guard below takes only a frontier or none.
             goal if self.cfg.autonomous
@@ -434,9 +437,10 @@ impl Navigator {
                             ),
                         );
                         self.start_goal(now, place, GoalKind::Revisit);
+                        self.revisit_started = Some(now);
                     }
                     // Already there, and what it sees closes nothing.
-                    Some(place) => self.revisit_closed_nothing(place),
+                    Some(place) => self.revisit_closed_nothing(now, place),
                     // Nowhere to go back to: asked again only once it has grown further.
                     None => self.raise_revisit_bound(),
                 }
@@ -445,19 +449,26 @@ impl Navigator {
         }
     }
 
-    /// A revisit ended: the drive back mapped nothing new, so the stall rule's clock
-    /// starts again rather than count it against exploring.
-    fn revisit_ended(&mut self) {
-        self.grown = None;
+    /// A revisit ended: the drive back mapped nothing new, so the stall rule's clock is moved
+    /// on by the time it took since the map last grew, rather than count it against exploring.
+    /// The time spent exploring before and after still counts: a rover whose every drive
+    /// towards a frontier ends in a revisit (its pose grows uncertain on the way each time, a
+    /// closure ties it back each time) runs out of exploring as one that makes no headway.
+    /// (Restarting the clock at each revisit, as before, kept such a rover at it for the
+    /// whole mission: seed 34's rover3, ninety-fifth session.)
+    fn revisit_ended(&mut self, now: Time) {
+        if let (Some(started), Some((known, since))) = (self.revisit_started.take(), self.grown) {
+            self.grown = Some((known, since + (now - started.max(since))));
+        }
     }
 
     /// A revisit to `place` ended (or could not start) without a closure bringing the
     /// uncertainty down: the place is not taken again, and the next revisit waits until the
     /// uncertainty has grown by [`RevisitConfig::retry_growth_m`] more.
-    fn revisit_closed_nothing(&mut self, place: Point2) {
+    fn revisit_closed_nothing(&mut self, now: Time, place: Point2) {
         self.raise_revisit_bound();
         self.revisits_closed_nothing.push(place);
-        self.revisit_ended();
+        self.revisit_ended(now);
     }
 
     /// The next revisit waits until the uncertainty has grown by
@@ -594,9 +605,9 @@ impl Navigator {
             if g.kind == GoalKind::Revisit {
                 // Given up (not pre-empted by the operator): the place closed nothing.
                 if blacklist {
-                    self.revisit_closed_nothing(g.point);
+                    self.revisit_closed_nothing(now, g.point);
                 } else {
-                    self.revisit_ended();
+                    self.revisit_ended(now);
                 }
             }
             if g.kind == GoalKind::Home && blacklist {
@@ -762,8 +773,8 @@ impl Navigator {
             self.start_goal(now, op, GoalKind::Operator);
         }
         self.revise_revisit(now, here, stalled);
-        // A revisit that ended restarted the stall rule's clock.
-        let stalled = stalled && self.grown.is_some();
+        // A revisit that ended moved the stall rule's clock on by its drive.
+        let stalled = stalled && self.stalled(now, explored, map.geometry().resolution_m);
         let current = self.goal.map(|g| g.point);
         // A rover on its way home because no frontier was left keeps looking: ground that
         // turns up on the way (a peer's claim lapsing, a corner its map redrew) is taken
@@ -935,6 +946,10 @@ impl Navigator {
     }
 
     fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
+        // A revisit taken over by another goal (the operator's, a drive to find itself) ends.
+        if kind != GoalKind::Revisit && self.goal.is_some_and(|g| g.kind == GoalKind::Revisit) {
+            self.revisit_ended(now);
+        }
         if kind == GoalKind::Frontier {
             // Exploring again (new ground appeared): it must come home again after.
             self.done = false;
@@ -1055,7 +1070,7 @@ impl Navigator {
                 match goal.kind {
                     GoalKind::Home => self.done = true,
                     GoalKind::Operator => self.operator_goal = None,
-                    GoalKind::Revisit => self.revisit_closed_nothing(goal.point),
+                    GoalKind::Revisit => self.revisit_closed_nothing(now, goal.point),
                     GoalKind::Frontier | GoalKind::Relocalise => {}
                 }
                 self.replan_now = true;
@@ -1358,6 +1373,34 @@ mod tests {
         );
         // The place closed the loop: it may be taken again.
         assert!(nav.may_revisit(anchored));
+    }
+
+    #[test]
+    fn a_rover_whose_every_drive_out_ends_in_a_revisit_still_runs_out_of_exploring() {
+        // Each drive towards the frontier grows the pose uncertain within 6 s, and each
+        // revisit ties it back within 4 s; the map never grows. The 6 s of each drive out
+        // count against exploring, the revisits do not: with a window of 20 s it ends in
+        // the fourth drive out and the rover heads home. (When each revisit restarted the
+        // stall rule's clock, it went on so for the whole mission.)
+        let mut nav = revisiting_navigator(20);
+        let map = room(false);
+        let pose = Pose2::new(4.0, 5.0, 0.0);
+        let anchored = Point2::new(2.0, 2.0);
+        let mut kinds = Vec::new();
+        for cycle in 0..8 {
+            let t0 = 10.0 * cycle as f64;
+            for (dt, sigma) in [(0.0, 0.1), (3.0, 0.2), (6.0, 0.3), (8.0, 0.2)] {
+                nav.set_localisation(Some((sigma, Some(anchored))));
+                nav.on_map(Time::from_secs_f64(t0 + dt), &map, pose);
+                kinds.push(nav.goal().map(|g| g.1));
+            }
+        }
+        let revisits = kinds
+            .windows(2)
+            .filter(|w| w[0] != Some(GoalKind::Revisit) && w[1] == Some(GoalKind::Revisit))
+            .count();
+        assert_eq!(revisits, 3, "{kinds:?}");
+        assert_eq!(kinds.last(), Some(&Some(GoalKind::Home)), "{kinds:?}");
     }
 
     #[test]
