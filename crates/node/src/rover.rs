@@ -641,6 +641,35 @@ mod tests {
         node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
     }
 
+    /// The `k`th tick of a rover's clock 0.1 s apart.
+    fn tick(k: i64) -> Time {
+        Time::ZERO + Duration::from_millis(100 * k)
+    }
+
+    /// A rover that has stood 3 s in the middle of the room (to the 30th [`tick`]), and
+    /// its clock's ticks.
+    fn settled_in_the_room() -> (RoverNode, fn(i64) -> Time) {
+        let mut node = node();
+        for k in 1..=30 {
+            step(&mut node, tick(k), Some(true));
+        }
+        (node, tick)
+    }
+
+    /// Stands the rover of [`settled_in_the_room`] still there from tick `from` to the 100th
+    /// and checks it tracks again where it is.
+    fn maps_the_room_again(node: &mut RoverNode, from: i64) {
+        let at = tick;
+        for k in from..=100 {
+            step(node, at(k), Some(true));
+        }
+        node.on_tick(at(101));
+        node.drain_outbox();
+        assert_ne!(node.mapping().state(), LocalisationState::Lost);
+        let pose = node.mapping().pose();
+        assert!(pose.x_m.hypot(pose.y_m) < 0.1, "{pose:?}");
+    }
+
     /// Feeds the node 0.1 s of standing still ending at `t`, with a scan if `lidar`; returns
     /// the speed and yaw rate it commanded last and the navigation statuses it sent.
     fn step(
@@ -778,12 +807,8 @@ mod tests {
         // clock holds, its first or its last nanosecond among them. Differences from such a
         // stamp overflowed the clock's arithmetic. The rover goes on, and maps the room
         // again once they stop.
-        let mut node = node();
-        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        let (mut node, at) = settled_in_the_room();
         let id = node.id();
-        for k in 1..=30 {
-            step(&mut node, at(k), Some(true));
-        }
         let ends = [
             i64::MIN,
             i64::MAX,
@@ -822,14 +847,7 @@ mod tests {
         // Of the seven stamps only -1 ns lies neither ahead of the rover's clock nor an hour
         // behind it: the other six instants' four messages are dropped.
         assert_eq!(node.rejected_inputs(), 24);
-        for k in 38..=100 {
-            step(&mut node, at(k), Some(true));
-        }
-        node.on_tick(at(101));
-        node.drain_outbox();
-        assert_ne!(node.mapping().state(), LocalisationState::Lost);
-        let pose = node.mapping().pose();
-        assert!(pose.x_m.hypot(pose.y_m) < 0.1, "{pose:?}");
+        maps_the_room_again(&mut node, 38);
     }
 
     #[test]
@@ -837,12 +855,8 @@ mod tests {
         // A driver's glitch on a real rover can send any number a message holds: a pose
         // 1e20 m out (a corrupt field still decodes), NaN, infinities, a scan claiming a
         // reach of 1e20 m. The rover goes on, and maps the room again once they stop.
-        let mut node = node();
-        let at = |k: i64| Time::ZERO + Duration::from_millis(100 * k);
+        let (mut node, at) = settled_in_the_room();
         let id = node.id();
-        for k in 1..=30 {
-            step(&mut node, at(k), Some(true));
-        }
         for (k, bad) in [
             1e20,
             -1e20,
@@ -912,14 +926,7 @@ mod tests {
         // The two goals with a coordinate that is no number are refused; the one 1e20 m
         // off is a place, which the planner finds no way to.
         assert_eq!(node.rejected_inputs(), 20);
-        for k in 40..=100 {
-            step(&mut node, at(k), Some(true));
-        }
-        node.on_tick(at(101));
-        node.drain_outbox();
-        assert_ne!(node.mapping().state(), LocalisationState::Lost);
-        let pose = node.mapping().pose();
-        assert!(pose.x_m.hypot(pose.y_m) < 0.1, "{pose:?}");
+        maps_the_room_again(&mut node, 40);
     }
 
     #[test]
