@@ -445,6 +445,8 @@ fn grade(
 /// `realms bench slip`.
 pub fn run(args: BenchSlipArgs) -> Result<()> {
     let (base, source) = load_scenario(args.scenario.as_deref())?;
+    let (navigation_changes, source) =
+        crate::bench_missions::with_nav_variant(args.nav_variant.as_deref(), source)?;
     let limit_s = parse_duration_s(&args.duration)?;
     anyhow::ensure!(
         args.period_s >= MIN_PERIOD_S,
@@ -483,6 +485,7 @@ pub fn run(args: BenchSlipArgs) -> Result<()> {
         let options = MissionOptions {
             ideal_comms: true,
             mapping_changes: crate::bench_slam::mapping_changes(variant.as_ref()),
+            navigation_changes: navigation_changes.clone(),
             ..MissionOptions::default()
         };
         let mission = crate::bench::explore_to_end(&s, options, limit_s);

@@ -342,6 +342,10 @@ pub struct BenchSlipArgs {
     /// `weak-floor-100-own+gaps-to-6m`.
     #[arg(long)]
     pub variant: Option<String>,
+    /// Run the rovers with this change to their navigation, as `realms bench missions
+    /// --nav-variant` names them (e.g. `revisit`).
+    #[arg(long)]
+    pub nav_variant: Option<String>,
     /// Missions run at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,
