@@ -1336,7 +1336,8 @@ mod tests {
     fn a_rover_whose_pose_grew_uncertain_drives_back_to_anchored_ground_until_a_closure_ties_it_back()
      {
         // The map never grows here: with a stall window of 5 s, exploring would end at the
-        // first map after the revisit unless the revisit restarted the stall rule's clock.
+        // first map after the revisit if its 6 s counted on the stall rule's clock (3 s of
+        // exploring before it, then the revisit's own time paused).
         let mut nav = revisiting_navigator(5);
         let map = room(false);
         let pose = Pose2::new(4.0, 5.0, 0.0);
