@@ -56,8 +56,8 @@ pub fn render(
             let lambert =
                 (normal[0] * to_sun[0] + normal[1] * to_sun[1] + normal[2] * to_sun[2]).max(0.0);
             // Seen from just off the surface towards the sun, as a shadow ray would start, so
-            // a lit wall face is not taken for its own column and a floor rising towards the
-            // sun less steeply than its rays is not shaded by its next cell's step.
+            // a lit wall face is not taken for its own column and the floor is not shaded by
+            // the small steps between its cells (up to a centimetre or so).
             let lit = lambert > 0.0
                 && shadows.lit([
                     p[0] + 0.03 * to_sun[0],
