@@ -180,6 +180,8 @@ struct Goal {
     kind: GoalKind,
     deadline: Option<Time>,
     attempts: u32,
+    /// When it was set (a revisit's drive does not count against exploring).
+    started: Time,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -245,8 +247,6 @@ pub struct Navigator {
     last_forced_replan: Option<Time>,
     /// Known cells of the map when it last grew by the stall threshold, and when.
     grown: Option<(usize, Time)>,
-    /// When the revisit under way started: its drive does not count against exploring.
-    revisit_started: Option<Time>,
     /// The position's uncertainty (metres) and the nearest place mapped while it was
     /// small, as the rover last said ([`Navigator::set_localisation`]).
     localisation: Option<(f64, Option<Point2>)>,
@@ -334,7 +334,6 @@ impl Navigator {
             home_failures: 0,
             last_forced_replan: None,
             grown: None,
-            revisit_started: None,
             localisation: None,
             revisit_above_m,
             revisits_closed_nothing: Vec::new(),
@@ -416,7 +415,7 @@ impl Navigator {
                 );
                 self.goal = None;
                 self.follower.set_path(Vec::new());
-                self.revisit_ended(now);
+                self.revisit_ended(now, g.started);
             }
             // A revisit under way goes on: the guard below takes only a frontier or none.
             goal if self.cfg.autonomous
@@ -437,10 +436,9 @@ impl Navigator {
                             ),
                         );
                         self.start_goal(now, place, GoalKind::Revisit);
-                        self.revisit_started = Some(now);
                     }
                     // Already there, and what it sees closes nothing.
-                    Some(place) => self.revisit_closed_nothing(now, place),
+                    Some(place) => self.revisit_closed_nothing(place),
                     // Nowhere to go back to: asked again only once it has grown further.
                     None => self.raise_revisit_bound(),
                 }
@@ -449,15 +447,16 @@ impl Navigator {
         }
     }
 
-    /// A revisit ended: the drive back mapped nothing new, so the stall rule's clock is moved
-    /// on by the time it took since the map last grew, rather than count it against exploring.
+    /// A revisit set at `started` ended: the drive back mapped nothing new, so the stall
+    /// rule's clock is moved on by the time it took since the map last grew, rather than
+    /// count it against exploring.
     /// The time spent exploring before and after still counts: a rover whose every drive
     /// towards a frontier ends in a revisit (its pose grows uncertain on the way each time, a
     /// closure ties it back each time) runs out of exploring as one that makes no headway.
     /// (Restarting the clock at each revisit, as before, kept such a rover at it for the
     /// whole mission: seed 34's rover3, ninety-fifth session.)
-    fn revisit_ended(&mut self, now: Time) {
-        if let (Some(started), Some((known, since))) = (self.revisit_started.take(), self.grown) {
+    fn revisit_ended(&mut self, now: Time, started: Time) {
+        if let Some((known, since)) = self.grown {
             self.grown = Some((known, since + (now - started.max(since))));
         }
     }
@@ -465,10 +464,9 @@ impl Navigator {
     /// A revisit to `place` ended (or could not start) without a closure bringing the
     /// uncertainty down: the place is not taken again, and the next revisit waits until the
     /// uncertainty has grown by [`RevisitConfig::retry_growth_m`] more.
-    fn revisit_closed_nothing(&mut self, now: Time, place: Point2) {
+    fn revisit_closed_nothing(&mut self, place: Point2) {
         self.raise_revisit_bound();
         self.revisits_closed_nothing.push(place);
-        self.revisit_ended(now);
     }
 
     /// The next revisit waits until the uncertainty has grown by
@@ -605,10 +603,9 @@ impl Navigator {
             if g.kind == GoalKind::Revisit {
                 // Given up (not pre-empted by the operator): the place closed nothing.
                 if blacklist {
-                    self.revisit_closed_nothing(now, g.point);
-                } else {
-                    self.revisit_ended(now);
+                    self.revisit_closed_nothing(g.point);
                 }
+                self.revisit_ended(now, g.started);
             }
             if g.kind == GoalKind::Home && blacklist {
                 self.home_failures += 1;
@@ -947,8 +944,11 @@ impl Navigator {
 
     fn start_goal(&mut self, now: Time, point: Point2, kind: GoalKind) {
         // A revisit taken over by another goal (the operator's, a drive to find itself) ends.
-        if kind != GoalKind::Revisit && self.goal.is_some_and(|g| g.kind == GoalKind::Revisit) {
-            self.revisit_ended(now);
+        if let Some(g) = self.goal
+            && g.kind == GoalKind::Revisit
+            && kind != GoalKind::Revisit
+        {
+            self.revisit_ended(now, g.started);
         }
         if kind == GoalKind::Frontier {
             // Exploring again (new ground appeared): it must come home again after.
@@ -959,6 +959,7 @@ impl Navigator {
             kind,
             deadline: None,
             attempts: 0,
+            started: now,
         });
         self.history.clear();
         self.event(
@@ -1070,7 +1071,10 @@ impl Navigator {
                 match goal.kind {
                     GoalKind::Home => self.done = true,
                     GoalKind::Operator => self.operator_goal = None,
-                    GoalKind::Revisit => self.revisit_closed_nothing(now, goal.point),
+                    GoalKind::Revisit => {
+                        self.revisit_closed_nothing(goal.point);
+                        self.revisit_ended(now, goal.started);
+                    }
                     GoalKind::Frontier | GoalKind::Relocalise => {}
                 }
                 self.replan_now = true;

@@ -37,14 +37,14 @@ pub const MAX_STAMP_AGE: Duration = Duration::from_secs(3600);
 /// a rover's own sensor messages stamped more than [`MAX_STAMP_AHEAD`] ahead of it or
 /// [`MAX_STAMP_AGE`] behind; `None` for any other message.
 pub fn implausible_stamp(message: &Message, now: Time) -> Option<&'static str> {
-    let stamp = match message {
-        Message::Odometry(odom) => odom.header.stamp,
-        Message::Imu(imu) => imu.header.stamp,
-        Message::LaserScan(scan) => scan.header.stamp,
-        Message::PointCloud(cloud) => cloud.header.stamp,
-        _ => return None,
-    };
-    if stamp > now + MAX_STAMP_AHEAD {
+    let sensor = matches!(
+        message,
+        Message::Odometry(_) | Message::Imu(_) | Message::LaserScan(_) | Message::PointCloud(_)
+    );
+    let stamp = message.stamp();
+    if !sensor {
+        None
+    } else if stamp > now + MAX_STAMP_AHEAD {
         Some("sensor stamp more than 1 s ahead of the rover's clock")
     } else if stamp < now - MAX_STAMP_AGE {
         Some("sensor stamp more than an hour behind the rover's clock")

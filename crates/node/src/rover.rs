@@ -626,17 +626,27 @@ mod tests {
     /// Feeds the node a level IMU sample at `t` and, if given, wheels reading the position
     /// `wheels` (x, y) heading along x.
     fn wheels_and_gyro(node: &mut RoverNode, t: Time, wheels: Option<(f64, f64)>) {
+        wheels_and_gyro_stamped(node, t, t, wheels);
+    }
+
+    /// [`wheels_and_gyro`] at `t` on the node's clock, both readings stamped `stamp`.
+    fn wheels_and_gyro_stamped(
+        node: &mut RoverNode,
+        t: Time,
+        stamp: Time,
+        wheels: Option<(f64, f64)>,
+    ) {
         let id = node.id();
         if let Some((x, y)) = wheels {
             let mut odom = Odometry::default();
-            odom.header.stamp = t;
+            odom.header.stamp = stamp;
             odom.pose.pose.position.x = x;
             odom.pose.pose.position.y = y;
             odom.pose.pose.orientation = Quaternion::IDENTITY;
             node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
         }
         let mut imu = Imu::default();
-        imu.header.stamp = t;
+        imu.header.stamp = stamp;
         imu.linear_acceleration.z = 9.81;
         node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
     }
@@ -646,24 +656,22 @@ mod tests {
         Time::ZERO + Duration::from_millis(100 * k)
     }
 
-    /// A rover that has stood 3 s in the middle of the room (to the 30th [`tick`]), and
-    /// its clock's ticks.
-    fn settled_in_the_room() -> (RoverNode, fn(i64) -> Time) {
+    /// A rover that has stood 3 s in the middle of the room (to the 30th [`tick`]).
+    fn settled_in_the_room() -> RoverNode {
         let mut node = node();
         for k in 1..=30 {
             step(&mut node, tick(k), Some(true));
         }
-        (node, tick)
+        node
     }
 
     /// Stands the rover of [`settled_in_the_room`] still there from tick `from` to the 100th
     /// and checks it tracks again where it is.
     fn maps_the_room_again(node: &mut RoverNode, from: i64) {
-        let at = tick;
         for k in from..=100 {
-            step(node, at(k), Some(true));
+            step(node, tick(k), Some(true));
         }
-        node.on_tick(at(101));
+        node.on_tick(tick(101));
         node.drain_outbox();
         assert_ne!(node.mapping().state(), LocalisationState::Lost);
         let pose = node.mapping().pose();
@@ -807,7 +815,7 @@ mod tests {
         // clock holds, its first or its last nanosecond among them. Differences from such a
         // stamp overflowed the clock's arithmetic. The rover goes on, and maps the room
         // again once they stop.
-        let (mut node, at) = settled_in_the_room();
+        let mut node = settled_in_the_room();
         let id = node.id();
         let ends = [
             i64::MIN,
@@ -818,18 +826,11 @@ mod tests {
             i64::MIN / 2,
         ];
         // And ten minutes ahead, which overflows nothing.
-        let ahead = at(37) + Duration::from_secs(600);
+        let ahead = tick(37) + Duration::from_secs(600);
         let stamps = ends.into_iter().map(Time::from_ns).chain([ahead]);
         for (k, stamp) in stamps.enumerate() {
-            let t = at(31 + k as i64);
-            let mut odom = Odometry::default();
-            odom.header.stamp = stamp;
-            odom.pose.pose.orientation = Quaternion::IDENTITY;
-            node.on_message(t, &id.topic("odom"), &Message::Odometry(Box::new(odom)));
-            let mut imu = Imu::default();
-            imu.header.stamp = stamp;
-            imu.linear_acceleration.z = 9.81;
-            node.on_message(t, &id.topic("imu"), &Message::Imu(Box::new(imu)));
+            let t = tick(31 + k as i64);
+            wheels_and_gyro_stamped(&mut node, t, stamp, Some((0.0, 0.0)));
             node.on_message(t, &id.topic("scan"), &Message::LaserScan(scan(stamp, true)));
             let cloud = realms_core::msgs::PointCloud {
                 header: Header {
@@ -855,7 +856,8 @@ mod tests {
         // A driver's glitch on a real rover can send any number a message holds: a pose
         // 1e20 m out (a corrupt field still decodes), NaN, infinities, a scan claiming a
         // reach of 1e20 m. The rover goes on, and maps the room again once they stop.
-        let (mut node, at) = settled_in_the_room();
+        let mut node = settled_in_the_room();
+        let at = tick;
         let id = node.id();
         for (k, bad) in [
             1e20,

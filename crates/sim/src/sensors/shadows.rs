@@ -1,7 +1,8 @@
 //! Where the sun's shadows fall, worked out once for the whole terrain: for every cell, the
 //! height below which a point over it lies in the shadow of the columns between it and the
-//! sun (or inside its own column). The sun and the ground never move, so the camera reads each pixel's light from this
-//! map instead of casting a shadow ray across the hall for it (a long one under a low sun).
+//! sun (or inside its own column). The sun and the ground never move, so the camera reads
+//! each pixel's light from this map instead of casting a shadow ray across the hall for it
+//! (a long one under a low sun).
 //!
 //! The map is swept from the sun's side of the grid, one column (or row, whichever the sun's
 //! direction runs along most) at a time: a cell's shadow height is the highest of what the
@@ -38,14 +39,15 @@ impl SunShadows {
                 heights: Grid::new(g, f32::INFINITY),
             };
         }
-        let mut heights = Grid::new(g, f32::NEG_INFINITY);
-        if ce > 1e-9 {
+        let heights = if ce > 1e-9 {
             let (sa, ca) = sun.azimuth_deg.to_radians().sin_cos();
+            let mut heights = Grid::new(g, f32::NEG_INFINITY);
             sweep(terrain, [ca, sa], se / ce, &mut heights);
+            heights
         } else {
             // Straight overhead, a ray from a column's top meets no other column.
-            heights = terrain.clone();
-        }
+            terrain.clone()
+        };
         SunShadows {
             sun: sun.clone(),
             heights,
@@ -65,7 +67,7 @@ impl SunShadows {
         let g = self.heights.geometry();
         match g.world_to_cell(Point2::new(p[0], p[1])) {
             Some(c) => p[2] > self.heights.cells()[g.index(c)] as f64,
-            None => self.heights.cells().first() != Some(&f32::INFINITY),
+            None => self.sun.elevation_deg.to_radians().sin() > 0.0,
         }
     }
 
@@ -112,13 +114,12 @@ fn sweep(terrain: &Grid<f32>, to_sun: [f64; 2], tan_elevation: f64, shadows: &mu
         let m = minor as i64 + d.round() as i64;
         (0..=minor_max).contains(&m).then_some(m as usize)
     };
-    let lines: Vec<usize> = if toward > 0 {
-        (0..major_len).rev().collect()
-    } else {
-        (0..major_len).collect()
-    };
-    // The line nearest the sun has nothing beyond it: its cells keep -inf.
-    for &major in &lines {
+    let half_rise = rise_m / 2.0;
+    // Nearest the sun first.
+    let lines = (0..major_len).map(|k| if toward > 0 { major_len - 1 - k } else { k });
+    // The line nearest the sun has nothing beyond it: its cells are dark only inside their
+    // own columns.
+    for major in lines {
         let next = major as i64 + toward;
         let has_next = (0..major_len as i64).contains(&next);
         for minor in 0..minor_len {
@@ -132,7 +133,6 @@ fn sweep(terrain: &Grid<f32>, to_sun: [f64; 2], tan_elevation: f64, shadows: &mu
                 // Over the next line's column, from where it enters it to where it leaves
                 // (half a step either side of its centre): the ray is lowest where it enters,
                 // half a step on.
-                let half_rise = rise_m / 2.0;
                 for d in [drift / 2.0, drift, 1.5 * drift] {
                     if let Some(m) = nearest(minor, d) {
                         shadow = shadow.max(tops[index(next, m)] as f64 - half_rise);
