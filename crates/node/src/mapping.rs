@@ -708,8 +708,9 @@ impl Mapping {
         self.mapper.pose()
     }
 
-    /// How far the position may be off, by the path that ties it to the start (the
-    /// standard deviation the published covariance holds at least), metres; `None` while
+    /// How far the position may be off, by the path that ties it to the start and any swing
+    /// of the heading from the gyro's since the pose was last set (the standard deviation
+    /// the published covariance holds at least), metres; `None` while
     /// lost or without the model (see [`Mapper::pose_uncertainty`]).
     pub fn position_uncertainty_m(&mut self) -> Option<f64> {
         if self.mapper.state() == LocalisationState::Lost {
@@ -1285,7 +1286,9 @@ impl Mapping {
     }
 
     /// The pose covariance: how far the pose may be from the truth by the path that ties it
-    /// to the start (see [`realms_slam::drift`]), at least what the last match's
+    /// to the start (see [`realms_slam::drift`]) and any swing of the heading from the
+    /// gyro's since the pose was last set
+    /// ([`realms_slam::mapper::MapperConfig::heading_departure`]), at least what the last match's
     /// information leaves (with a floor of a centimetre and a fraction of a degree), and
     /// huge when lost, or before any match without the path's model.
     fn covariance(&mut self, state: LocalisationState) -> [[f64; 6]; 6] {

@@ -400,9 +400,9 @@ pub struct MapperConfig {
     /// not the gyro's error, which over a second is a few hundredths of a degree.
     pub heading_window: Option<HeadingWindow>,
     /// With a gyro: where the tracked heading swings away from the gyro's within a few
-    /// seconds by more than the gyro can drift, the published uncertainty grows by that
-    /// swing times the distance from where it began, until the pose is next set (`None`:
-    /// not watched). Only what the rover says of its pose: the pose itself is left as the
+    /// seconds by more than the gyro can drift, the published position uncertainty grows by
+    /// that swing times the straight-line distance from where it began, and the heading's
+    /// by the swing, until the pose is next set (`None`: not watched). Only what the rover says of its pose: the pose itself is left as the
     /// match has it (the heading window, which holds it, moved every rover's path and
     /// gained nothing over whole missions).
     pub heading_departure: Option<HeadingDeparture>,
@@ -809,8 +809,9 @@ impl Default for HeadingDeparture {
     }
 }
 
-/// The largest swing of the tracked heading from the gyro's since the pose was last set, and
-/// where the rover was when the swing began.
+/// A swing of the tracked heading from the gyro's since the pose was last set: the largest
+/// found within one window, and where the rover was when the first swing to pass the bound
+/// began (a later, larger one keeps that place: the heading has been off since then).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Departed {
     swing_rad: f64,
