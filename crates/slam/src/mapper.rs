@@ -402,9 +402,9 @@ pub struct MapperConfig {
     /// With a gyro: where the tracked heading swings away from the gyro's within a few
     /// seconds by more than the gyro can drift, the published position uncertainty grows by
     /// that swing times the straight-line distance from where it began, and the heading's
-    /// by the swing, until the pose is next set (`None`: not watched). Only what the rover says of its pose: the pose itself is left as the
-    /// match has it (the heading window, which holds it, moved every rover's path and
-    /// gained nothing over whole missions).
+    /// by the swing, until the pose is next set (`None`: not watched). Only what the rover
+    /// says of its pose: the pose itself is left as the match has it (the heading window,
+    /// which holds it, moved every rover's path and gained nothing over whole missions).
     pub heading_departure: Option<HeadingDeparture>,
     /// With a gyro: each matched scan's heading is the gyro's turn from the last pose, moved
     /// this share of the way towards the match's own heading, and the match is redone with
@@ -1190,13 +1190,11 @@ pub struct Mapper {
     last_headings: Option<(f64, f64)>,
     /// The tracked heading less the odometry's when the pose was last set, and when.
     heading_anchor: Option<HeadingAnchor>,
-    /// The tracked heading less the odometry's at each scan within the heading window's
-    /// span, oldest first, since the pose was last set ([`MapperConfig::heading_window`]).
-    heading_offsets: std::collections::VecDeque<(f64, f64)>,
-    /// The tracked heading less the odometry's at each scan within the departure window's
-    /// span, with the position then, oldest first, since the pose was last set
-    /// ([`MapperConfig::heading_departure`]).
-    departure_offsets: std::collections::VecDeque<(f64, f64, Point2)>,
+    /// The tracked heading less the odometry's at each scan, with the time and the position
+    /// then, oldest first, since the pose was last set: over the longer span of the heading
+    /// window's and the heading departure's, each of which reads its own span
+    /// ([`MapperConfig::heading_window`], [`MapperConfig::heading_departure`]).
+    heading_offsets: std::collections::VecDeque<(f64, f64, Point2)>,
     /// The swing found, if any, since the pose was last set.
     departed: Option<Departed>,
     /// The odometry's heading at the last scan, while not lost: where a new anchor starts
@@ -1338,7 +1336,6 @@ impl Mapper {
             last_headings: None,
             heading_anchor: None,
             heading_offsets: std::collections::VecDeque::new(),
-            departure_offsets: std::collections::VecDeque::new(),
             departed: None,
             last_odom_yaw: None,
             searches_since_lost: 0,
@@ -1709,8 +1706,8 @@ impl Mapper {
                         let recent = self
                             .heading_offsets
                             .iter()
-                            .filter(|(t, _)| *t >= time_s - window.span_s)
-                            .map(|(_, o)| *o);
+                            .filter(|(t, _, _)| *t >= time_s - window.span_s)
+                            .map(|(_, o, _)| *o);
                         if let Some(bounded) = window.clamp(recent, offset) {
                             let held = MatcherConfig {
                                 prior_rotation_weight: HELD_HEADING_WEIGHT,
@@ -1956,21 +1953,24 @@ impl Mapper {
             self.last_odom_yaw = None;
         } else {
             self.last_odom_yaw = Some(odom.yaw_rad);
-            if let Some(window) = self.cfg.heading_window {
+            let spans = [
+                self.cfg.heading_window.map(|w| w.span_s),
+                self.cfg.heading_departure.map(|d| d.window_s),
+            ];
+            if let Some(span_s) = spans.into_iter().flatten().reduce(f64::max) {
                 while self
                     .heading_offsets
                     .front()
-                    .is_some_and(|(t, _)| *t < time_s - window.span_s)
+                    .is_some_and(|(t, _, _)| *t < time_s - span_s)
                 {
                     self.heading_offsets.pop_front();
                 }
-                self.heading_offsets.push_back((
-                    time_s,
-                    normalize_angle_rad(self.pose.yaw_rad - odom.yaw_rad),
-                ));
-            }
-            if let Some(departure) = self.cfg.heading_departure {
-                self.watch_departure(departure, time_s, odom.yaw_rad);
+                let offset = normalize_angle_rad(self.pose.yaw_rad - odom.yaw_rad);
+                if let Some(departure) = self.cfg.heading_departure {
+                    self.watch_departure(departure, time_s, offset);
+                }
+                self.heading_offsets
+                    .push_back((time_s, offset, self.pose.position()));
             }
         }
         // They were seen for this scan, and are stale at the next.
@@ -2487,27 +2487,20 @@ impl Mapper {
     fn forget_heading_references(&mut self) {
         self.heading_anchor = None;
         self.heading_offsets.clear();
-        self.departure_offsets.clear();
         self.departed = None;
     }
 
-    /// Keeps the tracked heading less the gyro's `odom_yaw` at `time_s` over the departure
-    /// window, and the largest swing within it from `departure.min_swing_rad` on, with where
-    /// the rover was at the offset it swung from ([`MapperConfig::heading_departure`]).
-    fn watch_departure(&mut self, departure: HeadingDeparture, time_s: f64, odom_yaw: f64) {
-        let offsets = &mut self.departure_offsets;
-        while offsets
-            .front()
-            .is_some_and(|(t, _, _)| *t < time_s - departure.window_s)
-        {
-            offsets.pop_front();
-        }
-        let offset = normalize_angle_rad(self.pose.yaw_rad - odom_yaw);
-        let swing = offsets
+    /// Keeps the largest swing of the tracked heading less the gyro's, `offset_rad` at
+    /// `time_s`, from the offsets within the departure window before it, from
+    /// `departure.min_swing_rad` on, with where the rover was at the offset it swung from
+    /// ([`MapperConfig::heading_departure`]).
+    fn watch_departure(&mut self, departure: HeadingDeparture, time_s: f64, offset_rad: f64) {
+        let swing = self
+            .heading_offsets
             .iter()
-            .map(|(_, o, at)| (normalize_angle_rad(offset - o).abs(), *at))
+            .filter(|(t, _, _)| *t >= time_s - departure.window_s)
+            .map(|(_, o, at)| (normalize_angle_rad(offset_rad - o).abs(), *at))
             .max_by(|a, b| a.0.total_cmp(&b.0));
-        offsets.push_back((time_s, offset, self.pose.position()));
         if let Some((swing_rad, from)) = swing.filter(|(s, _)| *s >= departure.min_swing_rad) {
             match &mut self.departed {
                 Some(d) => d.swing_rad = d.swing_rad.max(swing_rad),
