@@ -56,6 +56,8 @@ pub struct RoverBody {
     pub wheel_yaw_rate_rad_s: f64,
     /// True body yaw rate of the last step, rad/s.
     pub yaw_rate_rad_s: f64,
+    /// True body speed along its heading over the last step, m/s (0 while blocked).
+    pub speed_m_s: f64,
     /// Latest command and when it arrived.
     pub command: Option<TwistStamped>,
     /// Pose integrated from the wheel encoders (the `odom` frame starts at the true pose).
@@ -98,6 +100,7 @@ impl RoverBody {
             wheel_speed_m_s: 0.0,
             wheel_yaw_rate_rad_s: 0.0,
             yaw_rate_rad_s: 0.0,
+            speed_m_s: 0.0,
             command: None,
             odom_pose: pose,
             odom_speed_m_s: 0.0,
@@ -171,6 +174,7 @@ impl RoverBody {
             self.wheel_speed_m_s = 0.0;
             self.wheel_yaw_rate_rad_s = 0.0;
             self.yaw_rate_rad_s = 0.0;
+            self.speed_m_s = 0.0;
             self.odom_speed_m_s = 0.0;
             self.odom_yaw_rate_rad_s = 0.0;
             return outcomes;
@@ -224,10 +228,12 @@ impl RoverBody {
         let next = integrate(&self.pose, v, w, dt_s);
         if v == 0.0 && w == 0.0 {
             self.yaw_rate_rad_s = 0.0;
+            self.speed_m_s = 0.0;
             return outcomes;
         }
         if footprint_hits(&next, spec, truth) {
             self.yaw_rate_rad_s = 0.0;
+            self.speed_m_s = 0.0;
             if !self.in_contact {
                 self.in_contact = true;
                 self.stats.collisions += 1;
@@ -238,6 +244,7 @@ impl RoverBody {
         self.in_contact = false;
         self.stats.distance_m += self.pose.position().distance_m(next.position());
         self.yaw_rate_rad_s = w;
+        self.speed_m_s = v;
         self.pose = next;
         self.settle(spec, terrain);
 

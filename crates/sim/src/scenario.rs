@@ -279,6 +279,12 @@ pub struct Imu {
     pub gyro_bias_std_rad_s: f64,
     /// Accelerometer white noise standard deviation per axis, m/s^2.
     pub accel_noise_m_s2: f64,
+    /// Whether the accelerometer also feels the body's own acceleration, as a real one
+    /// does: along x the change of the body's speed since the last sample (a slip burst's
+    /// body all but stops while its wheels turn on; a collision stops it at once), along y
+    /// a turn's centripetal acceleration. Off by default: the rovers level their lidar by
+    /// the accelerometer's tilt, which takes all of it for gravity.
+    pub body_acceleration: bool,
 }
 
 /// A scheduled fault.
@@ -539,6 +545,7 @@ impl Default for Imu {
             gyro_noise_rad_s: 0.003,
             gyro_bias_std_rad_s: 0.002,
             accel_noise_m_s2: 0.02,
+            body_acceleration: false,
         }
     }
 }

@@ -71,6 +71,8 @@ struct RoverSlot {
     depth_rng: SimRng,
     motion_rng: SimRng,
     gyro_rng: SimRng,
+    /// When the IMU last sampled and the body's speed then (for its acceleration since).
+    imu_speed_mark: Option<(Time, f64)>,
     camera_wanted: bool,
     dropped: BTreeMap<SensorKind, u32>,
     /// `world_from_lidar` and the heading at each physics step of the last scan's length,
@@ -132,6 +134,7 @@ impl World {
                     depth_rng: streams.rng(Purpose::Depth(n)),
                     motion_rng,
                     gyro_rng: streams.rng(Purpose::Gyro(n)),
+                    imu_speed_mark: None,
                     camera_wanted: false,
                     dropped: BTreeMap::new(),
                     lidar_frames: VecDeque::new(),
@@ -510,15 +513,30 @@ impl World {
                 id.topic("odom"),
                 Message::Odometry(Box::new(proprio::odometry(&slot.body, spec, t))),
             ),
-            SensorKind::Imu => (
-                id.topic("imu"),
-                Message::Imu(Box::new(proprio::imu(
-                    &slot.body,
-                    spec,
-                    &mut slot.gyro_rng,
-                    t,
-                ))),
-            ),
+            SensorKind::Imu => {
+                let body = &slot.body;
+                let felt = spec.imu.body_acceleration.then(|| {
+                    // The speed's change since the last sample, as an accelerometer averages
+                    // it over its sample; the first sample has nothing to compare with.
+                    let along = match slot.imu_speed_mark.replace((t, body.speed_m_s)) {
+                        Some((t0, v0)) if t > t0 => {
+                            (body.speed_m_s - v0) / t.since(t0).as_secs_f64()
+                        }
+                        _ => 0.0,
+                    };
+                    (along, body.speed_m_s * body.yaw_rate_rad_s)
+                });
+                (
+                    id.topic("imu"),
+                    Message::Imu(Box::new(proprio::imu(
+                        body,
+                        spec,
+                        &mut slot.gyro_rng,
+                        t,
+                        felt,
+                    ))),
+                )
+            }
         })
     }
 

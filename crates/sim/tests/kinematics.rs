@@ -281,6 +281,82 @@ fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
     );
 }
 
+/// The accelerometer's readings along x and y of rover1 standing for 0.5 s, then driving at
+/// 0.3 m/s on flat, firm ground with a slip burst from 5 to 10 s, and with the body's acceleration felt or not:
+/// `(stamp s, x, y)` for each sample.
+fn accelerometer_through_a_slip_burst(felt: bool, w_rad_s: f64) -> Vec<(f64, f64, f64)> {
+    let mut s = firm(scenario(1));
+    s.rovers.imu.body_acceleration = felt;
+    s.faults.push(realms_sim::scenario::Fault {
+        kind: realms_sim::scenario::FaultKind::SlipBurst,
+        rover: "rover1".into(),
+        at_s: 5.0,
+        duration_s: 5.0,
+        sensor: None,
+    });
+    let mut world = flat_world(&s, &[Pose2::new(10.0, 10.0, 0.0)], |_| {});
+    // Standing for its first samples, it has a speed to compare the next ones with.
+    let mut out = idle_until(&mut world, Time::from_secs_f64(0.5));
+    out.extend(drive(&mut world, R1, 0.3, w_rad_s, 15.0));
+    out.iter()
+        .filter_map(|(_, m)| match m {
+            Message::Imu(imu) => Some((
+                imu.header.stamp.as_secs_f64(),
+                imu.linear_acceleration.x,
+                imu.linear_acceleration.y,
+            )),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The speed the accelerometer's x readings add up to between `from_s` and `to_s`.
+fn speed_change(samples: &[(f64, f64, f64)], from_s: f64, to_s: f64) -> f64 {
+    samples
+        .windows(2)
+        .filter(|w| w[1].0 > from_s && w[1].0 <= to_s)
+        .map(|w| w[1].1 * (w[1].0 - w[0].0))
+        .sum()
+}
+
+#[test]
+fn an_accelerometer_that_feels_the_body_sees_a_slip_burst_the_wheels_do_not() {
+    let felt = accelerometer_through_a_slip_burst(true, 0.0);
+    // Up to 0.3 m/s, down to a tenth of it as the burst begins, and back as it ends; the
+    // wheels turn at 0.3 m/s throughout.
+    // Each sample's noise adds 0.02 m/s^2 x 0.02 s = 0.4 mm/s (one standard deviation), so a
+    // second's readings (50) add up to within about 3 mm/s of the speed's change.
+    let start = speed_change(&felt, 0.4, 1.4);
+    let burst = speed_change(&felt, 4.5, 5.5);
+    let end = speed_change(&felt, 9.5, 10.5);
+    assert!((start - 0.3).abs() < 0.01, "start {start}");
+    assert!((burst + 0.27).abs() < 0.01, "burst {burst}");
+    assert!((end - 0.27).abs() < 0.01, "end {end}");
+    // Driving steadily it feels nothing but its noise.
+    let steady = speed_change(&felt, 1.5, 4.5);
+    assert!(steady.abs() < 0.02, "steady {steady}");
+    // Not felt, the burst is not in the readings either.
+    let unfelt = speed_change(&accelerometer_through_a_slip_burst(false, 0.0), 4.5, 5.5);
+    assert!(unfelt.abs() < 0.01, "unfelt {unfelt}");
+}
+
+#[test]
+fn an_accelerometer_that_feels_the_body_feels_a_turn_across_it() {
+    // 0.3 m/s on a 0.5 rad/s arc: 0.15 m/s^2 towards the turn's centre, the rover's left.
+    let across = |felt| {
+        let samples = accelerometer_through_a_slip_burst(felt, 0.5);
+        let steady: Vec<f64> = samples
+            .iter()
+            .filter(|(t, _, _)| (2.0..4.5).contains(t))
+            .map(|(_, _, y)| *y)
+            .collect();
+        steady.iter().sum::<f64>() / steady.len() as f64
+    };
+    let (felt, unfelt) = (across(true), across(false));
+    assert!((felt - 0.15).abs() < 0.01, "felt {felt}");
+    assert!(unfelt.abs() < 0.01, "unfelt {unfelt}");
+}
+
 #[test]
 fn a_powered_off_rover_stops_and_falls_silent() {
     let mut s = firm(scenario(1));

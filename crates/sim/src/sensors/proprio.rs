@@ -60,9 +60,16 @@ pub fn odometry(body: &RoverBody, spec: &Rovers, stamp: Time) -> Odometry {
 const GRAVITY_M_S2: f64 = 9.81;
 
 /// The IMU message: the true yaw rate plus bias and noise, and the accelerometer's specific
-/// force, which for a rover this slow is gravity seen in the tilted body frame (REP 103:
-/// x forward, z up) plus noise.
-pub fn imu(body: &RoverBody, spec: &Rovers, rng: &mut SimRng, stamp: Time) -> Imu {
+/// force: gravity seen in the tilted body frame (REP 103: x forward, z up) plus noise, and
+/// the body's own acceleration `felt` (along x and y, m/s^2) if the scenario has it felt
+/// ([`crate::scenario::Imu::body_acceleration`]).
+pub fn imu(
+    body: &RoverBody,
+    spec: &Rovers,
+    rng: &mut SimRng,
+    stamp: Time,
+    felt: Option<(f64, f64)>,
+) -> Imu {
     let sigma = spec.imu.gyro_noise_rad_s;
     let not_provided = [[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
     let var = sigma * sigma;
@@ -71,11 +78,15 @@ pub fn imu(body: &RoverBody, spec: &Rovers, rng: &mut SimRng, stamp: Time) -> Im
     let a_sigma = spec.imu.accel_noise_m_s2;
     let a_var = a_sigma * a_sigma;
     let gyro_z = body.yaw_rate_rad_s + body.gyro_bias_rad_s + gaussian(rng, sigma);
-    let accel = Vec3::new(
+    let mut accel = Vec3::new(
         -GRAVITY_M_S2 * sp + gaussian(rng, a_sigma),
         GRAVITY_M_S2 * cp * sr + gaussian(rng, a_sigma),
         GRAVITY_M_S2 * cp * cr + gaussian(rng, a_sigma),
     );
+    if let Some((along, across)) = felt {
+        accel.x += along;
+        accel.y += across;
+    }
     Imu {
         header: Header {
             stamp,
