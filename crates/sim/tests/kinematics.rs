@@ -254,9 +254,8 @@ fn gyro_reads_the_yaw_rate_plus_its_bias_and_noise() {
     assert!((std - sigma).abs() < 0.1 * sigma, "std {std}");
 }
 
-#[test]
-fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
-    let mut s = firm(scenario(1));
+/// `s` with a slip burst on rover1 from 5 to 10 s.
+fn with_slip_burst_from_5_to_10_s(mut s: realms_sim::Scenario) -> realms_sim::Scenario {
     s.faults.push(realms_sim::scenario::Fault {
         kind: realms_sim::scenario::FaultKind::SlipBurst,
         rover: "rover1".into(),
@@ -264,6 +263,12 @@ fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
         duration_s: 5.0,
         sensor: None,
     });
+    s
+}
+
+#[test]
+fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
+    let s = with_slip_burst_from_5_to_10_s(firm(scenario(1)));
     let mut world = flat_world(&s, &[Pose2::new(3.0, 10.0, 0.0)], |_| {});
     drive(&mut world, R1, 0.3, 0.0, 15.0);
     let body = world.rovers().next().expect("rover");
@@ -282,18 +287,11 @@ fn a_slip_burst_makes_odometry_report_motion_that_did_not_happen() {
 }
 
 /// The accelerometer's readings along x and y of rover1 standing for 0.5 s, then driving at
-/// 0.3 m/s on flat, firm ground with a slip burst from 5 to 10 s, and with the body's acceleration felt or not:
-/// `(stamp s, x, y)` for each sample.
+/// 0.3 m/s (turning at `w_rad_s`) on flat, firm ground with a slip burst from 5 to 10 s, the
+/// body's acceleration `felt` or not: `(stamp s, x, y)` for each sample.
 fn accelerometer_through_a_slip_burst(felt: bool, w_rad_s: f64) -> Vec<(f64, f64, f64)> {
-    let mut s = firm(scenario(1));
+    let mut s = with_slip_burst_from_5_to_10_s(firm(scenario(1)));
     s.rovers.imu.body_acceleration = felt;
-    s.faults.push(realms_sim::scenario::Fault {
-        kind: realms_sim::scenario::FaultKind::SlipBurst,
-        rover: "rover1".into(),
-        at_s: 5.0,
-        duration_s: 5.0,
-        sensor: None,
-    });
     let mut world = flat_world(&s, &[Pose2::new(10.0, 10.0, 0.0)], |_| {});
     // Standing for its first samples, it has a speed to compare the next ones with.
     let mut out = idle_until(&mut world, Time::from_secs_f64(0.5));
