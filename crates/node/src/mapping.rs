@@ -710,8 +710,8 @@ impl Mapping {
 
     /// How far the position may be off, by the path that ties it to the start and any swing
     /// of the heading from the gyro's since the pose was last set (the standard deviation
-    /// the published covariance holds at least), metres; `None` while
-    /// lost or without the model (see [`Mapper::pose_uncertainty`]).
+    /// the published covariance holds at least), metres; `None` while lost or without the
+    /// model (see [`Mapper::pose_uncertainty`]).
     pub fn position_uncertainty_m(&mut self) -> Option<f64> {
         if self.mapper.state() == LocalisationState::Lost {
             return None;
@@ -1288,9 +1288,9 @@ impl Mapping {
     /// The pose covariance: how far the pose may be from the truth by the path that ties it
     /// to the start (see [`realms_slam::drift`]) and any swing of the heading from the
     /// gyro's since the pose was last set
-    /// ([`realms_slam::mapper::MapperConfig::heading_departure`]), at least what the last match's
-    /// information leaves (with a floor of a centimetre and a fraction of a degree), and
-    /// huge when lost, or before any match without the path's model.
+    /// ([`realms_slam::mapper::MapperConfig::heading_departure`]), at least what the last
+    /// match's information leaves (with a floor of a centimetre and a fraction of a degree),
+    /// and huge when lost, or before any match without the path's model.
     fn covariance(&mut self, state: LocalisationState) -> [[f64; 6]; 6] {
         let mut c = [[0.0; 6]; 6];
         // z, roll and pitch are not estimated.

@@ -167,15 +167,15 @@ fn chessboard_distance(w: usize, h: usize, solid: impl Fn(usize) -> bool) -> Vec
             *t = three[0].min(three[1]).min(three[2]).saturating_add(1);
         }
     };
-    // The neighbour in the row itself, from the row's first cell on (the backward pass
-    // runs it over the row reversed).
-    let along = |row: &mut [u8]| {
+    // The neighbour in the row itself, in the order the cells come (the backward pass
+    // takes the row from its end).
+    fn along<'a>(row: impl Iterator<Item = &'a mut u8>) {
         let mut run = 255u8;
         for c in row {
             run = (*c).min(run.saturating_add(1));
             *c = run;
         }
-    };
+    }
     let mut beside = vec![255u8; w];
     for y in 0..h {
         let (done, rest) = d.split_at_mut(y * w);
@@ -186,7 +186,7 @@ fn chessboard_distance(w: usize, h: usize, solid: impl Fn(usize) -> bool) -> Vec
                 *c = (*c).min(*b);
             }
         }
-        along(row);
+        along(row.iter_mut());
     }
     for y in (0..h).rev() {
         let (row_and_before, after) = d.split_at_mut((y + 1) * w);
@@ -197,9 +197,7 @@ fn chessboard_distance(w: usize, h: usize, solid: impl Fn(usize) -> bool) -> Vec
                 *c = (*c).min(*b);
             }
         }
-        row.reverse();
-        along(row);
-        row.reverse();
+        along(row.iter_mut().rev());
     }
     d
 }
