@@ -308,6 +308,21 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.tilt_smoothing = 1.0,
     },
     Variant {
+        name: "tilt-less-wheels",
+        what: "the wheels' acceleration (their speed read over 0.2 s) taken out of each accelerometer sample before it goes into the tilt",
+        apply: |c| c.tilt_less_wheels = Some(Duration::from_millis(200)),
+    },
+    Variant {
+        name: "tilt-less-wheels-400",
+        what: "the wheels' acceleration (their speed read over 0.4 s) taken out of each accelerometer sample before it goes into the tilt",
+        apply: |c| c.tilt_less_wheels = Some(Duration::from_millis(400)),
+    },
+    Variant {
+        name: "tilt-less-wheels-100",
+        what: "the wheels' acceleration (their speed read over 0.1 s) taken out of each accelerometer sample before it goes into the tilt",
+        apply: |c| c.tilt_less_wheels = Some(Duration::from_millis(100)),
+    },
+    Variant {
         name: "tilt-half",
         what: "the lidar's returns and the depth camera's points levelled by an average of the accelerometer taking half of each new sample",
         apply: |c| c.tilt_smoothing = 0.5,

@@ -110,6 +110,7 @@ pub fn rover_mapping_config(world: &World, options: &MissionOptions) -> MappingC
         // tilt shows the lidar, but left the replays' maps no better (BENCHMARKS.md, "The
         // lidar levelled by the newest accelerometer sample").
         tilt_smoothing: 0.2,
+        tilt_less_wheels: None,
         // Right after a wheel climbs a rock the smoothed tilt lags, and the floor the lidar
         // then meets metres ahead was kept as arcs of obstacles across open ground: dropped,
         // the maps over sixteen missions came out 95.5 % right instead of 93.7 % (BENCHMARKS.md,

@@ -10,6 +10,7 @@
 //! - [`navigation::Navigator`]: exploration, planning, path following and recovery.
 //! - [`guard::Guard`]: the reactive check of the rover's own sensors.
 //! - [`lander_merge`]: the lander's job of merging every rover's map into one.
+//! - [`levelling::Levelling`]: the rover's tilt from its accelerometer, for levelling its sensors.
 //! - [`layers`]: the rover's published and planner maps, redrawn only where they changed.
 //! - [`sweep`]: a sweeping lidar's scan brought to one instant by the rover's measured motion.
 //! - [`station::StationNode`]: the lander and the ground station: every rover's map rebuilt
@@ -19,6 +20,7 @@ pub mod cost;
 pub mod guard;
 pub mod lander_merge;
 pub mod layers;
+pub mod levelling;
 pub mod mapping;
 pub mod navigation;
 pub mod plausible;

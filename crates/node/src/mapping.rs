@@ -12,6 +12,7 @@
 
 use crate::Outgoing;
 use crate::layers::TiledLayer;
+use crate::levelling::Levelling;
 use crate::sweep::{self, RecentMotion};
 use realms_core::geometry::{Quaternion, Vec3, normalize_angle_rad};
 use realms_core::msgs::{
@@ -72,6 +73,11 @@ pub struct MappingConfig {
     /// lidar's returns and the depth camera's points (1: the newest sample alone). A wheel
     /// climbing a rock tilts the rover within one physics step; a smoothed tilt lags it.
     pub tilt_smoothing: f64,
+    /// The wheels' acceleration is taken out of each accelerometer sample before it goes
+    /// into the tilt, their speed read over this stretch of time around the sample
+    /// ([`Levelling`]): an accelerometer that feels the body reads starting, stopping and
+    /// turning as tilt (`None`: the samples as they come).
+    pub tilt_less_wheels: Option<Duration>,
     /// A return is dropped as the floor too when its levelled height is within what the
     /// tilt's latest change, not yet in the smoothed gravity, could have moved it: the
     /// ground clearance plus the range times the angle between the smoothed gravity and
@@ -559,10 +565,8 @@ pub struct Mapping {
     bias_sum: f64,
     bias_samples: u64,
     gyro_bias_rad_s: Option<f64>,
-    /// Smoothed specific force in the body frame (gravity, for a slow rover), m/s^2.
-    gravity: [f64; 3],
-    /// The newest accelerometer sample, m/s^2.
-    newest_accel: [f64; 3],
+    /// The rover's tilt from its accelerometer.
+    level: Levelling,
     /// Returns dropped as floor hits, for the record.
     floor_hits: u64,
     next_map: Time,
@@ -618,6 +622,7 @@ impl Mapping {
         let published_layer = TiledLayer::new(1).rounding_hazards_out(cfg.hazards_rounded_out);
         Mapping {
             id,
+            level: Levelling::new(cfg.tilt_smoothing, cfg.tilt_less_wheels),
             mapper: Mapper::new(cfg.mapper),
             hazards: SubmapHazards::new(
                 cfg.traversability.resolution_m,
@@ -643,8 +648,6 @@ impl Mapping {
             bias_sum: 0.0,
             bias_samples: 0,
             gyro_bias_rad_s: None,
-            gravity: [0.0, 0.0, 9.81],
-            newest_accel: [0.0, 0.0, 9.81],
             floor_hits: 0,
             next_map: Time::ZERO,
             next_delta: Time::ZERO,
@@ -769,6 +772,7 @@ impl Mapping {
             }
         };
         self.recent.push_position(stamp, fused);
+        self.level.on_wheels(stamp, wheel);
         self.last_wheel = Some(wheel);
         if !back_from_silence
             && let Some((t1, _)) = self.odometry.last()
@@ -812,19 +816,12 @@ impl Mapping {
     /// Takes an IMU reading: integrates the gyro's yaw rate since the previous one, and
     /// smooths the accelerometer's gravity for the rover's tilt.
     pub fn on_imu(&mut self, imu: &Imu) {
-        if imu.linear_acceleration_covariance[0][0] >= 0.0 {
-            let a = imu.linear_acceleration;
-            self.newest_accel = [a.x, a.y, a.z];
-            let g = &mut self.gravity;
-            let k = self.cfg.tilt_smoothing.clamp(0.0, 1.0);
-            *g = [
-                g[0] + k * (a.x - g[0]),
-                g[1] + k * (a.y - g[1]),
-                g[2] + k * (a.z - g[2]),
-            ];
-        }
         let t = imu.header.stamp;
         let rate = imu.angular_velocity.z;
+        if imu.linear_acceleration_covariance[0][0] >= 0.0 {
+            let a = imu.linear_acceleration;
+            self.level.on_accel(t, [a.x, a.y, a.z], rate);
+        }
         if self.calibrating(t) {
             // Standing still: what the gyro reads is its bias (and noise), not a turn.
             self.bias_sum += rate;
@@ -862,21 +859,10 @@ impl Mapping {
         self.gyro_bias_rad_s
     }
 
-    /// The rotation that levels body-frame vectors (undoes pitch and roll, keeps yaw), from
-    /// the smoothed gravity: the body's rotation is Rz(yaw) Ry(pitch) Rx(roll) (REP 103), and
-    /// gravity's reaction in the body frame is the last row of Ry(pitch) Rx(roll).
+    /// The rotation that levels body-frame vectors (undoes pitch and roll, keeps yaw)
+    /// ([`Levelling::rotation`]).
     fn levelling(&self) -> [[f64; 3]; 3] {
-        let [gx, gy, gz] = self.gravity;
-        let norm = (gx * gx + gy * gy + gz * gz).sqrt().max(1e-6);
-        let pitch = (-gx / norm).clamp(-1.0, 1.0).asin();
-        let roll = gy.atan2(gz);
-        let (sp, cp) = pitch.sin_cos();
-        let (sr, cr) = roll.sin_cos();
-        [
-            [cp, sp * sr, sp * cr],
-            [0.0, cr, -sr],
-            [-sp, cp * sr, cp * cr],
-        ]
+        self.level.rotation()
     }
 
     /// Takes a depth frame: judges the ground it sees and fuses the verdicts into the hazard
@@ -1121,7 +1107,7 @@ impl Mapping {
         // How far a return's levelled height may be off per metre of range, for the tilt
         // the smoothed gravity has not caught up with.
         let unsettled_per_m = if self.cfg.tilt_gate {
-            angle_between(&self.gravity, &self.newest_accel).sin()
+            angle_between(&self.level.gravity(), &self.level.newest()).sin()
         } else {
             0.0
         };
@@ -1486,6 +1472,7 @@ mod tests {
                 lidar_height_m: 0.3,
                 ground_clearance_m: 0.12,
                 tilt_smoothing: 0.2,
+                tilt_less_wheels: None,
                 tilt_gate: false,
                 levelled_points: false,
                 depth_at_own_stamp: false,

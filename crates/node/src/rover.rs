@@ -568,6 +568,7 @@ mod tests {
                     lidar_height_m: 0.3,
                     ground_clearance_m: 0.12,
                     tilt_smoothing: 0.2,
+                    tilt_less_wheels: None,
                     tilt_gate: false,
                     levelled_points: false,
                     depth_at_own_stamp: false,
