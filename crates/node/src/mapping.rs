@@ -1789,8 +1789,9 @@ mod tests {
         // accelerometer sample before the scan on. Smoothed to a fifth, the levelling still
         // holds the rover at 1 degree, and the floor ahead passes for a return 0.24 m up.
         for (tilt_smoothing, expect_drop) in [(1.0, true), (0.2, false)] {
-            let mut m = mapping();
-            m.cfg.tilt_smoothing = tilt_smoothing;
+            let mut cfg = mapping().cfg;
+            cfg.tilt_smoothing = tilt_smoothing;
+            let m = Mapping::new(RoverId(1), cfg);
             assert_eq!(
                 floor_hits_after_a_tilt(m, 5f64.to_radians(), 3.34) == 1,
                 expect_drop,
