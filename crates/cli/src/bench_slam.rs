@@ -323,6 +323,22 @@ const VARIANTS: &[Variant] = &[
         apply: |c| c.tilt_less_wheels = Some(Duration::from_millis(100)),
     },
     Variant {
+        name: "tilt-gyro",
+        what: "the tilt carried between accelerometer samples by the gyro's roll and pitch rates, each sample taken in at 0.02 of its departure (about 1 s)",
+        apply: |c| {
+            c.tilt_gyro = true;
+            c.tilt_smoothing = 0.02;
+        },
+    },
+    Variant {
+        name: "tilt-gyro-05",
+        what: "the tilt carried between accelerometer samples by the gyro's roll and pitch rates, each sample taken in at 0.05 of its departure (about 0.4 s)",
+        apply: |c| {
+            c.tilt_gyro = true;
+            c.tilt_smoothing = 0.05;
+        },
+    },
+    Variant {
         name: "tilt-half",
         what: "the lidar's returns and the depth camera's points levelled by an average of the accelerometer taking half of each new sample",
         apply: |c| c.tilt_smoothing = 0.5,

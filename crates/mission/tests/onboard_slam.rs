@@ -224,14 +224,15 @@ fn wheels_that_drop_out_while_the_rover_drives_are_not_counted_twice() {
 /// A sweeping lidar (each beam 0.28 ms after the one before) on rovers that turn and drive:
 /// de-skewed, the scans track the truth; taken as if measured at once, the same scans put
 /// the rovers off by far more (the turns smear every wall a scan sees). The rovers' miss
-/// margin leaves the cells round each hit to the hits, which can forgive the smear (this
-/// minute's, with the wheels taken at their word: 0.017 m de-skewed, 0.015 m at once;
-/// taken at 0.92 of it: 0.014 against 0.080 m), so the two are compared without it.
+/// margin leaves the cells round each hit to the hits, which can forgive the smear (the
+/// first minute's, before the accelerometer felt the body, with the wheels taken at their
+/// word: 0.017 m de-skewed, 0.015 m at once; taken at 0.92 of it: 0.014 against 0.080 m), so
+/// the two are compared without it.
 #[test]
 fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
     let mut s = small();
     s.rovers.lidar.sweeps = true;
-    let (cfg, ids, _, capture) = common::captured_run(&s, 60.0);
+    let (cfg, ids, _, capture) = common::captured_run(&s, 90.0);
     assert!(cfg.deskew, "the rovers de-skew");
     assert!(
         cfg.mapper.frontend.miss_margin.is_some(),
@@ -269,8 +270,10 @@ fn sweeping_scans_de_skewed_track_the_truth_and_taken_at_once_do_not() {
         worst_deskewed = worst_deskewed.max(deskewed);
         worst_at_once = worst_at_once.max(at_once);
     }
-    // Measured: 0.011 m against 0.114 m for the rover that turned most (with the margin
-    // 0.014 m de-skewed).
+    // Measured over these 90 s: 0.010 m against 0.042 m for the rover that turned most (with
+    // the margin 0.014 m de-skewed). Over the first 60 s alone, before the accelerometer felt
+    // the body, 0.011 against 0.114 m; since, the rovers turn less in that minute (0.010
+    // against 0.017 m).
     assert!(
         worst_at_once > 3.0 * worst_deskewed,
         "worst rover taken at once {worst_at_once} m, de-skewed {worst_deskewed} m"

@@ -20,6 +20,9 @@ use std::collections::VecDeque;
 /// Standard gravity, m/s^2: the levelling's start, before any sample.
 const GRAVITY_M_S2: f64 = 9.81;
 
+/// Gyro rates after a gap longer than this carry the tilt no further, seconds.
+const MAX_GYRO_GAP_S: f64 = 0.1;
+
 /// A sample waits at most this many stretches for the wheels; past that they count as silent
 /// and it goes into the tilt as it came.
 const WAIT_FOR_WHEELS_STRETCHES: i64 = 3;
@@ -29,6 +32,9 @@ const WAIT_FOR_WHEELS_STRETCHES: i64 = 3;
 pub struct Levelling {
     /// The share of each sample taken into the smoothed specific force (1: the newest alone).
     smoothing: f64,
+    /// The gyro's roll and pitch rates carry the tilt between samples: the stamp of the last
+    /// rates taken, once any (`None` inside: not yet; the outer `None`: not carried).
+    carried_by_gyro: Option<Option<Time>>,
     /// The wheels' acceleration to take out of each sample, if the rover does.
     wheels: Option<WheelAcceleration>,
 
@@ -37,6 +43,18 @@ pub struct Levelling {
     gravity: [f64; 3],
     /// The newest sample as it came, m/s^2.
     newest: [f64; 3],
+}
+
+/// An accelerometer sample waiting for the wheels' speed around it.
+#[derive(Clone, Copy, Debug)]
+struct Waiting {
+    stamp: Time,
+    /// Specific force, m/s^2.
+    force: [f64; 3],
+    /// The gyro's yaw rate then, rad/s.
+    yaw_rate_rad_s: f64,
+    /// The smoothed specific force then, as the gyro carried it, m/s^2.
+    gravity_then: [f64; 3],
 }
 
 /// The wheels' speed through time, and the accelerometer samples waiting for it.
@@ -48,8 +66,8 @@ struct WheelAcceleration {
     /// each reading, oldest first.
     travel: VecDeque<(Time, f64)>,
     last_reading: Option<(Time, Pose2)>,
-    /// Samples not yet taken in: stamp, specific force (m/s^2), yaw rate (rad/s).
-    waiting: VecDeque<(Time, [f64; 3], f64)>,
+    /// Samples not yet taken in.
+    waiting: VecDeque<Waiting>,
     /// The wheels' speed at the last sample taken in, and its stamp.
     last_speed: Option<(Time, f64)>,
     /// The wheels' acceleration taken out of that sample, along the body's x and y, m/s^2.
@@ -57,12 +75,15 @@ struct WheelAcceleration {
 }
 
 impl Levelling {
-    /// A levelling that takes `smoothing` of each sample into the tilt (clamped to 0..=1), and
+    /// A levelling that takes `smoothing` of each sample into the tilt (clamped to 0..=1),
     /// first takes out the wheels' acceleration read over `wheel_stretch` around the sample,
-    /// if given.
-    pub fn new(smoothing: f64, wheel_stretch: Option<Duration>) -> Self {
+    /// if given, and carries the tilt between samples by the gyro's roll and pitch rates if
+    /// `gyro` (a complementary filter: the gyro follows a wheel climbing a rock at once, and
+    /// the accelerometer, taken in a little at a time, keeps the gyro from drifting).
+    pub fn new(smoothing: f64, wheel_stretch: Option<Duration>, gyro: bool) -> Self {
         Levelling {
             smoothing: smoothing.clamp(0.0, 1.0),
+            carried_by_gyro: gyro.then_some(None),
             wheels: wheel_stretch.map(|stretch| WheelAcceleration {
                 half_stretch: Duration(stretch.0 / 2),
                 travel: VecDeque::new(),
@@ -91,15 +112,40 @@ impl Levelling {
     }
 
     /// Takes an accelerometer sample (`force`, m/s^2 in the body frame) stamped `t`, with the
-    /// gyro's yaw rate then.
-    pub fn on_accel(&mut self, t: Time, force: [f64; 3], yaw_rate_rad_s: f64) {
+    /// gyro's rates about the body's x, y and z axes then (rad/s).
+    pub fn on_accel(&mut self, t: Time, force: [f64; 3], rates_rad_s: [f64; 3]) {
         self.newest = force;
+        self.carry(t, rates_rad_s);
+        let gravity_then = self.gravity;
         match &mut self.wheels {
-            None => self.take(force),
+            None => self.take(force, gravity_then),
             Some(w) => {
-                w.waiting.push_back((t, force, yaw_rate_rad_s));
+                w.waiting.push_back(Waiting {
+                    stamp: t,
+                    force,
+                    yaw_rate_rad_s: rates_rad_s[2],
+                    gravity_then,
+                });
                 self.take_waiting(t);
             }
+        }
+    }
+
+    /// Turns the smoothed specific force by the gyro's rates since the last ones, if the
+    /// gyro carries the tilt: gravity is fixed in the world, so in the body it turns against
+    /// the body's turn. Rates after a silence longer than a few samples carry nothing.
+    fn carry(&mut self, t: Time, [wx, wy, wz]: [f64; 3]) {
+        let Some(last) = &mut self.carried_by_gyro else {
+            return;
+        };
+        let dt = last.replace(t).map_or(0.0, |t0| (t - t0).as_secs_f64());
+        if dt <= 0.0 || dt > MAX_GYRO_GAP_S {
+            return;
+        }
+        let [gx, gy, gz] = self.gravity;
+        let spin = [wy * gz - wz * gy, wz * gx - wx * gz, wx * gy - wy * gx];
+        for (g, s) in self.gravity.iter_mut().zip(spin) {
+            *g -= s * dt;
         }
     }
 
@@ -126,7 +172,7 @@ impl Levelling {
         let travelled = w.travel.back().map_or(0.0, |&(_, s)| s) + along;
         w.travel.push_back((t, travelled));
         w.last_reading = Some((t, wheel));
-        let newest_sample = w.waiting.back().map(|&(t, _, _)| t);
+        let newest_sample = w.waiting.back().map(|s| s.stamp);
         if let Some(t) = newest_sample {
             self.take_waiting(t);
         }
@@ -139,7 +185,13 @@ impl Levelling {
             return;
         };
         let mut taken = Vec::new();
-        while let Some(&(t, force, yaw_rate)) = w.waiting.front() {
+        while let Some(&Waiting {
+            stamp: t,
+            force,
+            yaw_rate_rad_s: yaw_rate,
+            gravity_then,
+        }) = w.waiting.front()
+        {
             let heard_after = w
                 .travel
                 .back()
@@ -166,25 +218,33 @@ impl Levelling {
                 }
             };
             w.last_correction = correction;
-            taken.push([force[0] - correction[0], force[1] - correction[1], force[2]]);
+            let less_wheels = [force[0] - correction[0], force[1] - correction[1], force[2]];
+            taken.push((less_wheels, gravity_then));
         }
         // What no waiting sample needs again: the travel from before the oldest one's stretch.
-        if let Some(&(t, _, _)) = w.waiting.front() {
+        if let Some(&Waiting { stamp: t, .. }) = w.waiting.front() {
             let keep_from = t - w.half_stretch;
             while w.travel.len() > 2 && w.travel[1].0 <= keep_from {
                 w.travel.pop_front();
             }
         }
-        for force in taken {
-            self.take(force);
+        for (force, gravity_then) in taken {
+            self.take(force, gravity_then);
         }
     }
 
-    /// Takes a sample into the smoothed specific force.
-    fn take(&mut self, force: [f64; 3]) {
+    /// Takes a sample into the smoothed specific force: `smoothing` of its departure from
+    /// the smoothed force as it was at the sample's time (`gravity_then`), where the gyro
+    /// carries the tilt; from the smoothed force as it is, where it does not.
+    fn take(&mut self, force: [f64; 3], gravity_then: [f64; 3]) {
         let k = self.smoothing;
-        for (g, a) in self.gravity.iter_mut().zip(force) {
-            *g += k * (a - *g);
+        let reference = if self.carried_by_gyro.is_some() {
+            gravity_then
+        } else {
+            self.gravity
+        };
+        for ((g, a), r) in self.gravity.iter_mut().zip(force).zip(reference) {
+            *g += k * (a - r);
         }
     }
 
@@ -240,8 +300,9 @@ mod tests {
     const STRETCH: Duration = Duration::from_millis(200);
 
     /// Feeds a rover driving straight along x with speed `speed(t)` (m/s), its wheels read at
-    /// 20 Hz and an accelerometer at 50 Hz that feels gravity tilted by `pitch_rad` (nose up)
-    /// plus the body's acceleration; returns the pitch the levelling reads at the end, degrees.
+    /// 20 Hz and an accelerometer at 50 Hz that feels gravity tilted by `pitch_rad` (REP 103:
+    /// positive nose down) plus the body's acceleration; returns the pitch the levelling reads
+    /// at the end, degrees.
     fn pitch_read(level: &mut Levelling, pitch_rad: f64, speed: impl Fn(f64) -> f64) -> f64 {
         let dt = 0.001;
         let mut x = 0.0;
@@ -255,10 +316,10 @@ mod tests {
             felt += (v - prev_speed) / dt;
             prev_speed = v;
             let t = Time::from_secs_f64(t_s);
-            if steps % 50 == 0 {
+            if steps.is_multiple_of(50) {
                 level.on_wheels(t, Pose2::new(x, 0.0, 0.0));
             }
-            if steps % 20 == 0 {
+            if steps.is_multiple_of(20) {
                 let along = felt / 20.0;
                 felt = 0.0;
                 let force = [
@@ -266,7 +327,7 @@ mod tests {
                     0.0,
                     GRAVITY_M_S2 * pitch_rad.cos(),
                 ];
-                level.on_accel(t, force, 0.0);
+                level.on_accel(t, force, [0.0; 3]);
             }
             steps += 1;
         }
@@ -282,16 +343,16 @@ mod tests {
 
     #[test]
     fn the_accelerometer_alone_reads_speeding_up_as_pitch() {
-        let mut level = Levelling::new(0.2, None);
+        let mut level = Levelling::new(0.2, None, false);
         let pitch = pitch_read(&mut level, 0.0, speeding_up);
-        // 0.5 m/s^2 against 9.81: 2.9 degrees nose down.
+        // 0.5 m/s^2 against 9.81: 2.9 degrees nose up (a negative pitch).
         assert!((pitch + 2.92).abs() < 0.05, "{pitch}");
     }
 
     #[test]
     fn the_wheels_acceleration_taken_out_leaves_the_true_tilt() {
         for true_pitch_deg in [0.0, 3.0f64] {
-            let mut level = Levelling::new(0.2, Some(STRETCH));
+            let mut level = Levelling::new(0.2, Some(STRETCH), false);
             let pitch = pitch_read(&mut level, true_pitch_deg.to_radians(), speeding_up);
             assert!(
                 (pitch - true_pitch_deg).abs() < 0.05,
@@ -304,32 +365,61 @@ mod tests {
     fn the_newest_sample_does_not_wait_for_the_wheels() {
         // Speeding up steadily, then a wheel climbs a rock: the newest sample shows the
         // 5 degree tilt at once, less the acceleration the wheels last told of.
-        let mut level = Levelling::new(0.2, Some(STRETCH));
+        let mut level = Levelling::new(0.2, Some(STRETCH), false);
         pitch_read(&mut level, 0.0, speeding_up);
         let nose_down = 5f64.to_radians();
         level.on_accel(
             Time::from_secs_f64(4.02),
             [
-                GRAVITY_M_S2 * nose_down.sin() + 0.5,
+                -GRAVITY_M_S2 * nose_down.sin() + 0.5,
                 0.0,
                 GRAVITY_M_S2 * nose_down.cos(),
             ],
-            0.0,
+            [0.0; 3],
         );
         let [x, _, z] = level.newest();
-        assert!(((x / z).atan().to_degrees() - 5.0).abs() < 0.05, "{x} {z}");
+        assert!(((-x).atan2(z).to_degrees() - 5.0).abs() < 0.05, "{x} {z}");
+    }
+
+    #[test]
+    fn the_gyro_carries_a_sudden_tilt_that_the_slow_average_would_miss() {
+        // Level for a second, then a wheel climbs a rock: 5 degrees nose down within one 20 ms
+        // sample, which the gyro reads as 4.4 rad/s about y. Taking in a fiftieth of each
+        // sample, the levelling has the new tilt at once with the gyro, a tenth of it without.
+        let nose_down = 5f64.to_radians();
+        let pitch_after_the_rock = |gyro| {
+            let mut level = Levelling::new(0.02, None, gyro);
+            for i in 0..=50 {
+                let t = Time::from_secs_f64(i as f64 * 0.02);
+                level.on_accel(t, [0.0, 0.0, GRAVITY_M_S2], [0.0; 3]);
+            }
+            // Nose down is a positive pitch (REP 103), and gravity's reaction then leans
+            // back along the body's x axis.
+            let tilted = [
+                -GRAVITY_M_S2 * nose_down.sin(),
+                0.0,
+                GRAVITY_M_S2 * nose_down.cos(),
+            ];
+            let rate = nose_down / 0.02;
+            level.on_accel(Time::from_secs_f64(1.02), tilted, [0.0, rate, 0.0]);
+            let [gx, _, gz] = level.gravity();
+            (-gx).atan2(gz).to_degrees()
+        };
+        let (with_gyro, without) = (pitch_after_the_rock(true), pitch_after_the_rock(false));
+        assert!((with_gyro - 5.0).abs() < 0.05, "with the gyro {with_gyro}");
+        assert!((without - 0.1).abs() < 0.05, "without {without}");
     }
 
     #[test]
     fn a_turn_is_taken_out_across() {
         // 0.3 m/s on a 0.5 rad/s arc: 0.15 m/s^2 across, 0.87 degrees of roll if left in.
-        let mut level = Levelling::new(1.0, Some(STRETCH));
+        let mut level = Levelling::new(1.0, Some(STRETCH), false);
         let mut travel = 0.0;
         for i in 0..=40 {
             let t = Time::from_secs_f64(i as f64 * 0.05);
             level.on_wheels(t, Pose2::new(travel, 0.0, 0.0));
             travel += 0.3 * 0.05;
-            level.on_accel(t, [0.0, 0.15, GRAVITY_M_S2], 0.5);
+            level.on_accel(t, [0.0, 0.15, GRAVITY_M_S2], [0.0, 0.0, 0.5]);
         }
         let [_, gy, gz] = level.gravity();
         assert!(gy.atan2(gz).to_degrees().abs() < 0.01, "{gy}");
@@ -337,11 +427,11 @@ mod tests {
 
     #[test]
     fn silent_wheels_leave_the_samples_as_they_came() {
-        let mut level = Levelling::new(1.0, Some(STRETCH));
+        let mut level = Levelling::new(1.0, Some(STRETCH), false);
         level.on_wheels(Time::ZERO, Pose2::IDENTITY);
         let tilted = [-0.5, 0.0, GRAVITY_M_S2];
         for i in 1..=10 {
-            level.on_accel(Time::from_secs_f64(i as f64 * 0.1), tilted, 0.0);
+            level.on_accel(Time::from_secs_f64(i as f64 * 0.1), tilted, [0.0; 3]);
         }
         // Samples up to 0.4 s waited for wheels that never spoke again; none is lost.
         assert_eq!(level.gravity(), tilted);
@@ -349,10 +439,10 @@ mod tests {
 
     #[test]
     fn a_jump_of_the_wheels_frame_is_no_travel() {
-        let mut w = Levelling::new(1.0, Some(STRETCH));
+        let mut w = Levelling::new(1.0, Some(STRETCH), false);
         w.on_wheels(Time::ZERO, Pose2::IDENTITY);
         w.on_wheels(Time::from_secs_f64(0.05), Pose2::new(40.0, 0.0, 0.0));
-        let wheels = w.wheels.as_ref().unwrap();
-        assert_eq!(wheels.travel.back().unwrap().1, 0.0);
+        let wheels = w.wheels.as_ref().expect("the wheels are read");
+        assert_eq!(wheels.travel.back().expect("two readings").1, 0.0);
     }
 }

@@ -78,6 +78,11 @@ pub struct MappingConfig {
     /// ([`Levelling`]): an accelerometer that feels the body reads starting, stopping and
     /// turning as tilt (`None`: the samples as they come).
     pub tilt_less_wheels: Option<Duration>,
+    /// The gyro's roll and pitch rates carry the tilt between accelerometer samples, and
+    /// each sample moves it by [`tilt_smoothing`](Self::tilt_smoothing) of its departure
+    /// ([`Levelling`]; `false`: the tilt is the samples' average alone). Needs a gyro that
+    /// measures them: one that reads 0 about x and y leaves this the plain average.
+    pub tilt_gyro: bool,
     /// A return is dropped as the floor too when its levelled height is within what the
     /// tilt's latest change, not yet in the smoothed gravity, could have moved it: the
     /// ground clearance plus the range times the angle between the smoothed gravity and
@@ -622,7 +627,7 @@ impl Mapping {
         let published_layer = TiledLayer::new(1).rounding_hazards_out(cfg.hazards_rounded_out);
         Mapping {
             id,
-            level: Levelling::new(cfg.tilt_smoothing, cfg.tilt_less_wheels),
+            level: Levelling::new(cfg.tilt_smoothing, cfg.tilt_less_wheels, cfg.tilt_gyro),
             mapper: Mapper::new(cfg.mapper),
             hazards: SubmapHazards::new(
                 cfg.traversability.resolution_m,
@@ -820,7 +825,8 @@ impl Mapping {
         let rate = imu.angular_velocity.z;
         if imu.linear_acceleration_covariance[0][0] >= 0.0 {
             let a = imu.linear_acceleration;
-            self.level.on_accel(t, [a.x, a.y, a.z], rate);
+            let w = imu.angular_velocity;
+            self.level.on_accel(t, [a.x, a.y, a.z], [w.x, w.y, rate]);
         }
         if self.calibrating(t) {
             // Standing still: what the gyro reads is its bias (and noise), not a turn.
@@ -1473,6 +1479,7 @@ mod tests {
                 ground_clearance_m: 0.12,
                 tilt_smoothing: 0.2,
                 tilt_less_wheels: None,
+                tilt_gyro: false,
                 tilt_gate: false,
                 levelled_points: false,
                 depth_at_own_stamp: false,

@@ -569,6 +569,7 @@ mod tests {
                     ground_clearance_m: 0.12,
                     tilt_smoothing: 0.2,
                     tilt_less_wheels: None,
+                    tilt_gyro: false,
                     tilt_gate: false,
                     levelled_points: false,
                     depth_at_own_stamp: false,

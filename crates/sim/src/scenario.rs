@@ -266,8 +266,9 @@ pub struct Odometry {
     pub yaw_scale_error_std: f64,
 }
 
-/// IMU: a yaw gyro and an accelerometer (which, on a slow rover, measures gravity and so
-/// the rover's pitch and roll).
+/// IMU: a gyro (the yaw rate; the roll and pitch rates too with `tilt_rates`) and an
+/// accelerometer (gravity in the tilted body, so the rover's pitch and roll, plus the body's
+/// own acceleration with `body_acceleration`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Imu {
@@ -282,9 +283,14 @@ pub struct Imu {
     /// Whether the accelerometer also feels the body's own acceleration, as a real one
     /// does: along x the change of the body's speed since the last sample (a slip burst's
     /// body all but stops while its wheels turn on; a collision stops it at once), along y
-    /// a turn's centripetal acceleration. Off by default: the rovers level their lidar by
-    /// the accelerometer's tilt, which takes all of it for gravity.
+    /// a turn's centripetal acceleration. On by default; off, the accelerometer reads
+    /// gravity alone, as if the body never sped up, slowed down or turned.
     pub body_acceleration: bool,
+    /// Whether the gyro measures the body's roll and pitch rates too (a three-axis gyro, as
+    /// the Leo Rover's IMU has): about the body's x and y axes, as the pose's roll and pitch
+    /// change and its heading turns with the body tilted, with the same white noise as the
+    /// yaw rate and no bias. Off, x and y read 0; z is the heading's rate either way.
+    pub tilt_rates: bool,
 }
 
 /// A scheduled fault.
@@ -545,7 +551,8 @@ impl Default for Imu {
             gyro_noise_rad_s: 0.003,
             gyro_bias_std_rad_s: 0.002,
             accel_noise_m_s2: 0.02,
-            body_acceleration: false,
+            body_acceleration: true,
+            tilt_rates: false,
         }
     }
 }

@@ -73,6 +73,8 @@ struct RoverSlot {
     gyro_rng: SimRng,
     /// When the IMU last sampled and the body's speed then (for its acceleration since).
     imu_speed_mark: Option<(Time, f64)>,
+    /// When the IMU last sampled and the body's roll and pitch then (for their rates since).
+    imu_tilt_mark: Option<(Time, f64, f64)>,
     camera_wanted: bool,
     dropped: BTreeMap<SensorKind, u32>,
     /// `world_from_lidar` and the heading at each physics step of the last scan's length,
@@ -135,6 +137,7 @@ impl World {
                     motion_rng,
                     gyro_rng: streams.rng(Purpose::Gyro(n)),
                     imu_speed_mark: None,
+                    imu_tilt_mark: None,
                     camera_wanted: false,
                     dropped: BTreeMap::new(),
                     lidar_frames: VecDeque::new(),
@@ -526,6 +529,16 @@ impl World {
                     };
                     (along, body.speed_m_s * body.yaw_rate_rad_s)
                 });
+                let tilt_rates = spec.imu.tilt_rates.then(|| {
+                    let now = (t, body.roll_rad, body.pitch_rad);
+                    match slot.imu_tilt_mark.replace(now) {
+                        Some((t0, roll0, pitch0)) if t > t0 => {
+                            let dt = t.since(t0).as_secs_f64();
+                            ((body.roll_rad - roll0) / dt, (body.pitch_rad - pitch0) / dt)
+                        }
+                        _ => (0.0, 0.0),
+                    }
+                });
                 (
                     id.topic("imu"),
                     Message::Imu(Box::new(proprio::imu(
@@ -534,6 +547,7 @@ impl World {
                         &mut slot.gyro_rng,
                         t,
                         felt,
+                        tilt_rates,
                     ))),
                 )
             }

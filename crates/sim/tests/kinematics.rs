@@ -355,6 +355,71 @@ fn an_accelerometer_that_feels_the_body_feels_a_turn_across_it() {
     assert!(unfelt.abs() < 0.01, "unfelt {unfelt}");
 }
 
+/// Rover1 driving an arc across the foot of a 10 % ramp (rising towards +x from x = 4.5 m),
+/// so its roll, pitch and heading all change: the gravity its gyro carries from the level
+/// start (each sample's rates over the time since the one before, the yaw rate less the
+/// gyro's bias) and the gravity its tilt at the end gives, both as unit vectors in the body.
+fn gravity_carried_by_the_gyro_across_a_ramp(tilt_rates: bool) -> ([f64; 3], [f64; 3]) {
+    let mut s = firm(scenario(1));
+    s.rovers.imu.tilt_rates = tilt_rates;
+    let mut world = flat_world(&s, &[Pose2::new(4.0, 10.0, 0.0)], |t| {
+        let g = *t.geometry();
+        for (cell, h) in t.floor.clone().iter() {
+            let x = g.cell_center(cell).x_m;
+            let i = g.index(cell);
+            let rise = ((x - 4.5).max(0.0) * 0.1) as f32;
+            if t.kind.cells()[i] == realms_sim::terrain::SurfaceKind::Floor {
+                t.floor.cells_mut()[i] = h + rise;
+                t.heights.cells_mut()[i] = h + rise;
+            }
+        }
+    });
+    let out = drive(&mut world, R1, 0.3, 0.15, 12.0);
+    let body = world.rovers().next().expect("rover");
+    let bias = body.gyro_bias_rad_s;
+    let mut gravity = [0.0, 0.0, 1.0];
+    let mut last = None;
+    for (_, m) in &out {
+        let Message::Imu(imu) = m else { continue };
+        let t = imu.header.stamp.as_secs_f64();
+        if let Some(t0) = last.replace(t) {
+            let dt = t - t0;
+            let w = imu.angular_velocity;
+            let (wx, wy, wz) = (w.x, w.y, w.z - bias);
+            // Gravity is fixed in the world, so in the body it turns against the body's turn.
+            let [gx, gy, gz] = gravity;
+            let spin = [wy * gz - wz * gy, wz * gx - wx * gz, wx * gy - wy * gx];
+            gravity = [gx - spin[0] * dt, gy - spin[1] * dt, gz - spin[2] * dt];
+            let norm = gravity.iter().map(|g| g * g).sum::<f64>().sqrt();
+            gravity = gravity.map(|g| g / norm);
+        }
+    }
+    let (sp, cp) = body.pitch_rad.sin_cos();
+    let (sr, cr) = body.roll_rad.sin_cos();
+    (gravity, [-sp, cp * sr, cp * cr])
+}
+
+#[test]
+fn a_gyro_that_measures_roll_and_pitch_rates_carries_the_tilt() {
+    let angle_deg = |a: [f64; 3], b: [f64; 3]| {
+        let dot: f64 = a.iter().zip(b).map(|(a, b)| a * b).sum();
+        dot.clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let (carried, truth) = gravity_carried_by_the_gyro_across_a_ramp(true);
+    let tilt = angle_deg(truth, [0.0, 0.0, 1.0]);
+    // The arc ends on the ramp, tilted by most of its 5.7 degrees.
+    assert!(tilt > 3.0, "tilt {tilt}");
+    // 600 samples of 0.003 rad/s noise over 0.02 s each walk the carried gravity off by about
+    // 0.08 degrees per axis (one standard deviation).
+    assert!(angle_deg(carried, truth) < 0.3, "{carried:?} {truth:?}");
+    // A yaw gyro alone carries none of the tilt.
+    let (carried, truth) = gravity_carried_by_the_gyro_across_a_ramp(false);
+    assert!(
+        (angle_deg(carried, truth) - tilt).abs() < 0.3,
+        "{carried:?} {truth:?}"
+    );
+}
+
 #[test]
 fn a_powered_off_rover_stops_and_falls_silent() {
     let mut s = firm(scenario(1));

@@ -62,13 +62,16 @@ const GRAVITY_M_S2: f64 = 9.81;
 /// The IMU message: the true yaw rate plus bias and noise, and the accelerometer's specific
 /// force: gravity seen in the tilted body frame (REP 103: x forward, z up) plus noise, and
 /// the body's own acceleration `felt` (along x and y, m/s^2) if the scenario has it felt
-/// ([`crate::scenario::Imu::body_acceleration`]).
+/// ([`crate::scenario::Imu::body_acceleration`]); and about x and y, if the scenario's gyro
+/// measures them ([`crate::scenario::Imu::tilt_rates`]), the body's angular velocity from the
+/// rates of its roll and pitch (`tilt_rates`, rad/s) and its heading's.
 pub fn imu(
     body: &RoverBody,
     spec: &Rovers,
     rng: &mut SimRng,
     stamp: Time,
     felt: Option<(f64, f64)>,
+    tilt_rates: Option<(f64, f64)>,
 ) -> Imu {
     let sigma = spec.imu.gyro_noise_rad_s;
     let not_provided = [[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
@@ -87,6 +90,14 @@ pub fn imu(
         accel.x += along;
         accel.y += across;
     }
+    // The body's angular velocity from the rates of its Z-Y-X angles (REP 103): the heading
+    // turns about the world's vertical, which a tilted body sees partly about its x and y.
+    let (mut gyro_x, mut gyro_y) = (0.0, 0.0);
+    if let Some((roll_rate, pitch_rate)) = tilt_rates {
+        let yaw_rate = body.yaw_rate_rad_s;
+        gyro_x = roll_rate - yaw_rate * sp + gaussian(rng, sigma);
+        gyro_y = pitch_rate * cr + yaw_rate * cp * sr + gaussian(rng, sigma);
+    }
     Imu {
         header: Header {
             stamp,
@@ -94,7 +105,7 @@ pub fn imu(
         },
         orientation: Quaternion::IDENTITY,
         orientation_covariance: not_provided,
-        angular_velocity: Vec3::new(0.0, 0.0, gyro_z),
+        angular_velocity: Vec3::new(gyro_x, gyro_y, gyro_z),
         angular_velocity_covariance: [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, var]],
         linear_acceleration: accel,
         linear_acceleration_covariance: [[a_var, 0.0, 0.0], [0.0, a_var, 0.0], [0.0, 0.0, a_var]],
